@@ -1,0 +1,108 @@
+//! Materials and their BSDFs, evaluated in the local shading frame (normal = +z).
+//!
+//! Conventions: `wo` and `wi` are unit vectors pointing away from the surface; `eval` returns
+//! f(wo, wi) without the cosine; `sample` returns a direction with its value and solid-angle pdf
+//! so that the path weight is `value * |wi.z| / pdf`. Delta lobes (the smooth dielectric) return
+//! `delta: true`, and for them `value * |wi.z| / pdf` is still the weight.
+
+pub mod conductor;
+pub mod dielectric;
+pub mod diffuse;
+
+use glam::{Vec2, Vec3};
+
+/// A material as SCENES.md defines them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Material {
+    /// Lambertian, reflecting on both sides.
+    Diffuse { reflectance: Vec3 },
+    /// Smooth dielectric: exact unpolarised Fresnel, refraction, total internal reflection.
+    /// `ior` is the index inside (the side opposite the geometric normal) over outside.
+    Dielectric { ior: f32 },
+    /// GGX microfacet reflector: isotropic `alpha`, separable Smith G1(wi) G1(wo), constant
+    /// Fresnel equal to `reflectance`.
+    Conductor { alpha: f32, reflectance: Vec3 },
+}
+
+/// The kind of a material: the graph holds one shading system per kind a scene uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum MaterialKind {
+    Diffuse = 0,
+    Dielectric = 1,
+    Conductor = 2,
+}
+
+impl MaterialKind {
+    pub const ALL: [MaterialKind; 3] = [
+        MaterialKind::Diffuse,
+        MaterialKind::Dielectric,
+        MaterialKind::Conductor,
+    ];
+}
+
+impl Material {
+    pub fn kind(&self) -> MaterialKind {
+        match self {
+            Material::Diffuse { .. } => MaterialKind::Diffuse,
+            Material::Dielectric { .. } => MaterialKind::Dielectric,
+            Material::Conductor { .. } => MaterialKind::Conductor,
+        }
+    }
+
+    /// True when every lobe is a Dirac delta (no light sampling can reach it).
+    pub fn is_delta(&self) -> bool {
+        matches!(self, Material::Dielectric { .. })
+    }
+}
+
+/// Whether a path carries radiance (from the camera) or importance (from a light): refraction
+/// scales radiance by 1/eta^2 but not importance, which makes the BSDF non-symmetric.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TransportMode {
+    Radiance,
+    Importance,
+}
+
+/// A sampled direction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BsdfSample {
+    pub wi: Vec3,
+    /// f(wo, wi), without the cosine.
+    pub value: Vec3,
+    /// Solid-angle density of `wi` (for delta lobes, the discrete probability of the lobe).
+    pub pdf: f32,
+    pub delta: bool,
+}
+
+impl Material {
+    /// f(wo, wi) without the cosine; zero for delta materials.
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        match *self {
+            Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
+            Material::Dielectric { .. } => Vec3::ZERO,
+            Material::Conductor { alpha, reflectance } => {
+                conductor::eval(alpha, reflectance, wo, wi)
+            }
+        }
+    }
+
+    /// Solid-angle density with which `sample` returns `wi`; zero for delta materials.
+    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        match *self {
+            Material::Diffuse { .. } => diffuse::pdf(wo, wi),
+            Material::Dielectric { .. } => 0.0,
+            Material::Conductor { alpha, .. } => conductor::pdf(alpha, wo, wi),
+        }
+    }
+
+    /// Samples wi given wo; `None` when the sample carries no energy.
+    pub fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        match *self {
+            Material::Diffuse { reflectance } => diffuse::sample(reflectance, wo, u),
+            Material::Dielectric { ior } => Some(dielectric::sample(ior, wo, u.x, mode)),
+            Material::Conductor { alpha, reflectance } => {
+                conductor::sample(alpha, reflectance, wo, u)
+            }
+        }
+    }
+}

@@ -1,0 +1,21 @@
+//! stagelight: a data-oriented, ECS-style wavefront CPU renderer.
+//!
+//! The engine (`src/`) knows no particular system: it offers the pipeline (systems, graphs, the
+//! scheduler), the structure-of-arrays components, the scene and its preparation, BSDFs,
+//! sampling, the acceleration structure and the film. The systems themselves live in
+//! `systems/`, one file per system, grouped by stage; each integrator in `src/integrators/`
+//! declares its graph of systems in one place.
+
+pub mod accel;
+pub mod bsdf;
+pub mod components;
+pub mod film;
+pub mod integrators;
+pub mod math;
+pub mod metrics;
+pub mod pipeline;
+pub mod sampling;
+pub mod scene;
+
+#[path = "../systems/mod.rs"]
+pub mod systems;

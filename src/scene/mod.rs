@@ -1,0 +1,104 @@
+//! Scenes: the RON description, OBJ loading, procedural shapes, the hecs world of scene
+//! entities, and "prepare", which flattens that world once into render data.
+
+use crate::bsdf::Material;
+use glam::Vec3;
+use std::path::{Path, PathBuf};
+
+/// Marks a triangle that emits nothing (`TriangleColumns::emitter`).
+pub const NO_EMITTER: u32 = u32::MAX;
+/// Marks a flat-shaded triangle (`TriangleColumns::smooth`).
+pub const FLAT: u32 = u32::MAX;
+
+/// A pinhole camera. The image's right is forward x up; row 0 is the top row.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub position: Vec3,
+    /// Unit vectors: `right = forward x up` (normalised), `up` re-orthogonalised.
+    pub forward: Vec3,
+    pub right: Vec3,
+    pub up: Vec3,
+    /// Full vertical field of view in degrees, in (0, 180).
+    pub fov_y_degrees: f32,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Every triangle of the scene as structure-of-arrays columns, indexed by triangle id.
+#[derive(Clone, Debug, Default)]
+pub struct TriangleColumns {
+    pub p0: Vec<Vec3>,
+    pub p1: Vec<Vec3>,
+    pub p2: Vec<Vec3>,
+    /// Index into `PreparedScene::materials`.
+    pub material: Vec<u32>,
+    /// Index into `PreparedScene::emitters`, or `NO_EMITTER`.
+    pub emitter: Vec<u32>,
+    /// Index into `vertex_normals`, or `FLAT`: only meshes that have normals pay for them.
+    pub smooth: Vec<u32>,
+    /// Unit shading normals at (p0, p1, p2) of each smooth triangle.
+    pub vertex_normals: Vec<[Vec3; 3]>,
+}
+
+impl TriangleColumns {
+    pub fn len(&self) -> usize {
+        self.p0.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.p0.is_empty()
+    }
+}
+
+/// The emitting triangles and the distribution that picks one by power.
+#[derive(Clone, Debug, Default)]
+pub struct Emitters {
+    /// Triangle id of each emitter.
+    pub triangle: Vec<u32>,
+    /// Constant radiance, emitted on the geometric normal's side only.
+    pub radiance: Vec<Vec3>,
+    pub area: Vec<f32>,
+    /// Probability of picking each emitter (proportional to pi * area * luminance(radiance)).
+    pub pmf: Vec<f32>,
+    /// Running sum of `pmf`, ending at exactly 1.
+    pub cdf: Vec<f32>,
+    /// Total emitted power, sum of pi * area * radiance (RGB).
+    pub total_power: Vec3,
+}
+
+/// The render data of a scene: what systems read while rendering. No hecs queries happen
+/// after this is built.
+#[derive(Clone, Debug)]
+pub struct PreparedScene {
+    pub source: PathBuf,
+    pub camera: Camera,
+    pub triangles: TriangleColumns,
+    pub materials: Vec<Material>,
+    pub emitters: Emitters,
+    pub bounds_min: Vec3,
+    pub bounds_max: Vec3,
+    /// Zero-area triangles dropped while preparing (each also reported as a warning).
+    pub warnings: Vec<String>,
+}
+
+/// A scene error that names the file, the line and column where known, and what is wrong.
+#[derive(Debug, thiserror::Error)]
+#[error("{}{}: {message}", .file.display(), location(*.line, *.column))]
+pub struct SceneError {
+    pub file: PathBuf,
+    pub line: Option<usize>,
+    pub column: Option<usize>,
+    pub message: String,
+}
+
+fn location(line: Option<usize>, column: Option<usize>) -> String {
+    match (line, column) {
+        (Some(l), Some(c)) => format!(":{l}:{c}"),
+        (Some(l), None) => format!(":{l}"),
+        _ => String::new(),
+    }
+}
+
+/// Reads a RON scene and prepares it for rendering.
+pub fn load(_path: &Path) -> Result<PreparedScene, SceneError> {
+    todo!("scene helper")
+}

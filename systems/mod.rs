@@ -1,0 +1,1 @@
+//! Systems, one file per system, grouped by stage.
