@@ -8,6 +8,7 @@
 
 pub mod accel;
 pub mod bsdf;
+pub mod cli;
 pub mod components;
 pub mod film;
 pub mod integrators;

@@ -1,1 +1,36 @@
-//! Systems, one file per system, grouped by stage.
+//! Systems, one file per system, grouped by stage. Adding a system means adding a file here
+//! and naming it in an integrator's graph (`src/integrators/`).
+
+/// Making new work: camera rays (and later light paths and photons).
+pub mod generate {
+    pub mod camera_rays;
+}
+
+/// Ray casting against the scene.
+pub mod trace {
+    pub mod closest;
+    pub mod shadow;
+}
+
+/// What happens at a surface: emission found, queues by material, scattering, roulette.
+pub mod shade {
+    pub mod conductor;
+    pub mod dielectric;
+    pub mod diffuse;
+    pub mod emitted_light;
+    pub mod russian_roulette;
+    pub mod sort_by_material;
+    mod surface;
+    pub use surface::Surface;
+}
+
+/// Joining paths to lights: light sampling and the shadow rays' contributions.
+pub mod connect {
+    pub mod apply_shadow;
+    pub mod sample_lights;
+}
+
+/// Collecting finished work into the film.
+pub mod gather {
+    pub mod film;
+}

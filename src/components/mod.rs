@@ -1,1 +1,96 @@
-//! (in progress)
+//! Structure-of-arrays components: one `Vec` per field, indexed by slot.
+//!
+//! Every store is sized once to the wavefront and reused across bounces and passes. Live items
+//! are kept contiguous (slots `0..len`): compaction and sorting gather them into a scratch store
+//! of the same shape and swap, so systems run over plain slices split into fixed-size chunks,
+//! which rayon processes in parallel without any shared mutable state.
+
+mod paths;
+mod rays;
+mod shadow;
+
+pub use paths::{PathFlags, Paths, PathsChunk};
+pub use rays::{Hits, HitsChunk, MISS, Rays, RaysChunk};
+pub use shadow::{ShadowRays, ShadowRaysChunk};
+
+/// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
+pub const CHUNK: usize = 1024;
+
+/// Declares a structure-of-arrays store and its chunk view.
+///
+/// `soa! { pub struct Rays, RaysChunk { origin: Vec3, dir: Vec3 } }` makes `Rays` with one
+/// `Vec` per field and `RaysChunk<'a>` with one `&'a mut [T]` per field plus the chunk's
+/// first slot, and the methods: `new(capacity)`, `capacity()`, `chunks_mut(range)` (views over
+/// the slots of `range` in `CHUNK`-sized pieces), `gather_from(source, order)` (slot i takes
+/// source's slot `order[i]`, in parallel per column), and `bytes_per_item()`.
+#[macro_export]
+macro_rules! soa {
+    ($(#[$meta:meta])* pub struct $name:ident, $chunk:ident { $($(#[$fmeta:meta])* $field:ident : $ty:ty),+ $(,)? }) => {
+        $(#[$meta])*
+        #[derive(Clone, Debug, Default)]
+        pub struct $name {
+            $($(#[$fmeta])* pub $field: Vec<$ty>,)+
+        }
+
+        /// A mutable view of one chunk of slots.
+        pub struct $chunk<'a> {
+            /// Slot of the chunk's first item.
+            pub start: usize,
+            $(pub $field: &'a mut [$ty],)+
+        }
+
+        impl $chunk<'_> {
+            pub fn len(&self) -> usize {
+                let lens = [$(self.$field.len()),+];
+                lens[0]
+            }
+            pub fn is_empty(&self) -> bool {
+                self.len() == 0
+            }
+        }
+
+        impl $name {
+            pub fn new(capacity: usize) -> Self {
+                Self { $($field: vec![<$ty>::default(); capacity],)+ }
+            }
+
+            pub fn capacity(&self) -> usize {
+                let lens = [$(self.$field.len()),+];
+                lens[0]
+            }
+
+            pub fn bytes_per_item() -> usize {
+                0 $(+ std::mem::size_of::<$ty>())+
+            }
+
+            /// Views of the slots in `range`, `CHUNK` slots each.
+            pub fn chunks_mut(&mut self, range: std::ops::Range<usize>) -> Vec<$chunk<'_>> {
+                let n_chunks = range.len().div_ceil($crate::components::CHUNK);
+                let mut views = Vec::with_capacity(n_chunks);
+                $(let mut $field = self.$field[range.clone()].chunks_mut($crate::components::CHUNK);)+
+                for c in 0..n_chunks {
+                    views.push($chunk {
+                        start: range.start + c * $crate::components::CHUNK,
+                        $($field: $field.next().expect("one slice per chunk"),)+
+                    });
+                }
+                views
+            }
+
+            /// Slot `i` takes `source`'s slot `order[i]`, for `i < order.len()`.
+            pub fn gather_from(&mut self, source: &Self, order: &[u32]) {
+                use rayon::prelude::*;
+                $(
+                    self.$field[..order.len()]
+                        .par_chunks_mut($crate::components::CHUNK)
+                        .zip(order.par_chunks($crate::components::CHUNK))
+                        .for_each(|(dst, idx)| {
+                            for (d, &i) in dst.iter_mut().zip(idx) {
+                                *d = source.$field[i as usize];
+                            }
+                        });
+                )+
+            }
+        }
+    };
+}

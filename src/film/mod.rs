@@ -1,1 +1,211 @@
-//! (in progress)
+//! The film: per-pixel sums in f64 (so a million samples of a constant give that constant
+//! exactly), non-finite samples counted and never added, and images written as EXR (float32
+//! linear RGB, unscaled) and PNG (sRGB preview).
+
+use glam::{DVec3, Vec3};
+use std::path::Path;
+
+/// Accumulated samples of one render.
+#[derive(Clone, Debug)]
+pub struct Film {
+    pub width: usize,
+    pub height: usize,
+    sum: Vec<DVec3>,
+    samples: Vec<u64>,
+    /// Samples rejected because a channel was NaN or infinite.
+    pub nonfinite: u64,
+}
+
+impl Film {
+    pub fn new(width: usize, height: usize) -> Film {
+        Film {
+            width,
+            height,
+            sum: vec![DVec3::ZERO; width * height],
+            samples: vec![0; width * height],
+            nonfinite: 0,
+        }
+    }
+
+    pub fn pixel_count(&self) -> usize {
+        self.width * self.height
+    }
+
+    /// Adds one sample to a pixel; a sample with a NaN or infinite channel is counted instead.
+    #[inline]
+    pub fn add_sample(&mut self, pixel: usize, value: Vec3) {
+        self.samples[pixel] += 1;
+        if value.is_finite() {
+            self.sum[pixel] += value.as_dvec3();
+        } else {
+            self.nonfinite += 1;
+        }
+    }
+
+    /// Samples taken in a pixel (rejected non-finite ones included: they count as zero, which
+    /// keeps the estimator's normalisation).
+    pub fn samples_in(&self, pixel: usize) -> u64 {
+        self.samples[pixel]
+    }
+
+    pub fn total_samples(&self) -> u64 {
+        self.samples.iter().sum()
+    }
+
+    /// The per-pixel mean as an image.
+    pub fn image(&self) -> Image {
+        let pixels = self
+            .sum
+            .iter()
+            .zip(&self.samples)
+            .map(|(s, &n)| {
+                if n == 0 {
+                    Vec3::ZERO
+                } else {
+                    (*s / n as f64).as_vec3()
+                }
+            })
+            .collect();
+        Image {
+            width: self.width,
+            height: self.height,
+            pixels,
+        }
+    }
+}
+
+/// A linear RGB image, row 0 at the top.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    pub width: usize,
+    pub height: usize,
+    pub pixels: Vec<Vec3>,
+}
+
+/// An image file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {message}", .path.display())]
+pub struct ImageError {
+    pub path: std::path::PathBuf,
+    pub message: String,
+}
+
+fn image_error(path: &Path, message: impl std::fmt::Display) -> ImageError {
+    ImageError {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+impl Image {
+    pub fn new(width: usize, height: usize) -> Image {
+        Image {
+            width,
+            height,
+            pixels: vec![Vec3::ZERO; width * height],
+        }
+    }
+
+    /// Mean of each channel over all pixels, in f64.
+    pub fn channel_means(&self) -> DVec3 {
+        let sum: DVec3 = self.pixels.iter().map(|p| p.as_dvec3()).sum();
+        sum / self.pixels.len().max(1) as f64
+    }
+
+    /// Writes float32 linear RGB, unscaled.
+    pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
+        create_parent(path)?;
+        exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
+            let p = self.pixels[y * self.width + x];
+            (p.x, p.y, p.z)
+        })
+        .map_err(|e| image_error(path, format!("cannot write EXR: {e}")))
+    }
+
+    /// Reads the first RGB(A) layer of an EXR file as linear RGB.
+    pub fn read_exr(path: &Path) -> Result<Image, ImageError> {
+        let image = exr::prelude::read_first_rgba_layer_from_file(
+            path,
+            |resolution, _| Image::new(resolution.width(), resolution.height()),
+            |image: &mut Image, position, (r, g, b, _a): (f32, f32, f32, f32)| {
+                let w = image.width;
+                image.pixels[position.y() * w + position.x()] = Vec3::new(r, g, b);
+            },
+        )
+        .map_err(|e| image_error(path, format!("cannot read EXR: {e}")))?;
+        Ok(image.layer_data.channel_data.pixels)
+    }
+
+    /// Writes an 8-bit sRGB preview (values clamped to [0, 1]).
+    pub fn write_png(&self, path: &Path) -> Result<(), ImageError> {
+        create_parent(path)?;
+        let file = std::fs::File::create(path).map_err(|e| image_error(path, e))?;
+        let mut encoder = png::Encoder::new(
+            std::io::BufWriter::new(file),
+            self.width as u32,
+            self.height as u32,
+        );
+        encoder.set_color(png::ColorType::Rgb);
+        encoder.set_depth(png::BitDepth::Eight);
+        let mut writer = encoder
+            .write_header()
+            .map_err(|e| image_error(path, format!("cannot write PNG: {e}")))?;
+        let bytes: Vec<u8> = self
+            .pixels
+            .iter()
+            .flat_map(|p| [srgb8(p.x), srgb8(p.y), srgb8(p.z)])
+            .collect();
+        writer
+            .write_image_data(&bytes)
+            .map_err(|e| image_error(path, format!("cannot write PNG: {e}")))
+    }
+}
+
+fn create_parent(path: &Path) -> Result<(), ImageError> {
+    match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => {
+            std::fs::create_dir_all(dir).map_err(|e| image_error(path, e))
+        }
+        _ => Ok(()),
+    }
+}
+
+/// Linear to 8-bit sRGB with the exact piecewise transfer function.
+pub fn srgb8(linear: f32) -> u8 {
+    let c = if linear.is_finite() {
+        linear.clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let s = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0 + 0.5) as u8
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nonfinite_samples_are_counted_not_added() {
+        let mut film = Film::new(2, 1);
+        film.add_sample(0, Vec3::ONE);
+        film.add_sample(0, Vec3::new(f32::NAN, 0.0, 0.0));
+        film.add_sample(1, Vec3::splat(f32::INFINITY));
+        assert_eq!(film.nonfinite, 2);
+        let img = film.image();
+        assert_eq!(img.pixels[0], Vec3::splat(0.5));
+        assert_eq!(img.pixels[1], Vec3::ZERO);
+    }
+
+    #[test]
+    fn srgb_endpoints() {
+        assert_eq!(srgb8(0.0), 0);
+        assert_eq!(srgb8(1.0), 255);
+        assert_eq!(srgb8(0.5), 188);
+        assert_eq!(srgb8(f32::NAN), 0);
+    }
+}

@@ -19,7 +19,7 @@ pub fn mix64(mut x: u64) -> u64 {
 
 /// The random-number source of one (seed, stream, sample): `get(dim)` is a pure function of its
 /// four inputs. Copy it freely; it is 8 bytes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SampleKey(u64);
 
 impl SampleKey {

@@ -1,0 +1,450 @@
+//! The `stagelight` command line: render, diff and bench.
+
+use crate::film::Image;
+use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pt};
+use anyhow::{Context, Result, bail};
+use clap::{Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+#[derive(Parser, Debug)]
+#[command(
+    name = "stagelight",
+    version,
+    about = "A data-oriented wavefront CPU renderer"
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub enum Command {
+    /// Renders a scene to an EXR (float32 linear RGB) with a PNG preview beside it.
+    Render(RenderArgs),
+    /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
+    Diff { image: PathBuf, reference: PathBuf },
+    /// Renders a scene several times at a fixed budget and prints throughput as a table.
+    Bench {
+        scene: PathBuf,
+        #[arg(long, value_enum, default_value_t = IntegratorName::Pt)]
+        integrator: IntegratorName,
+        /// Samples per pixel of each timed run.
+        #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u64).range(1..))]
+        spp: u64,
+        /// Timed runs (after one warm-up run); the table gives their median and spread.
+        #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..))]
+        runs: u32,
+        #[arg(long)]
+        threads: Option<usize>,
+    },
+}
+
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum IntegratorName {
+    /// Path tracing with next-event estimation and MIS.
+    Pt,
+}
+
+impl IntegratorName {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            IntegratorName::Pt => "pt",
+        }
+    }
+}
+
+#[derive(clap::Args, Debug)]
+pub struct RenderArgs {
+    /// Scene file (RON).
+    pub scene: PathBuf,
+    #[arg(long, value_enum, default_value_t = IntegratorName::Pt)]
+    pub integrator: IntegratorName,
+    /// Samples per pixel (default 64 unless --time is given).
+    #[arg(long, conflicts_with = "time", value_parser = clap::value_parser!(u64).range(1..))]
+    pub spp: Option<u64>,
+    /// Render for this many wall-clock seconds (whole passes).
+    #[arg(long, value_parser = parse_seconds)]
+    pub time: Option<f64>,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub threads: Option<u64>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Maximum number of bounces (default: unlimited; Russian roulette ends paths).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Output EXR (default render/SCENE_INTEGRATOR.exr); a PNG preview is written beside it.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
+    let v: f64 = s
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number of seconds"))?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!(
+            "the time must be a positive number of seconds, not {s}"
+        ))
+    }
+}
+
+/// Exit code of an interrupted render that saved its finished passes.
+pub const EXIT_INTERRUPTED: i32 = 130;
+
+/// Runs the command line; returns the process exit code (0 success, 1 error, 130 interrupted).
+pub fn main() -> i32 {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let code = if e.use_stderr() { 1 } else { 0 };
+            let _ = e.print();
+            return code;
+        }
+    };
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            1
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<i32> {
+    match cli.command {
+        Command::Render(args) => render_command(&args),
+        Command::Diff { image, reference } => {
+            diff_command(&image, &reference)?;
+            Ok(0)
+        }
+        Command::Bench {
+            scene,
+            integrator,
+            spp,
+            runs,
+            threads,
+        } => {
+            bench_command(&scene, integrator, spp, runs, threads)?;
+            Ok(0)
+        }
+    }
+}
+
+fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    let mut builder = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        builder = builder.num_threads(n);
+    }
+    builder.build().context("cannot start the worker threads")
+}
+
+/// Loads and prepares a scene, printing its warnings.
+pub fn load_scene(path: &Path) -> Result<Arc<SceneData>> {
+    let scene = crate::scene::load(path)?;
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(Arc::new(SceneData::new(scene)))
+}
+
+fn render_command(args: &RenderArgs) -> Result<i32> {
+    let data = load_scene(&args.scene)?;
+    let budget = match (args.spp, args.time) {
+        (_, Some(t)) => Budget::Seconds(t),
+        (Some(spp), None) => Budget::SamplesPerPixel(spp),
+        (None, None) => Budget::SamplesPerPixel(64),
+    };
+    let output = args.output.clone().unwrap_or_else(|| {
+        let stem = args
+            .scene
+            .file_stem()
+            .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
+        PathBuf::from("render").join(format!("{stem}_{}.exr", args.integrator.as_str()))
+    });
+    if output.extension().is_none_or(|e| e != "exr") {
+        bail!("{}: the output must be an .exr file", output.display());
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = stop.clone();
+        // A second Ctrl-C while the image is being written has no further effect.
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
+            .context("cannot install the Ctrl-C handler")?;
+    }
+    let pool = thread_pool(args.threads.map(|t| t as usize))?;
+    let threads = pool.current_num_threads();
+    let bar = progress_bar(budget, args.quiet);
+    let progress = |done: u64, _total: Option<u64>| match budget {
+        Budget::SamplesPerPixel(_) => bar.set_position(done),
+        Budget::Seconds(_) => {
+            bar.set_position(bar.elapsed().as_secs().min(bar.length().unwrap_or(0)))
+        }
+    };
+    let control = Control {
+        stop: &stop,
+        progress: &progress,
+    };
+    let settings = pt::PtSettings {
+        seed: args.seed,
+        max_depth: args.max_depth.unwrap_or(u32::MAX),
+    };
+    let cpu_start = cpu_seconds();
+    let outcome = pool.install(|| pt::render(data.clone(), settings, budget, &control));
+    let cpu = cpu_seconds() - cpu_start;
+    bar.finish_and_clear();
+
+    let image = outcome.film.image();
+    image.write_exr(&output)?;
+    let png = output.with_extension("png");
+    image.write_png(&png)?;
+    print_report(&args.scene, args.integrator, threads, &outcome, cpu, &data);
+    println!("wrote {} and {}", output.display(), png.display());
+    if outcome.interrupted {
+        println!(
+            "interrupted: saved the {} finished passes ({} samples)",
+            outcome.passes, outcome.samples
+        );
+        return Ok(EXIT_INTERRUPTED);
+    }
+    Ok(0)
+}
+
+fn progress_bar(budget: Budget, quiet: bool) -> indicatif::ProgressBar {
+    if quiet {
+        return indicatif::ProgressBar::hidden();
+    }
+    let (len, unit) = match budget {
+        Budget::SamplesPerPixel(spp) => (spp, "passes"),
+        Budget::Seconds(s) => (s.ceil() as u64, "s"),
+    };
+    let bar = indicatif::ProgressBar::new(len);
+    let style = indicatif::ProgressStyle::with_template(&format!(
+        "{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit} (eta {{eta}})"
+    ))
+    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+    bar.set_style(style);
+    bar
+}
+
+/// CPU seconds (user + system) this process has used, from /proc (Linux; 0 elsewhere).
+pub fn cpu_seconds() -> f64 {
+    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
+        return 0.0;
+    };
+    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
+    let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r) else {
+        return 0.0;
+    };
+    let fields: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| {
+        fields
+            .get(i)
+            .and_then(|f| f.parse::<f64>().ok())
+            .unwrap_or(0.0)
+    };
+    // Linux reports these in USER_HZ, which is 100 on every mainstream architecture.
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+/// Peak resident memory in bytes (VmHWM), from /proc (Linux; 0 elsewhere).
+pub fn peak_memory_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1))
+                .and_then(|kb| kb.parse::<u64>().ok())
+        })
+        .map_or(0, |kb| kb * 1024)
+}
+
+fn mega(x: f64) -> String {
+    if x >= 1e6 {
+        format!("{:.3} M", x / 1e6)
+    } else if x >= 1e3 {
+        format!("{:.3} k", x / 1e3)
+    } else {
+        format!("{x:.0}")
+    }
+}
+
+fn print_report(
+    scene: &Path,
+    integrator: IntegratorName,
+    threads: usize,
+    o: &RenderOutcome,
+    cpu: f64,
+    data: &SceneData,
+) {
+    let wall = o.wall.as_secs_f64();
+    let cam = data.scene.camera;
+    println!(
+        "{} with {} at {}x{}, {} threads",
+        scene.display(),
+        integrator.as_str(),
+        cam.width,
+        cam.height,
+        threads
+    );
+    println!("  passes            {} ({} samples)", o.passes, o.samples);
+    println!(
+        "  time              {wall:.3} s wall, {cpu:.2} s CPU ({:.2} cores busy)",
+        cpu / wall.max(1e-9)
+    );
+    println!("  samples/s         {}", mega(o.samples as f64 / wall));
+    println!(
+        "  closest-hit rays  {} ({}rays/s)",
+        o.closest_rays(),
+        mega(o.closest_rays() as f64 / wall)
+    );
+    println!(
+        "  shadow rays       {} ({}rays/s)",
+        o.shadow_rays(),
+        mega(o.shadow_rays() as f64 / wall)
+    );
+    println!(
+        "  NaN/Inf samples   {} (counted, never added)",
+        o.film.nonfinite
+    );
+    println!(
+        "  memory            peak {:.1} MiB; {} paths in flight x {} bytes/path = {:.1} MiB",
+        peak_memory_bytes() as f64 / (1 << 20) as f64,
+        o.wavefront,
+        o.bytes_per_path,
+        (o.wavefront * o.bytes_per_path) as f64 / (1 << 20) as f64
+    );
+    let total = o.stats.total_time().as_secs_f64().max(1e-12);
+    println!("  systems           time share   runs   items taken -> emitted");
+    for s in &o.stats.systems {
+        println!(
+            "    {:<32} {:>6.1}% {:>6} {:>14} -> {}",
+            s.name,
+            100.0 * s.time.as_secs_f64() / total,
+            s.runs,
+            s.taken,
+            s.emitted
+        );
+    }
+}
+
+fn diff_command(image: &Path, reference: &Path) -> Result<()> {
+    let a = Image::read_exr(image)?;
+    let b = Image::read_exr(reference)?;
+    let m = crate::metrics::compare(&a, &b)
+        .with_context(|| format!("{} against {}", image.display(), reference.display()))?;
+    println!("{} against {}", image.display(), reference.display());
+    println!("  relMSE  {:.6e}", m.relmse);
+    println!("  RMSE    {:.6e}", m.rmse);
+    println!("  MAE     {:.6e}", m.mae);
+    println!(
+        "  mean    ({:.6}, {:.6}, {:.6}) against ({:.6}, {:.6}, {:.6})",
+        m.mean.x, m.mean.y, m.mean.z, m.reference_mean.x, m.reference_mean.y, m.reference_mean.z
+    );
+    Ok(())
+}
+
+fn bench_command(
+    scene: &Path,
+    integrator: IntegratorName,
+    spp: u64,
+    runs: u32,
+    threads: Option<usize>,
+) -> Result<()> {
+    let data = load_scene(scene)?;
+    let pool = thread_pool(threads)?;
+    let stop = AtomicBool::new(false);
+    let control = Control {
+        stop: &stop,
+        progress: &|_, _| {},
+    };
+    let settings = pt::PtSettings {
+        seed: 0,
+        max_depth: u32::MAX,
+    };
+    let run_once = |seed: u64| {
+        let cpu0 = cpu_seconds();
+        let t = Instant::now();
+        let o = pool.install(|| {
+            pt::render(
+                data.clone(),
+                pt::PtSettings { seed, ..settings },
+                Budget::SamplesPerPixel(spp),
+                &control,
+            )
+        });
+        let wall = t.elapsed().as_secs_f64();
+        (o, wall, cpu_seconds() - cpu0)
+    };
+    run_once(1_000_000); // warm-up
+    let mut samples_per_s = Vec::new();
+    let mut closest_per_s = Vec::new();
+    let mut shadow_per_s = Vec::new();
+    let mut last = None;
+    for r in 0..runs {
+        let (o, wall, cpu) = run_once(r as u64);
+        samples_per_s.push(o.samples as f64 / wall);
+        closest_per_s.push(o.closest_rays() as f64 / wall);
+        shadow_per_s.push(o.shadow_rays() as f64 / wall);
+        last = Some((o, cpu));
+    }
+    let (o, cpu) = last.expect("at least one run");
+    println!(
+        "bench {} ({}, {} spp, {} runs after a warm-up, {} threads)",
+        scene.display(),
+        integrator.as_str(),
+        spp,
+        runs,
+        pool.current_num_threads()
+    );
+    println!("| measure | median | min | max |");
+    println!("|---|---|---|---|");
+    for (name, v) in [
+        ("samples/s", &mut samples_per_s),
+        ("closest-hit rays/s", &mut closest_per_s),
+        ("shadow rays/s", &mut shadow_per_s),
+    ] {
+        v.sort_by(f64::total_cmp);
+        println!(
+            "| {name} | {} | {} | {} |",
+            mega(v[v.len() / 2]),
+            mega(v[0]),
+            mega(v[v.len() - 1])
+        );
+    }
+    println!("| bytes per path in flight | {} | | |", o.bytes_per_path);
+    println!("| paths in flight | {} | | |", o.wavefront);
+    println!(
+        "| peak memory | {:.1} MiB | | |",
+        peak_memory_bytes() as f64 / (1 << 20) as f64
+    );
+    println!(
+        "| CPU s / wall s (last run) | {:.2} | | |",
+        cpu / o.wall.as_secs_f64()
+    );
+    println!("| NaN/Inf samples (last run) | {} | | |", o.film.nonfinite);
+    println!();
+    println!("| system (last run) | time share | runs | taken | emitted |");
+    println!("|---|---|---|---|---|");
+    let total = o.stats.total_time().as_secs_f64().max(1e-12);
+    for s in &o.stats.systems {
+        println!(
+            "| {} | {:.1}% | {} | {} | {} |",
+            s.name,
+            100.0 * s.time.as_secs_f64() / total,
+            s.runs,
+            s.taken,
+            s.emitted
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,287 @@
+//! Path tracing (`--integrator pt`): next-event estimation and BSDF sampling combined by
+//! multiple importance sampling (power heuristic), Russian roulette, unlimited depth unless
+//! capped.
+//!
+//! The graph, built from the scene (a material kind no surface uses has no system):
+//!
+//! ```text
+//! generate_camera_rays
+//! loop bounces (while paths are live):
+//!     trace_closest -> add_emitted_light -> sort_by_material
+//!     [sample_lights] -> [shade_diffuse] [shade_conductor] [shade_dielectric]
+//!     [trace_shadow -> apply_shadow_contributions]
+//!     russian_roulette_and_compaction
+//! accumulate_film
+//! ```
+
+use crate::bsdf::MaterialKind;
+use crate::components::{Hits, Paths, Rays, ShadowRays};
+use crate::film::Film;
+use crate::integrators::SceneData;
+use crate::pipeline::{Graph, Node};
+use crate::systems::{connect, gather, generate, shade, trace};
+use glam::Vec3;
+use std::ops::Range;
+use std::sync::Arc;
+
+/// Random-number dimensions: two for the pixel jitter, then `DIMS_PER_BOUNCE` per bounce.
+pub const DIM_PIXEL: u32 = 0;
+pub const DIMS_PER_BOUNCE: u32 = 6;
+/// Offsets within a bounce's dimensions.
+pub const DIM_LIGHT_PICK: u32 = 0;
+pub const DIM_LIGHT_POINT: u32 = 1;
+pub const DIM_BSDF: u32 = 3;
+pub const DIM_ROULETTE: u32 = 5;
+
+/// First random dimension of bounce `depth`.
+#[inline]
+pub fn bounce_dim(depth: u32) -> u32 {
+    2 + depth * DIMS_PER_BOUNCE
+}
+
+/// Paths in flight at once: large enough to keep both cores busy between stage barriers,
+/// small enough to stay in a few tens of megabytes.
+pub const WAVEFRONT: usize = 1 << 18;
+
+/// Russian roulette starts after this many bounces.
+pub const ROULETTE_DEPTH: u32 = 3;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PtSettings {
+    pub seed: u64,
+    /// Maximum number of scattering events; `u32::MAX` for unlimited.
+    pub max_depth: u32,
+}
+
+/// The samples a wave renders: global sample ids `first..first + len`, where global sample id
+/// g is pixel `g % pixels` at sample index `g / pixels`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Wave {
+    pub first: u64,
+    pub len: usize,
+}
+
+/// Slots of each material kind after `sort_by_material`: non-delta kinds first, so light
+/// sampling runs over one contiguous range.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct MaterialRanges {
+    pub diffuse: Range<usize>,
+    pub conductor: Range<usize>,
+    pub dielectric: Range<usize>,
+}
+
+impl MaterialRanges {
+    pub fn of(&self, kind: MaterialKind) -> Range<usize> {
+        match kind {
+            MaterialKind::Diffuse => self.diffuse.clone(),
+            MaterialKind::Conductor => self.conductor.clone(),
+            MaterialKind::Dielectric => self.dielectric.clone(),
+        }
+    }
+    /// Slots whose material can be reached by light sampling.
+    pub fn non_delta(&self) -> Range<usize> {
+        self.diffuse.start..self.conductor.end
+    }
+}
+
+/// The path tracer's wavefront state.
+pub struct PtState {
+    pub data: Arc<SceneData>,
+    pub settings: PtSettings,
+    pub pixels: u64,
+    pub wave: Wave,
+    pub rays: Rays,
+    pub hits: Hits,
+    pub paths: Paths,
+    pub shadow: ShadowRays,
+    /// Live paths occupy slots `0..active`.
+    pub active: usize,
+    pub ranges: MaterialRanges,
+    /// Radiance of each sample of the wave, written when its path ends.
+    pub sample_radiance: Vec<Vec3>,
+    pub film: Film,
+    /// Double buffers for compaction and sorting.
+    pub scratch: Scratch,
+}
+
+#[derive(Default)]
+pub struct Scratch {
+    pub rays: Rays,
+    pub hits: Hits,
+    pub paths: Paths,
+    pub order: Vec<u32>,
+}
+
+impl PtState {
+    pub fn new(data: Arc<SceneData>, settings: PtSettings, capacity: usize) -> PtState {
+        let cam = data.scene.camera;
+        let pixels = cam.width as u64 * cam.height as u64;
+        PtState {
+            data,
+            settings,
+            pixels,
+            wave: Wave::default(),
+            rays: Rays::new(capacity),
+            hits: Hits::new(capacity),
+            paths: Paths::new(capacity),
+            shadow: ShadowRays::new(capacity),
+            active: 0,
+            ranges: MaterialRanges::default(),
+            sample_radiance: vec![Vec3::ZERO; capacity],
+            film: Film::new(cam.width as usize, cam.height as usize),
+            scratch: Scratch {
+                rays: Rays::new(capacity),
+                hits: Hits::new(capacity),
+                paths: Paths::new(capacity),
+                order: Vec::with_capacity(capacity),
+            },
+        }
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.paths.capacity()
+    }
+
+    /// Bytes of wavefront state per path slot (double buffers included).
+    pub fn bytes_per_path() -> usize {
+        2 * (Rays::bytes_per_item() + Hits::bytes_per_item() + Paths::bytes_per_item())
+            + ShadowRays::bytes_per_item()
+            + std::mem::size_of::<Vec3>()
+            + std::mem::size_of::<u32>()
+    }
+}
+
+/// Which material kinds the scene's surfaces use.
+pub fn used_kinds(data: &SceneData) -> Vec<MaterialKind> {
+    let mut used: Vec<MaterialKind> = data
+        .scene
+        .triangles
+        .material
+        .iter()
+        .map(|&m| data.scene.materials[m as usize].kind())
+        .collect();
+    used.sort();
+    used.dedup();
+    used
+}
+
+/// The path tracer's graph for a scene: one shading system per material kind in use, light
+/// sampling only where a non-delta surface and an emitter exist.
+pub fn graph(data: &SceneData) -> Graph<PtState> {
+    let kinds = used_kinds(data);
+    let has_emitters = !data.scene.emitters.triangle.is_empty();
+    let light_sampling = has_emitters
+        && kinds
+            .iter()
+            .any(|k| matches!(k, MaterialKind::Diffuse | MaterialKind::Conductor));
+
+    let mut bounce: Vec<Node<PtState>> = vec![Node::system(trace::closest::TraceClosest)];
+    if has_emitters {
+        bounce.push(Node::system(shade::emitted_light::AddEmittedLight));
+    }
+    bounce.push(Node::system(shade::sort_by_material::SortByMaterial));
+    if light_sampling {
+        bounce.push(Node::system(connect::sample_lights::SampleLights));
+    }
+    for kind in kinds {
+        bounce.push(match kind {
+            MaterialKind::Diffuse => Node::system(shade::diffuse::ShadeDiffuse),
+            MaterialKind::Conductor => Node::system(shade::conductor::ShadeConductor),
+            MaterialKind::Dielectric => Node::system(shade::dielectric::ShadeDielectric),
+        });
+    }
+    if light_sampling {
+        bounce.push(Node::system(trace::shadow::TraceShadow));
+        bounce.push(Node::system(
+            connect::apply_shadow::ApplyShadowContributions,
+        ));
+    }
+    bounce.push(Node::system(
+        shade::russian_roulette::RussianRouletteAndCompaction,
+    ));
+
+    Graph::new(
+        "pt",
+        vec![
+            Node::system(generate::camera_rays::GenerateCameraRays),
+            Node::Loop {
+                name: "bounces",
+                queue_len: |s: &PtState| s.active,
+                body: bounce,
+            },
+            Node::system(gather::film::AccumulateFilm),
+        ],
+    )
+}
+
+impl PtState {
+    /// Ends the path in `slot`: its radiance becomes its sample's value.
+    #[inline]
+    pub fn finish_path(&mut self, slot: usize) {
+        self.sample_radiance[self.paths.sample[slot] as usize] = self.paths.radiance[slot];
+    }
+
+    /// Moves the paths listed in `scratch.order` to slots `0..order.len()` (rays and paths,
+    /// and hits when `with_hits`), leaving every other path behind.
+    pub fn reorder(&mut self, with_hits: bool) {
+        let order = &self.scratch.order;
+        self.scratch.rays.gather_from(&self.rays, order);
+        self.scratch.paths.gather_from(&self.paths, order);
+        std::mem::swap(&mut self.rays, &mut self.scratch.rays);
+        std::mem::swap(&mut self.paths, &mut self.scratch.paths);
+        if with_hits {
+            self.scratch.hits.gather_from(&self.hits, order);
+            std::mem::swap(&mut self.hits, &mut self.scratch.hits);
+        }
+        self.active = order.len();
+    }
+}
+
+impl crate::systems::trace::closest::ClosestHitQueue for PtState {
+    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
+        (&self.data.accel, &self.rays, &mut self.hits, self.active)
+    }
+}
+
+impl crate::systems::trace::shadow::ShadowQueue for PtState {
+    fn shadow_queue(&mut self) -> (&crate::accel::Accel, &mut ShadowRays, Range<usize>) {
+        (&self.data.accel, &mut self.shadow, self.ranges.non_delta())
+    }
+}
+
+/// Renders with the path tracer until the budget is spent or a stop is asked for; the film
+/// holds every completed wave.
+pub fn render(
+    data: Arc<SceneData>,
+    settings: PtSettings,
+    budget: crate::integrators::Budget,
+    control: &crate::integrators::Control,
+) -> crate::integrators::RenderOutcome {
+    use crate::integrators::{RenderOutcome, WavePlan};
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let graph = graph(&data);
+    let mut plan = WavePlan::new(pixels, budget, WAVEFRONT);
+    let mut state = PtState::new(data, settings, plan.capacity());
+    let mut stats = crate::pipeline::Stats::default();
+    let mut interrupted = false;
+    while let Some((first, len)) = plan.next_wave(control) {
+        state.wave = Wave { first, len };
+        graph.run(&mut state, &mut stats);
+        (control.progress)(plan.passes_done(), plan.total_passes());
+    }
+    if control.stopped() {
+        interrupted = true;
+    }
+    RenderOutcome {
+        samples: plan.next,
+        passes: plan.passes_done(),
+        wall: plan.elapsed(),
+        film: state.film,
+        stats,
+        interrupted,
+        systems: graph.system_names(),
+        bytes_per_path: PtState::bytes_per_path(),
+        wavefront: plan.capacity(),
+    }
+}

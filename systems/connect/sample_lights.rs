@@ -1,0 +1,87 @@
+//! Next-event estimation: at every path on a non-delta surface, picks an emitter by power and a
+//! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
+//! heuristic against BSDF sampling) contribution it brings if unoccluded.
+
+use crate::accel::{offset_ray_origin, surface_point};
+use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
+use crate::pipeline::{Flow, System};
+use crate::sampling::{power_heuristic, sample_cdf, uniform_triangle};
+use crate::systems::shade::Surface;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// Shadow rays stop this fraction short of the light point, which lies on the light itself.
+const SHADOW_EPSILON: f32 = 1e-4;
+
+pub struct SampleLights;
+
+impl System<PtState> for SampleLights {
+    fn name(&self) -> &'static str {
+        "sample_lights"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["hits", "rays.dir", "paths", "material_ranges", "emitters"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["shadow_rays"]
+    }
+    fn run(&self, s: &mut PtState) -> Flow {
+        let data = &*s.data;
+        let (hits, rays, paths) = (&s.hits, &s.rays, &s.paths);
+        let emitters = &data.scene.emitters;
+        let tris = &data.scene.triangles;
+        let range = s.ranges.non_delta();
+        let taken = range.len();
+        let cast: usize = s
+            .shadow
+            .chunks_mut(range)
+            .into_par_iter()
+            .map(|c| {
+                let mut cast = 0;
+                for i in 0..c.len() {
+                    let slot = c.start + i;
+                    c.t_max[i] = 0.0;
+                    let surf = Surface::at(
+                        data,
+                        hits.triangle[slot],
+                        hits.b1[slot],
+                        hits.b2[slot],
+                        rays.dir[slot],
+                    );
+                    let key = paths.key[slot];
+                    let dim = bounce_dim(paths.depth[slot]);
+                    let e = sample_cdf(&emitters.cdf, key.get(dim + DIM_LIGHT_PICK));
+                    let b = uniform_triangle(key.get2(dim + DIM_LIGHT_POINT));
+                    let light = surface_point(tris, emitters.triangle[e], b.x, b.y);
+                    let to_light = light.p - surf.p;
+                    let dist2 = to_light.length_squared();
+                    let wi = to_light / dist2.sqrt();
+                    let cos_light = -wi.dot(light.ng);
+                    if cos_light <= 0.0 || !surf.reflects_geometrically(wi) {
+                        continue;
+                    }
+                    let wi_local = surf.frame.to_local(wi);
+                    let f = surf.material.eval(surf.wo_local, wi_local);
+                    if f == Vec3::ZERO {
+                        continue;
+                    }
+                    let light_pdf = emitters.pmf[e] / emitters.area[e] * dist2 / cos_light;
+                    let weight =
+                        power_heuristic(light_pdf, surf.material.pdf(surf.wo_local, wi_local));
+                    let origin = surf.spawn(wi);
+                    let target = offset_ray_origin(light.p, light.p_error, light.ng, -wi);
+                    c.origin[i] = origin;
+                    c.dir[i] = target - origin;
+                    c.t_max[i] = 1.0 - SHADOW_EPSILON;
+                    c.contribution[i] = paths.throughput[slot]
+                        * f
+                        * (wi_local.z.abs() * weight / light_pdf)
+                        * emitters.radiance[e];
+                    cast += 1;
+                }
+                cast
+            })
+            .sum();
+        Flow::new(taken, cast)
+    }
+}

@@ -1,0 +1,74 @@
+//! Adds the light of emitters that paths hit, weighted by multiple importance sampling against
+//! the light sampling that could also have found them.
+
+use crate::accel::surface_point;
+use crate::components::{MISS, PathFlags};
+use crate::integrators::pt::PtState;
+use crate::pipeline::{Flow, System};
+use crate::sampling::power_heuristic;
+use crate::scene::NO_EMITTER;
+use rayon::prelude::*;
+
+pub struct AddEmittedLight;
+
+impl System<PtState> for AddEmittedLight {
+    fn name(&self) -> &'static str {
+        "add_emitted_light"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &[
+            "hits",
+            "rays",
+            "paths.throughput",
+            "paths.bsdf_pdf",
+            "paths.flags",
+        ]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["paths.radiance"]
+    }
+    fn run(&self, s: &mut PtState) -> Flow {
+        let data = &*s.data;
+        let (hits, rays) = (&s.hits, &s.rays);
+        let emitters = &data.scene.emitters;
+        let tris = &data.scene.triangles;
+        let found: usize = s
+            .paths
+            .chunks_mut(0..s.active)
+            .into_par_iter()
+            .map(|p| {
+                let mut found = 0;
+                for i in 0..p.len() {
+                    let slot = p.start + i;
+                    let tri = hits.triangle[slot];
+                    if tri == MISS {
+                        continue;
+                    }
+                    let e = tris.emitter[tri as usize];
+                    if e == NO_EMITTER {
+                        continue;
+                    }
+                    let sp = surface_point(tris, tri, hits.b1[slot], hits.b2[slot]);
+                    let cos_light = -rays.dir[slot].dot(sp.ng);
+                    if cos_light <= 0.0 {
+                        continue; // emitters are one-sided
+                    }
+                    found += 1;
+                    let le = emitters.radiance[e as usize];
+                    let weight = if p.flags[i].has(PathFlags::SPECULAR) {
+                        1.0
+                    } else {
+                        let t = hits.t[slot];
+                        let light_pdf =
+                            emitters.pmf[e as usize] / emitters.area[e as usize] * t * t
+                                / cos_light;
+                        power_heuristic(p.bsdf_pdf[i], light_pdf)
+                    };
+                    p.radiance[i] += p.throughput[i] * le * weight;
+                }
+                found
+            })
+            .sum();
+        Flow::new(s.active, found)
+    }
+}

@@ -1,0 +1,129 @@
+//! The shading point of a hit, shared by the systems that shade, sample lights or add
+//! emission: position with its error bound, normals, the shading frame and wo.
+
+use crate::accel::{offset_ray_origin, surface_point};
+use crate::bsdf::Material;
+use crate::integrators::SceneData;
+use crate::math::Frame;
+use glam::Vec3;
+
+pub struct Surface {
+    pub p: Vec3,
+    pub p_error: Vec3,
+    /// Geometric normal (flipped to wo's side for two-sided materials).
+    pub ng: Vec3,
+    /// Shading frame; its normal is in the hemisphere of `ng`.
+    pub frame: Frame,
+    /// Direction towards the ray's origin, world and local.
+    pub wo: Vec3,
+    pub wo_local: Vec3,
+    pub material: Material,
+}
+
+impl Surface {
+    /// The shading point of triangle `triangle` at barycentrics (b1, b2), seen along `dir`.
+    #[inline]
+    pub fn at(data: &SceneData, triangle: u32, b1: f32, b2: f32, dir: Vec3) -> Surface {
+        let tris = &data.scene.triangles;
+        let material = data.scene.materials[tris.material[triangle as usize] as usize];
+        let sp = surface_point(tris, triangle, b1, b2);
+        let mut ng = sp.ng;
+        let mut ns = if sp.ns.dot(ng) < 0.0 { -sp.ns } else { sp.ns };
+        let wo = -dir;
+        // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
+        if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
+            ng = -ng;
+            ns = -ns;
+        }
+        let frame = Frame::from_normal(ns);
+        Surface {
+            p: sp.p,
+            p_error: sp.p_error,
+            ng,
+            frame,
+            wo,
+            wo_local: frame.to_local(wo),
+            material,
+        }
+    }
+
+    /// Origin of a ray leaving towards `w` that cannot re-hit this surface.
+    #[inline]
+    pub fn spawn(&self, w: Vec3) -> Vec3 {
+        offset_ray_origin(self.p, self.p_error, self.ng, w)
+    }
+
+    /// True when `wi` leaves on the geometric side of `wo` (a reflection, not a leak through
+    /// the surface that shading normals alone would allow).
+    #[inline]
+    pub fn reflects_geometrically(&self, wi: Vec3) -> bool {
+        wi.dot(self.ng) * self.wo.dot(self.ng) > 0.0
+    }
+}
+
+use crate::bsdf::BsdfSample;
+use crate::components::PathFlags;
+use crate::integrators::pt::{DIM_BSDF, PtState, bounce_dim};
+use crate::pipeline::Flow;
+use glam::Vec2;
+use rayon::prelude::*;
+use std::ops::Range;
+
+/// The scattering step every shading system shares: at each path of `range`, `sample`
+/// draws wi (local frame) from the surface's BSDF; the path's throughput, next ray and MIS
+/// state follow, or the path ends when the sample carries nothing or leaks through the
+/// surface. Returns the flow (paths taken, paths that scatter on).
+#[inline]
+pub fn scatter_paths(
+    s: &mut PtState,
+    range: Range<usize>,
+    sample: impl Fn(&Surface, Vec2) -> Option<BsdfSample> + Sync,
+) -> Flow {
+    let data = &*s.data;
+    let hits = &s.hits;
+    let taken = range.len();
+    let rays = s.rays.chunks_mut(range.clone());
+    let paths = s.paths.chunks_mut(range);
+    let scattered: usize = rays
+        .into_par_iter()
+        .zip(paths)
+        .map(|(r, p)| {
+            let mut scattered = 0;
+            for i in 0..p.len() {
+                let slot = p.start + i;
+                let surf = Surface::at(
+                    data,
+                    hits.triangle[slot],
+                    hits.b1[slot],
+                    hits.b2[slot],
+                    r.dir[i],
+                );
+                let u = p.key[i].get2(bounce_dim(p.depth[i]) + DIM_BSDF);
+                let next = sample(&surf, u).and_then(|bs| {
+                    let wi = surf.frame.to_world(bs.wi).normalize();
+                    // Reflection must leave on wo's geometric side, refraction on the other.
+                    let reflected = bs.wi.z * surf.wo_local.z > 0.0;
+                    if surf.reflects_geometrically(wi) != reflected || bs.pdf <= 0.0 {
+                        return None;
+                    }
+                    let weight = bs.value * bs.wi.z.abs() / bs.pdf;
+                    (weight.max_element() > 0.0).then_some((bs, wi, weight))
+                });
+                match next {
+                    Some((bs, wi, weight)) => {
+                        p.throughput[i] *= weight;
+                        p.bsdf_pdf[i] = bs.pdf;
+                        p.flags[i].set(PathFlags::SPECULAR, bs.delta);
+                        p.depth[i] += 1;
+                        r.origin[i] = surf.spawn(wi);
+                        r.dir[i] = wi;
+                        scattered += 1;
+                    }
+                    None => p.flags[i].set(PathFlags::DEAD, true),
+                }
+            }
+            scattered
+        })
+        .sum();
+    Flow::new(taken, scattered)
+}
