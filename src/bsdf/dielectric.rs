@@ -2,11 +2,79 @@
 use super::{BsdfSample, TransportMode};
 use glam::Vec3;
 
+/// Smallest |cos| a delta lobe divides by. A direction exactly in the tangent plane would make
+/// `F / |cos|` infinite; with the floor the value stays finite (at most ~1e20 times eta^2) and
+/// the weight `value * |cos| / pdf` is exact for every |cos| >= 1e-20 (and 0 below, where the
+/// ray is tangent and carries no projected energy anyway).
+const COS_FLOOR: f32 = 1e-20;
+
 /// Unpolarised Fresnel reflectance for a ray arriving with cosine `cos_i` (positive: from the
 /// outside) at an interface with relative index `eta` (inside over outside).
-pub fn fresnel(_cos_i: f32, _eta: f32) -> f32 {
-    todo!("bsdf helper")
+pub fn fresnel(cos_i: f32, eta: f32) -> f32 {
+    let c = cos_i.clamp(-1.0, 1.0);
+    fresnel_cs(c, (1.0 - c * c).max(0.0), eta)
 }
-pub fn sample(_ior: f32, _wo: Vec3, _u: f32, _mode: TransportMode) -> BsdfSample {
-    todo!("bsdf helper")
+
+/// `fresnel` given also sin^2 of the incident angle: near normal incidence 1 - cos^2 cancels,
+/// so `sample` passes wo.x^2 + wo.y^2 instead, which keeps grazing transmission accurate.
+fn fresnel_cs(cos_i: f32, sin2_i: f32, eta: f32) -> f32 {
+    let mut cos_i = cos_i;
+    let mut eta = eta;
+    if cos_i < 0.0 {
+        // Arriving from the inside: the side left is the dense one.
+        eta = 1.0 / eta;
+        cos_i = -cos_i;
+    }
+    let sin2_t = sin2_i / (eta * eta);
+    if sin2_t >= 1.0 {
+        return 1.0; // total internal reflection
+    }
+    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+    let r_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
+    let r_p = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
+    // Both denominators are > 0 here: cos_t > 0 since sin2_t < 1, and eta > 0.
+    (0.5 * (r_s * r_s + r_p * r_p)).min(1.0)
+}
+
+/// Samples reflection with probability F and refraction with probability 1 - F, choosing with
+/// `u`. The reflected sample has weight 1; the refracted one has weight 1 in importance mode and
+/// (eta_o / eta_t)^2 in radiance mode, where eta_o is the index of wo's side and eta_t that of
+/// wi's side (radiance is compressed into the narrower cone of the denser medium).
+pub fn sample(ior: f32, wo: Vec3, u: f32, mode: TransportMode) -> BsdfSample {
+    let cos_o = wo.z.clamp(-1.0, 1.0);
+    let sin2_o = (wo.x * wo.x + wo.y * wo.y).min(1.0);
+    let f = fresnel_cs(cos_o, sin2_o, ior);
+    if u < f {
+        let wi = Vec3::new(-wo.x, -wo.y, wo.z);
+        return BsdfSample {
+            wi,
+            value: Vec3::splat(f / wi.z.abs().max(COS_FLOOR)),
+            pdf: f,
+            delta: true,
+        };
+    }
+    // Refraction; here F < 1, so the transmitted cosine is nonzero.
+    let outside = wo.z >= 0.0;
+    // eta = index of the side entered over that of the side left.
+    let eta = if outside { ior } else { 1.0 / ior };
+    let sin2_t = sin2_o / (eta * eta);
+    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+    // Snell: tangential part scaled by 1/eta and reversed, normal part on the other side.
+    let wi = Vec3::new(
+        -wo.x / eta,
+        -wo.y / eta,
+        if outside { -cos_t } else { cos_t },
+    )
+    .normalize_or(Vec3::new(0.0, 0.0, if outside { -1.0 } else { 1.0 }));
+    let t = 1.0 - f;
+    let scale = match mode {
+        TransportMode::Radiance => 1.0 / (eta * eta),
+        TransportMode::Importance => 1.0,
+    };
+    BsdfSample {
+        wi,
+        value: Vec3::splat(t * scale / wi.z.abs().max(COS_FLOOR)),
+        pdf: t,
+        delta: true,
+    }
 }

@@ -1,0 +1,1014 @@
+//! BSDF tests: sample/eval/pdf consistency, chi-square goodness of fit of the sampling routines,
+//! energy conservation, reciprocity and numerical stability. Every random number comes from
+//! `SampleKey` with fixed seeds, so the tests are deterministic.
+
+use glam::{DVec3, Vec2, Vec3};
+use stagelight::bsdf::{Material, TransportMode, conductor, dielectric};
+use stagelight::sampling::SampleKey;
+use std::f64::consts::PI;
+
+// ---------------------------------------------------------------------------------------------
+// Helpers
+
+/// A unit direction at polar angle `theta` (from +z) and azimuth `phi`, both in degrees.
+fn dir_deg(theta: f64, phi: f64) -> Vec3 {
+    let (t, p) = (theta.to_radians(), phi.to_radians());
+    DVec3::new(t.sin() * p.cos(), t.sin() * p.sin(), t.cos()).as_vec3()
+}
+
+fn u2(seed: u64, stream: u64, i: u64) -> Vec2 {
+    SampleKey::new(seed, stream, i).get2(0)
+}
+
+fn is_finite3(v: Vec3) -> bool {
+    v.is_finite()
+}
+
+fn rel_close(a: f32, b: f32, tol: f32) -> bool {
+    (a - b).abs() <= tol * a.abs().max(b.abs()).max(1e-30)
+}
+
+/// ln Gamma(x) for x > 0: shift up to x >= 10, then Stirling's series (error < 1e-12 there).
+fn ln_gamma(mut x: f64) -> f64 {
+    let mut shift = 0.0;
+    while x < 10.0 {
+        shift -= x.ln();
+        x += 1.0;
+    }
+    let x2 = x * x;
+    shift + (x - 0.5) * x.ln() - x + 0.5 * (2.0 * PI).ln() + 1.0 / (12.0 * x)
+        - 1.0 / (360.0 * x * x2)
+        + 1.0 / (1260.0 * x * x2 * x2)
+        - 1.0 / (1680.0 * x * x2 * x2 * x2)
+}
+
+/// Regularised upper incomplete gamma Q(a, x) = Gamma(a, x) / Gamma(a): the power series of P
+/// below x = a + 1, the continued fraction of Q (modified Lentz) above.
+fn gamma_q(a: f64, x: f64) -> f64 {
+    assert!(a > 0.0 && x >= 0.0);
+    if x == 0.0 {
+        return 1.0;
+    }
+    let log_prefactor = -x + a * x.ln() - ln_gamma(a);
+    if x < a + 1.0 {
+        // P(a, x) = x^a e^-x / Gamma(a + 1) * sum_n x^n / ((a+1)...(a+n)).
+        let mut term = 1.0 / a;
+        let mut sum = term;
+        let mut n = 1.0;
+        while term.abs() > sum.abs() * 1e-16 && n < 10_000.0 {
+            term *= x / (a + n);
+            sum += term;
+            n += 1.0;
+        }
+        (1.0 - sum * log_prefactor.exp()).max(0.0)
+    } else {
+        // Q(a, x) = x^a e^-x / Gamma(a) * 1 / (x + 1 - a - 1(1-a) / (x + 3 - a - ...)).
+        let tiny = 1e-300;
+        let mut b = x + 1.0 - a;
+        let mut c = 1.0 / tiny;
+        let mut d = 1.0 / b;
+        let mut h = d;
+        for i in 1..10_000 {
+            let an = -(i as f64) * (i as f64 - a);
+            b += 2.0;
+            d = an * d + b;
+            if d.abs() < tiny {
+                d = tiny;
+            }
+            c = b + an / c;
+            if c.abs() < tiny {
+                c = tiny;
+            }
+            d = 1.0 / d;
+            let delta = d * c;
+            h *= delta;
+            if (delta - 1.0).abs() < 1e-16 {
+                break;
+            }
+        }
+        (log_prefactor.exp() * h).clamp(0.0, 1.0)
+    }
+}
+
+/// Survival function of the chi-square distribution with `dof` degrees of freedom.
+fn chi2_p_value(chi2: f64, dof: usize) -> f64 {
+    gamma_q(dof as f64 / 2.0, chi2 / 2.0)
+}
+
+#[test]
+fn chi2_p_value_matches_tables() {
+    // Reference survival values computed with mpmath's regularised incomplete gamma.
+    let cases = [
+        (3.841_459, 1, 0.049_999_994_653_195_8),
+        (6.634_897, 1, 0.009_999_997_760_282_47),
+        (23.209_251, 10, 0.010_000_000_547_937_3),
+        (18.307_038, 10, 0.050_000_000_824_732_3),
+        (124.342_113, 100, 0.050_000_002_549_929_9),
+        (1_106.969_301, 1000, 0.009_999_829_183_378_36),
+        (0.454_936, 1, 0.500_000_199_347_037),
+    ];
+    for (x, dof, p) in cases {
+        let got = chi2_p_value(x, dof);
+        assert!(
+            (got - p).abs() < 1e-5 * p.max(1e-3),
+            "Q({x}, {dof}) = {got}, want {p}"
+        );
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Chi-square goodness of fit.
+//
+// Directions are binned in spherical coordinates (theta, phi) about the normal on wo's side, so
+// that the horizon, where the pdf jumps to zero, is a bin edge and the pdf is smooth inside
+// every bin. To resolve narrow lobes the bin edges follow a mixture of a uniform and a Cauchy
+// density centred on the lobe (the mirror direction), which matches GGX's slope tails. Expected
+// counts integrate pdf() * sin(theta) over each bin by adaptive Simpson cubature. Two more
+// cells hold the samples on the other side (expected zero: both materials only reflect) and the
+// samples `sample` refuses (the leftover probability). Cells expected below 5 are pooled.
+
+/// Number of chi-square tests in this file, for the Sidak correction.
+const CHI2_TESTS: usize = 3 + 4 * 3 + 2;
+const CHI2_SAMPLES: u64 = 1_000_000;
+const CHI2_BINS: usize = 40;
+
+fn sidak_alpha() -> f64 {
+    1.0 - (1.0 - 0.01f64).powf(1.0 / CHI2_TESTS as f64)
+}
+
+/// Bin edges on [lo, hi] at equal steps of the CDF of (1 - beta) uniform + beta Cauchy(c, w).
+fn mixture_edges(lo: f64, hi: f64, c: f64, w: f64, beta: f64, n: usize) -> Vec<f64> {
+    let (a0, a1) = (((lo - c) / w).atan(), ((hi - c) / w).atan());
+    let cdf = |x: f64| {
+        (1.0 - beta) * (x - lo) / (hi - lo) + beta * (((x - c) / w).atan() - a0) / (a1 - a0)
+    };
+    (0..=n)
+        .map(|j| {
+            let target = j as f64 / n as f64;
+            let (mut a, mut b) = (lo, hi);
+            for _ in 0..80 {
+                let m = 0.5 * (a + b);
+                if cdf(m) < target { a = m } else { b = m }
+            }
+            if j == 0 {
+                lo
+            } else if j == n {
+                hi
+            } else {
+                0.5 * (a + b)
+            }
+        })
+        .collect()
+}
+
+fn axis_index(edges: &[f64], x: f64) -> usize {
+    edges[1..edges.len() - 1].partition_point(|&e| e <= x)
+}
+
+struct Binning {
+    /// Normal on wo's side and a tangent frame; phi is measured from the lobe's azimuth.
+    pole: DVec3,
+    t1: DVec3,
+    t2: DVec3,
+    phi0: f64,
+    theta_edges: Vec<f64>,
+    phi_edges: Vec<f64>,
+}
+
+impl Binning {
+    /// `center`: the lobe's direction; `width`: its angular scale (None: uniform bins).
+    fn new(pole_z: f64, center: Vec3, width: Option<f64>) -> Binning {
+        let pole = DVec3::new(0.0, 0.0, pole_z);
+        let t1 = DVec3::X;
+        let t2 = pole.cross(t1);
+        let c = center.as_dvec3();
+        let (x, y, z) = (c.dot(t1), c.dot(t2), c.dot(pole));
+        let theta_c = (x * x + y * y).sqrt().atan2(z);
+        let phi0 = y.atan2(x);
+        let n = CHI2_BINS;
+        let half = 0.5 * PI;
+        let (theta_edges, phi_edges) = match width {
+            Some(w) if w < 0.5 => {
+                let wphi = w / theta_c.sin().max(w);
+                let phi_edges = if wphi < 1.5 {
+                    mixture_edges(-PI, PI, 0.0, wphi, 0.9, n)
+                } else {
+                    mixture_edges(-PI, PI, 0.0, 1.0, 0.0, n)
+                };
+                (mixture_edges(0.0, half, theta_c, w, 0.9, n), phi_edges)
+            }
+            _ => (
+                mixture_edges(0.0, half, 0.0, 1.0, 0.0, n),
+                mixture_edges(-PI, PI, 0.0, 1.0, 0.0, n),
+            ),
+        };
+        Binning {
+            pole,
+            t1,
+            t2,
+            phi0,
+            theta_edges,
+            phi_edges,
+        }
+    }
+
+    fn cells(&self) -> usize {
+        (self.theta_edges.len() - 1) * (self.phi_edges.len() - 1)
+    }
+
+    /// Cell of a direction; `cells()` for the other side of the surface.
+    fn bin(&self, d: Vec3) -> usize {
+        let d = d.as_dvec3();
+        let (x, y, z) = (d.dot(self.t1), d.dot(self.t2), d.dot(self.pole));
+        if z <= 0.0 {
+            return self.cells();
+        }
+        // atan2 keeps the polar angle accurate near the pole, where acos would not.
+        let theta = (x * x + y * y).sqrt().atan2(z);
+        let phi = (y.atan2(x) - self.phi0 + PI).rem_euclid(2.0 * PI) - PI;
+        let nphi = self.phi_edges.len() - 1;
+        axis_index(&self.theta_edges, theta) * nphi + axis_index(&self.phi_edges, phi)
+    }
+
+    fn direction(&self, theta: f64, phi: f64) -> Vec3 {
+        let (st, ct) = theta.sin_cos();
+        let (sp, cp) = (phi + self.phi0).sin_cos();
+        (self.t1 * (st * cp) + self.t2 * (st * sp) + self.pole * ct).as_vec3()
+    }
+
+    /// Probability of every cell under `pdf`.
+    fn integrate(&self, pdf: &dyn Fn(Vec3) -> f32) -> Vec<f64> {
+        let f = |theta: f64, phi: f64| pdf(self.direction(theta, phi)) as f64 * theta.sin();
+        let mut out = Vec::with_capacity(self.cells());
+        for t in self.theta_edges.windows(2) {
+            for p in self.phi_edges.windows(2) {
+                out.push(adaptive_simpson_2d(&f, [t[0], t[1], p[0], p[1]], 1e-8));
+            }
+        }
+        out
+    }
+}
+
+/// Simpson's rule on the 3x3 nodes `v` of a rectangle of area `area`.
+fn simpson_3x3(v: &[[f64; 3]; 3], area: f64) -> f64 {
+    let w = [1.0, 4.0, 1.0];
+    let mut s = 0.0;
+    for i in 0..3 {
+        for j in 0..3 {
+            s += w[i] * w[j] * v[i][j];
+        }
+    }
+    s * area / 36.0
+}
+
+/// Adaptive Simpson cubature over rect = [x0, x1, y0, y1]: compares the rule on the rectangle
+/// with the sum over its quarters, reusing the parent's nodes, and splits where they disagree.
+fn adaptive_simpson_2d(f: &dyn Fn(f64, f64) -> f64, rect: [f64; 4], tol: f64) -> f64 {
+    let [x0, x1, y0, y1] = rect;
+    let mut v = [[0.0; 3]; 3];
+    for (i, row) in v.iter_mut().enumerate() {
+        for (j, val) in row.iter_mut().enumerate() {
+            *val = f(
+                x0 + (x1 - x0) * i as f64 / 2.0,
+                y0 + (y1 - y0) * j as f64 / 2.0,
+            );
+        }
+    }
+    simpson_node(f, rect, &v, tol, 0)
+}
+
+fn simpson_node(
+    f: &dyn Fn(f64, f64) -> f64,
+    [x0, x1, y0, y1]: [f64; 4],
+    v: &[[f64; 3]; 3],
+    tol: f64,
+    depth: u32,
+) -> f64 {
+    // The 5x5 nodes: the even ones are the parent's.
+    let mut g = [[0.0; 5]; 5];
+    for (i, row) in g.iter_mut().enumerate() {
+        for (j, val) in row.iter_mut().enumerate() {
+            *val = if i % 2 == 0 && j % 2 == 0 {
+                v[i / 2][j / 2]
+            } else {
+                f(
+                    x0 + (x1 - x0) * i as f64 / 4.0,
+                    y0 + (y1 - y0) * j as f64 / 4.0,
+                )
+            };
+        }
+    }
+    let area = (x1 - x0) * (y1 - y0);
+    let coarse = simpson_3x3(v, area);
+    let (xm, ym) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    let quarter = |qi: usize, qj: usize| {
+        let mut s = [[0.0; 3]; 3];
+        for (i, row) in s.iter_mut().enumerate() {
+            for (j, val) in row.iter_mut().enumerate() {
+                *val = g[2 * qi + i][2 * qj + j];
+            }
+        }
+        s
+    };
+    let quarters = [
+        ([x0, xm, y0, ym], quarter(0, 0)),
+        ([x0, xm, ym, y1], quarter(0, 1)),
+        ([xm, x1, y0, ym], quarter(1, 0)),
+        ([xm, x1, ym, y1], quarter(1, 1)),
+    ];
+    let fine: f64 = quarters
+        .iter()
+        .map(|(_, q)| simpson_3x3(q, 0.25 * area))
+        .sum();
+    if (fine - coarse).abs() <= 15.0 * tol || depth >= 10 {
+        return fine + (fine - coarse) / 15.0;
+    }
+    quarters
+        .iter()
+        .map(|(r, q)| simpson_node(f, *r, q, 0.5 * tol, depth + 1))
+        .sum()
+}
+
+struct Chi2Result {
+    p_value: f64,
+    dof: usize,
+    chi2: f64,
+    total_probability: f64,
+}
+
+/// Draws CHI2_SAMPLES directions from `sample` and tests them against `pdf`.
+fn chi2_test(
+    binning: &Binning,
+    stream: u64,
+    sample: &dyn Fn(Vec2) -> Option<Vec3>,
+    pdf: &dyn Fn(Vec3) -> f32,
+) -> Chi2Result {
+    let n = CHI2_SAMPLES;
+    let cells = binning.cells();
+    // Cells, then the other side, then the refused samples.
+    let mut observed = vec![0.0f64; cells + 2];
+    for i in 0..n {
+        match sample(u2(0xc41_5eed, stream, i)) {
+            Some(wi) => observed[binning.bin(wi)] += 1.0,
+            None => observed[cells + 1] += 1.0,
+        }
+    }
+    let mut expected: Vec<f64> = binning
+        .integrate(pdf)
+        .into_iter()
+        .map(|p| p * n as f64)
+        .collect();
+    let total_probability = expected.iter().sum::<f64>() / n as f64;
+    expected.push(0.0);
+    expected.push((n as f64 * (1.0 - total_probability)).max(0.0));
+
+    // Pool the sparse cells; a pool still below 5 joins the smallest regular cell.
+    let mut kept: Vec<(f64, f64)> = Vec::new();
+    let (mut pool_e, mut pool_o) = (0.0, 0.0);
+    for (&e, &o) in expected.iter().zip(&observed) {
+        if e < 5.0 {
+            pool_e += e;
+            pool_o += o;
+        } else {
+            kept.push((e, o));
+        }
+    }
+    if pool_e >= 5.0 {
+        kept.push((pool_e, pool_o));
+    } else if let Some(smallest) = kept.iter_mut().min_by(|a, b| a.0.total_cmp(&b.0)) {
+        smallest.0 += pool_e;
+        smallest.1 += pool_o;
+    }
+    let chi2: f64 = kept.iter().map(|(e, o)| (o - e) * (o - e) / e).sum();
+    let dof = kept.len() - 1;
+    Chi2Result {
+        p_value: chi2_p_value(chi2, dof),
+        dof,
+        chi2,
+        total_probability,
+    }
+}
+
+#[test]
+fn chi2_diffuse() {
+    let m = Material::Diffuse {
+        reflectance: Vec3::new(0.8, 0.5, 0.2),
+    };
+    for (stream, (theta, phi)) in [(0.0, 0.0), (89.0, 200.0), (120.0, 45.0)]
+        .into_iter()
+        .enumerate()
+    {
+        let wo = dir_deg(theta, phi);
+        let side = wo.z.signum() as f64;
+        let binning = Binning::new(side, Vec3::new(0.0, 0.0, side as f32), None);
+        let r = chi2_test(
+            &binning,
+            stream as u64,
+            &|u| m.sample(wo, u, TransportMode::Radiance).map(|s| s.wi),
+            &|wi| m.pdf(wo, wi),
+        );
+        println!(
+            "diffuse wo theta {theta}: chi2 {:.1} dof {} p {:.4} integral {:.6}",
+            r.chi2, r.dof, r.p_value, r.total_probability
+        );
+        assert!(
+            (r.total_probability - 1.0).abs() < 1e-4,
+            "{}",
+            r.total_probability
+        );
+        assert!(
+            r.p_value > sidak_alpha(),
+            "diffuse theta {theta}: p = {}",
+            r.p_value
+        );
+    }
+}
+
+fn chi2_conductor(alpha: f32, thetas: &[f64], stream0: u64) {
+    let m = Material::Conductor {
+        alpha,
+        reflectance: Vec3::new(1.0, 0.78, 0.34),
+    };
+    for (i, &theta) in thetas.iter().enumerate() {
+        let wo = dir_deg(theta, 10.0 + 97.0 * i as f64);
+        let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
+        let binning = Binning::new(1.0, mirror, Some(2.0 * alpha as f64));
+        let r = chi2_test(
+            &binning,
+            stream0 + i as u64,
+            &|u| m.sample(wo, u, TransportMode::Radiance).map(|s| s.wi),
+            &|wi| m.pdf(wo, wi),
+        );
+        println!(
+            "conductor alpha {alpha} wo theta {theta}: chi2 {:.1} dof {} p {:.4} integral {:.6}",
+            r.chi2, r.dof, r.p_value, r.total_probability
+        );
+        assert!(r.total_probability <= 1.0 + 1e-4, "{}", r.total_probability);
+        assert!(
+            r.dof >= 200,
+            "too few populated cells ({}) for a test",
+            r.dof
+        );
+        assert!(
+            r.p_value > sidak_alpha(),
+            "conductor alpha {alpha} theta {theta}: chi2 {} dof {} p = {}",
+            r.chi2,
+            r.dof,
+            r.p_value
+        );
+    }
+}
+
+#[test]
+fn chi2_conductor_rough() {
+    chi2_conductor(1.0, &[0.0, 45.0, 88.0], 100);
+    chi2_conductor(0.5, &[0.0, 45.0, 88.0], 110);
+}
+
+#[test]
+fn chi2_conductor_glossy() {
+    chi2_conductor(0.1, &[0.0, 45.0, 88.0], 120);
+    chi2_conductor(0.01, &[0.0, 45.0, 88.0], 130);
+}
+
+#[test]
+fn chi2_conductor_near_mirror() {
+    // alpha = 1e-4 is nearly a mirror; the Cauchy-spaced bins still resolve it.
+    chi2_conductor(1e-4, &[0.0, 70.0], 140);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Consistency of sample() with eval() and pdf().
+
+fn test_wos() -> Vec<Vec3> {
+    let mut v = vec![Vec3::Z];
+    for (i, theta) in [10.0, 30.0, 45.0, 60.0, 75.0, 85.0, 89.0, 89.9, 89.99]
+        .into_iter()
+        .enumerate()
+    {
+        v.push(dir_deg(theta, 37.0 * i as f64));
+    }
+    v
+}
+
+#[test]
+fn sample_matches_eval_and_pdf() {
+    let mut materials = vec![Material::Diffuse {
+        reflectance: Vec3::new(0.7, 0.6, 0.5),
+    }];
+    for alpha in [1e-4, 1e-3, 0.01, 0.1, 0.5, 1.0] {
+        materials.push(Material::Conductor {
+            alpha,
+            reflectance: Vec3::new(0.9, 0.8, 0.3),
+        });
+    }
+    for (mi, m) in materials.iter().enumerate() {
+        for (wi_idx, &wo0) in test_wos().iter().enumerate() {
+            // Diffuse reflects on both sides: test below the surface too.
+            let sides: &[f32] = if matches!(m, Material::Diffuse { .. }) {
+                &[1.0, -1.0]
+            } else {
+                &[1.0]
+            };
+            for &side in sides {
+                let wo = Vec3::new(wo0.x, wo0.y, wo0.z * side);
+                let mut accepted = 0;
+                for i in 0..2000 {
+                    let u = u2(7, (mi * 100 + wi_idx) as u64, i);
+                    let Some(s) = m.sample(wo, u, TransportMode::Radiance) else {
+                        continue;
+                    };
+                    accepted += 1;
+                    assert!(!s.delta);
+                    assert!((s.wi.length() - 1.0).abs() < 1e-5);
+                    assert!(s.pdf > 0.0 && s.pdf.is_finite());
+                    let f = m.eval(wo, s.wi);
+                    let p = m.pdf(wo, s.wi);
+                    for c in 0..3 {
+                        assert!(
+                            rel_close(s.value[c], f[c], 1e-5),
+                            "{m:?} wo {wo} wi {}: value {} eval {}",
+                            s.wi,
+                            s.value,
+                            f
+                        );
+                    }
+                    assert!(rel_close(s.pdf, p, 1e-5), "{m:?}: pdf {} vs {p}", s.pdf);
+                }
+                assert!(accepted > 0, "{m:?} wo {wo}: no sample accepted");
+            }
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Conductor specifics.
+
+#[test]
+fn conductor_tiny_alpha_is_near_mirror() {
+    let alpha = 1e-4f32;
+    let r = Vec3::new(1.0, 0.78, 0.34);
+    let m = Material::Conductor {
+        alpha,
+        reflectance: r,
+    };
+    for (case, theta) in [0.0, 45.0, 75.0].into_iter().enumerate() {
+        let wo = dir_deg(theta, 20.0);
+        let mirror = Vec3::new(-wo.x, -wo.y, wo.z).as_dvec3();
+        let n = 100_000;
+        let mut angles = Vec::with_capacity(n);
+        for i in 0..n as u64 {
+            let s = m
+                .sample(wo, u2(11, case as u64, i), TransportMode::Radiance)
+                .expect("a near-mirror sample is always above the surface here");
+            let w = s.value * s.wi.z / s.pdf;
+            assert!(is_finite3(s.value) && s.pdf.is_finite() && is_finite3(w));
+            assert!(w.cmple(r * 1.000_01).all());
+            angles.push(s.wi.as_dvec3().angle_between(mirror));
+        }
+        angles.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        // GGX's slopes have Cauchy-like tails: P(tan theta_h > x alpha) ~ 1 / (1 + x^2) at
+        // normal incidence, and the reflected direction turns by about twice theta_h.
+        let median = angles[n / 2];
+        let q99 = angles[n * 99 / 100];
+        let a = alpha as f64;
+        println!("alpha 1e-4 theta {theta}: median {median:e} q99 {q99:e}");
+        assert!(median < 4.0 * a, "median deviation {median}");
+        assert!(q99 < 40.0 * a, "99% quantile {q99}");
+    }
+}
+
+#[test]
+fn conductor_albedo() {
+    let r = Vec3::new(1.0, 0.78, 0.34);
+    for alpha in [1e-4f32, 0.01, 0.1, 0.5, 1.0] {
+        let m = Material::Conductor {
+            alpha,
+            reflectance: r,
+        };
+        for theta in [0.0, 45.0, 80.0, 89.0] {
+            let wo = dir_deg(theta, 0.0);
+            let n = 100_000;
+            let mut sum = Vec3::ZERO.as_dvec3();
+            for i in 0..n {
+                if let Some(s) = m.sample(wo, u2(13, 0, i), TransportMode::Radiance) {
+                    let w = s.value * s.wi.z / s.pdf;
+                    // Each weight is R G1(wi), so bounded by R.
+                    assert!(w.cmple(r * 1.000_01).all(), "weight {w}");
+                    sum += w.as_dvec3();
+                }
+            }
+            let albedo = (sum / n as f64).as_vec3();
+            assert!(albedo.cmple(r * 1.000_01).all(), "albedo {albedo}");
+            if alpha <= 0.1 && theta == 0.0 {
+                assert!(
+                    albedo.cmpgt(0.95 * r).all(),
+                    "alpha {alpha}: albedo {albedo}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn diffuse_albedo_is_reflectance() {
+    let r = Vec3::new(0.725, 0.71, 0.68);
+    let m = Material::Diffuse { reflectance: r };
+    for wo in [dir_deg(0.0, 0.0), dir_deg(70.0, 5.0), dir_deg(150.0, 80.0)] {
+        let n = 10_000;
+        let mut sum = Vec3::ZERO;
+        let mut count = 0;
+        for i in 0..n {
+            if let Some(s) = m.sample(wo, u2(17, 0, i), TransportMode::Radiance) {
+                assert_eq!(s.wi.z.signum(), wo.z.signum());
+                sum += s.value * s.wi.z.abs() / s.pdf;
+                count += 1;
+            }
+        }
+        assert!(count as f64 > 0.999 * n as f64);
+        let albedo = sum / n as f32;
+        assert!((albedo - r).abs().max_element() < 2e-3, "albedo {albedo}");
+    }
+}
+
+#[test]
+fn reciprocity_diffuse_and_conductor() {
+    let materials = [
+        Material::Diffuse {
+            reflectance: Vec3::new(0.5, 0.4, 0.3),
+        },
+        Material::Conductor {
+            alpha: 0.05,
+            reflectance: Vec3::new(0.9, 0.8, 0.3),
+        },
+        Material::Conductor {
+            alpha: 0.7,
+            reflectance: Vec3::new(0.9, 0.8, 0.3),
+        },
+    ];
+    for m in materials {
+        let mut nonzero = 0;
+        for i in 0..10_000 {
+            let k = SampleKey::new(19, 0, i);
+            let a = stagelight::sampling::uniform_sphere(k.get2(0));
+            // Pairs mostly on the same side, some across.
+            let mut b = stagelight::sampling::uniform_sphere(k.get2(2));
+            if k.get(4) < 0.8 && a.z * b.z < 0.0 {
+                b.z = -b.z;
+            }
+            let fab = m.eval(a, b);
+            let fba = m.eval(b, a);
+            for c in 0..3 {
+                assert!(rel_close(fab[c], fba[c], 1e-5), "{m:?}: {fab} vs {fba}");
+            }
+            if fab.max_element() > 0.0 {
+                nonzero += 1;
+            }
+        }
+        assert!(nonzero > 1000);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Dielectric.
+
+/// Fresnel reflectance from the angle form (Born and Wolf), independent of the cosine form.
+fn fresnel_reference(theta_i: f64, n_i: f64, n_t: f64) -> f64 {
+    let s = n_i / n_t * theta_i.sin();
+    if s >= 1.0 {
+        return 1.0;
+    }
+    if theta_i == 0.0 {
+        let r = (n_t - n_i) / (n_t + n_i);
+        return r * r;
+    }
+    let theta_t = s.asin();
+    let rs = (theta_i - theta_t).sin() / (theta_i + theta_t).sin();
+    let rp = (theta_i - theta_t).tan() / (theta_i + theta_t).tan();
+    0.5 * (rs * rs + rp * rp)
+}
+
+#[test]
+fn fresnel_values() {
+    let f0 = dielectric::fresnel(1.0, 1.5);
+    assert!((f0 - 0.04).abs() < 1e-6, "F(0) = {f0}");
+    assert!((dielectric::fresnel(-1.0, 1.5) - 0.04).abs() < 1e-6);
+    for ior in [1.33f32, 1.5, 2.4] {
+        for i in 0..=180 {
+            let theta = i as f64 * 0.5; // 0 to 90 degrees
+            let c = theta.to_radians().cos() as f32;
+            let out = dielectric::fresnel(c, ior);
+            let inn = dielectric::fresnel(-c, ior);
+            let ref_out = fresnel_reference(theta.to_radians(), 1.0, ior as f64);
+            let ref_in = fresnel_reference(theta.to_radians(), ior as f64, 1.0);
+            assert!(
+                (out as f64 - ref_out).abs() < 2e-5,
+                "ior {ior} theta {theta}"
+            );
+            assert!(
+                (inn as f64 - ref_in).abs() < 2e-5,
+                "ior {ior} theta {theta} inside"
+            );
+            assert!((0.0..=1.0).contains(&out) && (0.0..=1.0).contains(&inn));
+        }
+        // Grazing: everything reflects.
+        assert_eq!(dielectric::fresnel(0.0, ior), 1.0);
+        // Beyond the critical angle from inside: total internal reflection.
+        let crit = (1.0 / ior as f64).asin();
+        for extra in [1e-3, 0.1, 0.5] {
+            let c = -(crit + extra).cos() as f32;
+            assert_eq!(dielectric::fresnel(c, ior), 1.0);
+        }
+    }
+}
+
+#[test]
+fn dielectric_lobe_frequencies_and_directions() {
+    let ior = 1.5f32;
+    let m = Material::Dielectric { ior };
+    // (theta of wo in degrees; > 90 means inside).
+    let thetas = [
+        0.0, 30.0, 60.0, 80.0, 89.0, 180.0, 160.0, 140.0, 139.0, 138.5, 120.0,
+    ];
+    for (case, &theta) in thetas.iter().enumerate() {
+        let wo = dir_deg(theta, 33.0 + 40.0 * case as f64);
+        let f = dielectric::fresnel(wo.z, ior);
+        let (n_o, n_t) = if wo.z > 0.0 { (1.0, ior) } else { (ior, 1.0) };
+        let n = 200_000u64;
+        let mut reflected = 0u64;
+        for i in 0..n {
+            let u = SampleKey::new(23, case as u64, i).get(0);
+            let s = m
+                .sample(wo, Vec2::new(u, 0.5), TransportMode::Importance)
+                .unwrap();
+            assert!(s.delta);
+            assert!((s.wi.length() - 1.0).abs() < 1e-5);
+            if s.wi.z * wo.z > 0.0 {
+                reflected += 1;
+                // The exact mirror direction, chosen with probability F.
+                assert_eq!(s.wi, Vec3::new(-wo.x, -wo.y, wo.z));
+                assert!((s.pdf - f).abs() < 1e-5);
+            } else {
+                assert!((s.pdf - (1.0 - f)).abs() < 1e-5);
+                // Snell: n_o sin_o = n_t sin_t, in the plane of incidence, azimuth reversed.
+                let so = Vec2::new(wo.x, wo.y);
+                let st = Vec2::new(s.wi.x, s.wi.y);
+                assert!((n_o * so.length() - n_t * st.length()).abs() < 1e-5);
+                assert!(so.perp_dot(st).abs() < 1e-5 && so.dot(st) <= 0.0);
+            }
+        }
+        let freq = reflected as f64 / n as f64;
+        let sigma = (f as f64 * (1.0 - f as f64) / n as f64).sqrt();
+        assert!(
+            (freq - f as f64).abs() <= 5.0 * sigma + 1e-6,
+            "theta {theta}: reflected {freq}, F = {f}"
+        );
+    }
+}
+
+#[test]
+fn dielectric_energy() {
+    for ior in [1.5f32, 1.0 / 1.5, 2.4] {
+        for i in 0..200 {
+            let k = SampleKey::new(29, 0, i);
+            let wo = stagelight::sampling::uniform_sphere(k.get2(0));
+            let m = Material::Dielectric { ior };
+            let (n_o, n_t) = if wo.z >= 0.0 { (1.0, ior) } else { (ior, 1.0) };
+            let f = dielectric::fresnel(wo.z, ior);
+            // u = 0 picks reflection when F > 0; u just below 1 picks refraction when F < 1.
+            let mut total = 0.0;
+            for u in [0.0f32, 1.0 - f32::EPSILON / 2.0] {
+                let si = m
+                    .sample(wo, Vec2::new(u, 0.0), TransportMode::Importance)
+                    .unwrap();
+                let sr = m
+                    .sample(wo, Vec2::new(u, 0.0), TransportMode::Radiance)
+                    .unwrap();
+                assert_eq!(si.wi, sr.wi);
+                let wi_ = si.value * si.wi.z.abs() / si.pdf;
+                let wr = sr.value * sr.wi.z.abs() / sr.pdf;
+                // Importance weight is exactly one for both lobes.
+                assert!((wi_ - Vec3::ONE).abs().max_element() < 1e-5, "weight {wi_}");
+                let refracted = si.wi.z * wo.z < 0.0;
+                let expect = if refracted { (n_o / n_t).powi(2) } else { 1.0 };
+                assert!((wr.x - expect).abs() < 1e-5 * expect, "{wr} vs {expect}");
+                // Energy: (value * cos) summed over both lobes is R + T = 1.
+                // u = 0 reflects unless F = 0; the largest u refracts unless F rounds to 1.
+                let e = si.value.x * si.wi.z.abs();
+                if (u == 0.0) != refracted {
+                    assert!((si.pdf - if refracted { 1.0 - f } else { f }).abs() < 1e-5);
+                    total += e;
+                }
+            }
+            assert!((total - 1.0).abs() < 1e-5, "R + T = {total}");
+        }
+    }
+}
+
+#[test]
+fn dielectric_total_internal_reflection() {
+    let ior = 1.5f32;
+    let m = Material::Dielectric { ior };
+    let crit = (1.0 / ior as f64).asin().to_degrees();
+    for theta_in in [crit + 1e-4, crit + 0.5, crit + 10.0, 89.0, 89.999] {
+        let wo = dir_deg(180.0 - theta_in, 10.0);
+        assert!(wo.z < 0.0);
+        for i in 0..1000 {
+            let u = SampleKey::new(31, 0, i).get(0);
+            let s = m
+                .sample(wo, Vec2::new(u, 0.0), TransportMode::Radiance)
+                .unwrap();
+            assert_eq!(s.wi, Vec3::new(-wo.x, -wo.y, wo.z));
+            assert_eq!(s.pdf, 1.0);
+        }
+    }
+    // Exactly at the critical angle (in f32): finite either way.
+    let c = (1.0 - 1.0 / (ior * ior)).sqrt();
+    for dz in [-2e-7f32, 0.0, 2e-7] {
+        let z = -(c + dz);
+        let wo = Vec3::new((1.0 - z * z).sqrt(), 0.0, z);
+        for u in [0.0, 0.5, 0.999, 1.0 - f32::EPSILON / 2.0] {
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                let s = m.sample(wo, Vec2::new(u, 0.0), mode).unwrap();
+                let w = s.value * s.wi.z.abs() / s.pdf;
+                assert!(is_finite3(s.value) && s.pdf > 0.0 && is_finite3(w) && s.wi.is_finite());
+            }
+        }
+    }
+}
+
+/// Refracts `w` through the interface (u just below 1 selects refraction where F < 1).
+fn refract(ior: f32, w: Vec3, mode: TransportMode) -> stagelight::bsdf::BsdfSample {
+    let s = dielectric::sample(ior, w, 1.0 - f32::EPSILON / 2.0, mode);
+    assert!(s.wi.z * w.z < 0.0, "not refracted");
+    s
+}
+
+/// Projected solid angle (area of the projection onto the tangent plane) of a triangle of
+/// nearby directions.
+fn projected_area(a: Vec3, b: Vec3, c: Vec3) -> f64 {
+    let (a, b, c) = (a.as_dvec3(), b.as_dvec3(), c.as_dvec3());
+    0.5 * ((b.x - a.x) * (c.y - a.y) - (b.y - a.y) * (c.x - a.x)).abs()
+}
+
+#[test]
+fn dielectric_generalised_reciprocity() {
+    // For a refracting pair, with f written as c * delta over projected solid angle,
+    // Veach's generalised reciprocity reads f(wo, wi) / n_o^2 = f(wi, wo) / n_i^2, where
+    // n_o, n_i are the indices on wo's and wi's sides. The delta in wi becomes one in wo with the
+    // Jacobian J = d(sigma_i) / d(sigma_o) of the refraction map, measured here numerically, so
+    // the check is c(wo -> wi) / (J n_o^2) = c(wi -> wo) / n_i^2. Importance mode is the adjoint:
+    // c_importance(wo -> wi) / J = c_radiance(wi -> wo).
+    for ior in [1.5f32, 2.4, 1.0 / 1.33] {
+        for theta in [0.0, 10.0, 30.0, 50.0, 70.0, 85.0, 100.0, 130.0, 150.0] {
+            let wo = dir_deg(theta, 57.0);
+            let (n_o, n_i) = if wo.z > 0.0 {
+                (1.0, ior as f64)
+            } else {
+                (ior as f64, 1.0)
+            };
+            // Skip total internal reflection.
+            if dielectric::fresnel(wo.z, ior) >= 1.0 {
+                continue;
+            }
+            let fwd = refract(ior, wo, TransportMode::Radiance);
+            let wi = fwd.wi;
+            let bwd = refract(ior, wi, TransportMode::Radiance);
+            // The round trip returns to wo, with the same Fresnel transmittance.
+            assert!((bwd.wi - wo).length() < 1e-5, "{} vs {wo}", bwd.wi);
+            assert!(
+                (fwd.pdf - bwd.pdf).abs() < 1e-5,
+                "ior {ior} theta {theta}: T {} vs {}",
+                fwd.pdf,
+                bwd.pdf
+            );
+
+            // A small triangle of directions around wo, and its image under refraction.
+            let wod = wo.as_dvec3();
+            let a = wod.any_orthonormal_vector();
+            let b = wod.cross(a);
+            let d = 1e-3;
+            let wo1 = (wod + d * a).normalize().as_vec3();
+            let wo2 = (wod + d * b).normalize().as_vec3();
+            let wi1 = refract(ior, wo1, TransportMode::Radiance).wi;
+            let wi2 = refract(ior, wo2, TransportMode::Radiance).wi;
+            let jac = projected_area(wi, wi1, wi2) / projected_area(wo, wo1, wo2);
+            // Etendue: n^2 d(sigma) is conserved, so J = (n_o / n_i)^2.
+            assert!((jac - (n_o / n_i).powi(2)).abs() < 1e-3 * jac, "J = {jac}");
+
+            let c_fwd = (fwd.value.x * fwd.wi.z.abs()) as f64;
+            let c_bwd = (bwd.value.x * bwd.wi.z.abs()) as f64;
+            let lhs = c_fwd / (jac * n_o * n_o);
+            let rhs = c_bwd / (n_i * n_i);
+            assert!(
+                (lhs - rhs).abs() < 2e-3 * rhs,
+                "ior {ior} theta {theta}: {lhs} vs {rhs}"
+            );
+            let imp = refract(ior, wo, TransportMode::Importance);
+            let c_imp = (imp.value.x * imp.wi.z.abs()) as f64;
+            assert!((c_imp / jac - c_bwd).abs() < 2e-3 * c_bwd);
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Stability.
+
+fn edge_directions() -> Vec<Vec3> {
+    let mut v = vec![Vec3::Z, -Vec3::Z, Vec3::X, Vec3::new(0.6, 0.8, 0.0)];
+    for z in [1e-30f32, 1e-20, 1e-10, 1e-7, 1e-4, 1e-2, 0.5, 1.0 - 1e-7] {
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        v.push(Vec3::new(r * 0.8, r * 0.6, z));
+        v.push(Vec3::new(-r * 0.6, r * 0.8, -z));
+    }
+    v
+}
+
+fn edge_us() -> Vec<Vec2> {
+    let e = [0.0, 1e-7, 0.25, 0.5, 0.75, 1.0 - f32::EPSILON / 2.0];
+    let mut v = Vec::new();
+    for a in e {
+        for b in e {
+            v.push(Vec2::new(a, b));
+        }
+    }
+    v
+}
+
+fn check_material_finite(m: Material) {
+    for wo in edge_directions() {
+        for wi in edge_directions() {
+            let f = m.eval(wo, wi);
+            let p = m.pdf(wo, wi);
+            assert!(
+                is_finite3(f) && f.cmpge(Vec3::ZERO).all(),
+                "{m:?} {wo} {wi}: f {f}"
+            );
+            assert!(p.is_finite() && p >= 0.0, "{m:?} {wo} {wi}: pdf {p}");
+        }
+        for u in edge_us() {
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                if let Some(s) = m.sample(wo, u, mode) {
+                    let w = s.value * s.wi.z.abs() / s.pdf;
+                    assert!(
+                        s.wi.is_finite() && is_finite3(s.value) && s.pdf.is_finite(),
+                        "{m:?} wo {wo} u {u}: {s:?}"
+                    );
+                    assert!(s.pdf > 0.0 && is_finite3(w), "{m:?} wo {wo} u {u}: {s:?}");
+                    assert!((s.wi.length() - 1.0).abs() < 1e-4, "{m:?} wo {wo}: {s:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn stability_all_materials() {
+    check_material_finite(Material::Diffuse {
+        reflectance: Vec3::splat(0.5),
+    });
+    for ior in [1.0f32, 1.5, 2.4, 1.0 / 1.5] {
+        check_material_finite(Material::Dielectric { ior });
+    }
+    for alpha in [0.0f32, 1e-6, 1e-4, 1e-3, 0.01, 0.3, 1.0] {
+        check_material_finite(Material::Conductor {
+            alpha,
+            reflectance: Vec3::new(1.0, 0.78, 0.34),
+        });
+    }
+    // Near-mirror pairs at tiny alpha stay finite: the peak of D at grazing angles.
+    for z in [1.0f32, 0.5, 1e-3, 1e-6] {
+        let r = (1.0 - z * z).sqrt();
+        let wo = Vec3::new(r, 0.0, z);
+        let wi = Vec3::new(-r, 0.0, z);
+        for alpha in [1e-4f32, 1e-3, 1.0] {
+            let f = conductor::eval(alpha, Vec3::ONE, wo, wi);
+            let p = conductor::pdf(alpha, wo, wi);
+            assert!(
+                f.is_finite() && p.is_finite() && p > 0.0,
+                "alpha {alpha} z {z}"
+            );
+        }
+    }
+}
+
+#[test]
+fn dielectric_grazing_is_finite() {
+    for ior in [1.5f32, 1.0 / 1.5] {
+        for z in [0.0f32, -0.0, 1e-30, -1e-30, 1e-7, -1e-7, 1e-3, -1e-3] {
+            let r = (1.0 - z * z).sqrt();
+            let wo = Vec3::new(r, 0.0, z);
+            for u in [0.0f32, 0.5, 0.999_999, 1.0 - f32::EPSILON / 2.0] {
+                for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                    let s = dielectric::sample(ior, wo, u, mode);
+                    let w = s.value * s.wi.z.abs() / s.pdf;
+                    assert!(
+                        s.wi.is_finite() && s.value.is_finite(),
+                        "z {z} u {u}: {s:?}"
+                    );
+                    assert!(s.pdf > 0.0 && s.pdf <= 1.0 && w.is_finite(), "z {z}: {s:?}");
+                }
+            }
+        }
+    }
+}
