@@ -1,0 +1,121 @@
+//! The command line: exit codes, clear errors for bad input, and Ctrl-C keeping finished work.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn stagelight(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_stagelight"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .expect("stagelight runs")
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("stagelight-cli-{name}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn zero_samples_is_a_clear_error() {
+    let o = stagelight(&["render", "scenes/cornell_box.ron", "--spp", "0"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--spp"), "{}", stderr(&o));
+}
+
+#[test]
+fn negative_time_is_a_clear_error() {
+    let o = stagelight(&["render", "scenes/cornell_box.ron", "--time", "-3"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("positive"), "{}", stderr(&o));
+}
+
+#[test]
+fn missing_scene_names_the_file() {
+    let o = stagelight(&["render", "scenes/no_such_scene.ron"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("no_such_scene.ron"), "{}", stderr(&o));
+}
+
+#[test]
+fn malformed_scene_names_file_and_line() {
+    let dir = temp_dir("malformed");
+    let scene = dir.join("broken.ron");
+    std::fs::write(&scene, "Scene(\n  camera: (\n    position: (0, 0, 0),,\n").unwrap();
+    let o = stagelight(&["render", scene.to_str().unwrap(), "--spp", "1"]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(err.contains("broken.ron:3"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+}
+
+#[test]
+fn diff_of_different_sizes_is_an_error_and_of_itself_is_zero() {
+    let dir = temp_dir("diff");
+    let (a, b) = (dir.join("a.exr"), dir.join("b.exr"));
+    stagelight::film::Image::new(4, 4).write_exr(&a).unwrap();
+    stagelight::film::Image::new(4, 5).write_exr(&b).unwrap();
+    let o = stagelight(&["diff", a.to_str().unwrap(), b.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("size"), "{}", stderr(&o));
+    let o = stagelight(&["diff", a.to_str().unwrap(), a.to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(0));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("relMSE  0.000000e0"));
+}
+
+#[test]
+fn render_writes_exr_and_png_and_reports() {
+    let dir = temp_dir("render");
+    let out = dir.join("cb.exr");
+    let o = stagelight(&[
+        "render",
+        "scenes/cornell_box.ron",
+        "--spp",
+        "2",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let report = String::from_utf8_lossy(&o.stdout);
+    for line in ["samples/s", "closest-hit rays", "shadow rays", "NaN/Inf samples", "bytes/path"] {
+        assert!(report.contains(line), "report lacks {line}: {report}");
+    }
+    // The Cornell box is all diffuse: the report's systems say so.
+    assert!(report.contains("shade_diffuse") && !report.contains("shade_dielectric"));
+    let image = stagelight::film::Image::read_exr(&out).unwrap();
+    assert_eq!((image.width, image.height), (256, 256));
+    assert!(out.with_extension("png").exists());
+}
+
+#[test]
+fn ctrl_c_saves_the_finished_passes_and_exits_130() {
+    let dir = temp_dir("sigint");
+    let out = dir.join("long.exr");
+    let child = Command::new(env!("CARGO_BIN_EXE_stagelight"))
+        .args(["render", "scenes/cornell_box.ron", "--spp", "1000000", "--quiet", "-o"])
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("stagelight starts");
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains("interrupted: saved the"), "{stdout}");
+    let image = stagelight::film::Image::read_exr(&out).expect("the finished passes were written");
+    let mean = image.channel_means();
+    assert!(mean.x > 0.0 && mean.x.is_finite());
+}
