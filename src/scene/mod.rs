@@ -1,6 +1,16 @@
 //! Scenes: the RON description, OBJ loading, procedural shapes, the hecs world of scene
 //! entities, and "prepare", which flattens that world once into render data.
 
+pub mod format;
+pub mod parse;
+pub mod prepare;
+pub mod shapes;
+pub mod world;
+
+pub use parse::{Located, ParsedScene, parse};
+pub use prepare::prepare;
+pub use world::SceneWorld;
+
 use crate::bsdf::Material;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
@@ -76,7 +86,8 @@ pub struct PreparedScene {
     pub emitters: Emitters,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
-    /// Zero-area triangles dropped while preparing (each also reported as a warning).
+    /// Messages for the user (the CLI prints them): zero-area triangles dropped while
+    /// preparing (one message per object), unused materials, a scene without light.
     pub warnings: Vec<String>,
 }
 
@@ -99,6 +110,20 @@ fn location(line: Option<usize>, column: Option<usize>) -> String {
 }
 
 /// Reads a RON scene and prepares it for rendering.
-pub fn load(_path: &Path) -> Result<PreparedScene, SceneError> {
-    todo!("scene helper")
+pub fn load(path: &Path) -> Result<PreparedScene, SceneError> {
+    let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+        file: path.to_path_buf(),
+        line: None,
+        column: None,
+        message: format!("cannot read the scene file: {e}"),
+    })?;
+    load_from_str(path, &text)
+}
+
+/// Prepares scene text as if read from `source` (named by errors; mesh paths are relative to
+/// its directory).
+pub fn load_from_str(source: &Path, text: &str) -> Result<PreparedScene, SceneError> {
+    let parsed = parse(source, text)?;
+    let world = world::build(&parsed)?;
+    prepare(&world)
 }

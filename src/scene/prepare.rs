@@ -1,0 +1,237 @@
+//! "prepare": reads the scene world once into the flat columns the renderer uses.
+
+use super::world::{
+    Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape, SourceSpot,
+    Transform,
+};
+use super::{Camera, Emitters, FLAT, NO_EMITTER, PreparedScene, SceneError, TriangleColumns};
+use crate::bsdf::Material;
+use crate::math::luminance;
+use glam::{DVec3, Vec3};
+use hecs::Entity;
+use std::f64::consts::PI;
+
+/// A triangle whose doubled area is below this fraction of its longest squared edge is
+/// degenerate in f32 (its normal is rounding noise) and is dropped.
+const MIN_RELATIVE_AREA: f64 = 1e-6;
+
+pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
+    let world = &scene.world;
+    let error = |spot: Option<&SourceSpot>, message: String| SceneError {
+        file: scene.source.clone(),
+        line: spot.map(|s| s.line),
+        column: spot.map(|s| s.column),
+        message,
+    };
+
+    let camera = {
+        let mut query = world.query::<&Camera>();
+        let cameras: Vec<Camera> = query.iter().copied().collect();
+        match cameras[..] {
+            [camera] => camera,
+            _ => return Err(error(None, "a scene needs exactly one camera".to_string())),
+        }
+    };
+
+    let mut object_query = world.query::<(
+        &ObjectInfo,
+        &SourceSpot,
+        &Shape,
+        &Transform,
+        &MaterialRef,
+        Option<&Emission>,
+        Option<&FlipNormals>,
+    )>();
+    let mut objects: Vec<_> = object_query.iter().collect();
+    // Triangle ids follow the file, whatever order hecs stores archetypes in.
+    objects.sort_by_key(|o| o.0.order);
+
+    // Only the materials some object uses, in declaration order.
+    let mut material_query = world.query::<(Entity, &MaterialInfo, &Material)>();
+    let mut declared: Vec<_> = material_query.iter().collect();
+    declared.sort_by_key(|m| m.1.order);
+    let mut materials = Vec::new();
+    let mut material_index = Vec::new(); // (entity, index into `materials`)
+    let mut warnings = Vec::new();
+    for &(entity, info, material) in &declared {
+        if objects.iter().any(|o| o.4.0 == entity) {
+            material_index.push((entity, materials.len() as u32));
+            materials.push(*material);
+        } else {
+            warnings.push(format!("material \"{}\" is not used", info.name));
+        }
+    }
+
+    let mut triangles = TriangleColumns::default();
+    let mut emitters = Emitters::default();
+    for (info, spot, shape, transform, material, emission, flip) in objects {
+        let describe = || match &info.name {
+            Some(name) => format!("object \"{name}\" (line {})", spot.line),
+            None => format!("object #{} (line {})", info.order + 1, spot.line),
+        };
+        let material = material_index
+            .iter()
+            .find(|(e, _)| *e == material.0)
+            .map(|&(_, i)| i)
+            .ok_or_else(|| error(Some(spot), "object's material entity is missing".into()))?;
+        let mesh = &shape.0;
+        let affine = transform.0;
+        // Normals transform by the inverse transpose; a mirroring transform reverses the
+        // winding, so the geometric normal keeps pointing to the same side of the surface.
+        let normal_matrix = affine.matrix3.inverse().transpose();
+        let mirrored = affine.matrix3.determinant() < 0.0;
+        let flip_normals = flip.is_some();
+        let reverse = mirrored != flip_normals;
+
+        let positions: Vec<Vec3> = mesh
+            .positions
+            .iter()
+            .map(|&p| affine.transform_point3(p).as_vec3())
+            .collect();
+        if positions.iter().any(|p| !p.is_finite()) {
+            return Err(error(
+                Some(spot),
+                format!("{}: transformed vertices are not finite", describe()),
+            ));
+        }
+        let normals: Option<Vec<Vec3>> = mesh.normals.as_ref().map(|normals| {
+            normals
+                .iter()
+                .map(|&n| {
+                    let n = (normal_matrix * n).try_normalize().unwrap_or(DVec3::ZERO);
+                    (if flip_normals { -n } else { n }).as_vec3()
+                })
+                .collect()
+        });
+
+        let mut dropped = 0usize;
+        let mut emitting = 0usize;
+        for &[a, b, c] in &mesh.triangles {
+            let corners = if reverse { [a, c, b] } else { [a, b, c] };
+            let [p0, p1, p2] = corners.map(|i| positions[i as usize]);
+            let (e1, e2, e3) = (
+                (p1 - p0).as_dvec3(),
+                (p2 - p0).as_dvec3(),
+                (p2 - p1).as_dvec3(),
+            );
+            let doubled_area = e1.cross(e2).length();
+            let longest = e1
+                .length_squared()
+                .max(e2.length_squared())
+                .max(e3.length_squared());
+            // Positions are finite here, so the comparison is never NaN; equal points give 0 <= 0.
+            if doubled_area <= MIN_RELATIVE_AREA * longest {
+                dropped += 1;
+                continue;
+            }
+            if triangles.len() >= u32::MAX as usize - 1 {
+                return Err(error(Some(spot), "too many triangles".to_string()));
+            }
+            let id = triangles.len() as u32;
+            triangles.p0.push(p0);
+            triangles.p1.push(p1);
+            triangles.p2.push(p2);
+            triangles.material.push(material);
+
+            let vertex_normals = normals
+                .as_ref()
+                .map(|n| corners.map(|i| n[i as usize]))
+                .filter(|n| n.iter().all(|v| *v != Vec3::ZERO));
+            match vertex_normals {
+                Some(n) => {
+                    triangles.smooth.push(triangles.vertex_normals.len() as u32);
+                    triangles.vertex_normals.push(n);
+                }
+                None => triangles.smooth.push(FLAT),
+            }
+
+            match emission {
+                Some(Emission(radiance)) => {
+                    triangles.emitter.push(emitters.triangle.len() as u32);
+                    emitters.triangle.push(id);
+                    emitters.radiance.push(*radiance);
+                    emitters.area.push((0.5 * doubled_area) as f32);
+                    emitting += 1;
+                }
+                None => triangles.emitter.push(NO_EMITTER),
+            }
+        }
+        if dropped > 0 {
+            warnings.push(format!(
+                "{}: dropped {dropped} zero-area triangle{}",
+                describe(),
+                if dropped == 1 { "" } else { "s" }
+            ));
+        }
+        if emission.is_some() && emitting == 0 {
+            return Err(error(
+                Some(spot),
+                format!(
+                    "{}: degenerate light: the emissive object has zero total area",
+                    describe()
+                ),
+            ));
+        }
+    }
+    if triangles.is_empty() {
+        return Err(error(None, "the scene has no triangles".to_string()));
+    }
+    if emitters.triangle.is_empty() {
+        warnings.push("no object emits light: the image will be black".to_string());
+    }
+    build_distribution(&mut emitters);
+
+    let all_points = || {
+        triangles
+            .p0
+            .iter()
+            .chain(&triangles.p1)
+            .chain(&triangles.p2)
+    };
+    let bounds_min = all_points().fold(Vec3::INFINITY, |m, p| m.min(*p));
+    let bounds_max = all_points().fold(Vec3::NEG_INFINITY, |m, p| m.max(*p));
+
+    Ok(PreparedScene {
+        source: scene.source.clone(),
+        camera,
+        triangles,
+        materials,
+        emitters,
+        bounds_min,
+        bounds_max,
+        warnings,
+    })
+}
+
+/// Fills pmf (proportional to pi * area * luminance), cdf (ending at exactly 1) and the total
+/// power, summing in double precision.
+fn build_distribution(emitters: &mut Emitters) {
+    let powers: Vec<DVec3> = emitters
+        .radiance
+        .iter()
+        .zip(&emitters.area)
+        .map(|(l, &area)| PI * area as f64 * l.as_dvec3())
+        .collect();
+    let weights: Vec<f64> = powers
+        .iter()
+        .map(|p| luminance(p.as_vec3()) as f64)
+        .collect();
+    let total: f64 = weights.iter().sum();
+    emitters.total_power = powers.iter().sum::<DVec3>().as_vec3();
+    if total <= 0.0 {
+        // No emitters (radiance is checked to be non-zero, so luminance is positive).
+        return;
+    }
+    emitters.pmf = weights.iter().map(|w| (w / total) as f32).collect();
+    let mut running = 0.0;
+    emitters.cdf = weights
+        .iter()
+        .map(|w| {
+            running += w;
+            (running / total) as f32
+        })
+        .collect();
+    if let Some(last) = emitters.cdf.last_mut() {
+        *last = 1.0;
+    }
+}

@@ -1,0 +1,238 @@
+//! The scene as a hecs world: the camera, each material and each object is an entity.
+//! `build` fills it from the parsed file (meshing every shape, reading OBJ files);
+//! `super::prepare` reads it once into render data.
+
+use super::format::{CameraDesc, MaterialDesc, ShapeDesc, TransformDesc};
+use super::shapes::{self, Mesh};
+use super::{Camera, ParsedScene, SceneError};
+use crate::bsdf::Material;
+use glam::{DAffine3, DQuat, Vec3};
+use hecs::{Entity, EntityBuilder, World};
+use std::path::{Path, PathBuf};
+
+/// A scene's entities, before preparation.
+pub struct SceneWorld {
+    pub world: World,
+    /// The scene file, named by errors.
+    pub source: PathBuf,
+}
+
+/// Where an entity was declared in the scene file (1-based), for messages.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SourceSpot {
+    pub line: usize,
+    pub column: usize,
+}
+
+/// A material entity's name and declaration order.
+#[derive(Clone, Debug)]
+pub struct MaterialInfo {
+    pub name: String,
+    pub order: u32,
+}
+
+/// A scene object's declaration order (triangle ids follow it) and optional name.
+#[derive(Clone, Debug)]
+pub struct ObjectInfo {
+    pub order: u32,
+    pub name: Option<String>,
+}
+
+/// The object's mesh in object space.
+pub struct Shape(pub Mesh);
+
+/// Object space to world space.
+#[derive(Clone, Copy, Debug)]
+pub struct Transform(pub DAffine3);
+
+/// The material entity an object uses.
+#[derive(Clone, Copy, Debug)]
+pub struct MaterialRef(pub Entity);
+
+/// Constant radiance emitted on the geometric normal's side of every triangle of the object.
+#[derive(Clone, Copy, Debug)]
+pub struct Emission(pub Vec3);
+
+/// Marks an object whose triangles are reversed (and vertex normals negated).
+#[derive(Clone, Copy, Debug)]
+pub struct FlipNormals;
+
+/// Spawns the camera, the materials and the objects of a parsed scene.
+pub fn build(parsed: &ParsedScene) -> Result<SceneWorld, SceneError> {
+    let source = parsed.source.clone();
+    let mut world = World::new();
+
+    let camera = make_camera(&parsed.camera.desc).map_err(|message| SceneError {
+        file: source.clone(),
+        line: Some(parsed.camera.spot.line),
+        column: Some(parsed.camera.spot.column),
+        message,
+    })?;
+    world.spawn((camera, parsed.camera.spot.clone()));
+
+    let materials: Vec<(String, Entity)> = parsed
+        .materials
+        .iter()
+        .enumerate()
+        .map(|(order, (name, desc))| {
+            let info = MaterialInfo {
+                name: name.clone(),
+                order: order as u32,
+            };
+            (name.clone(), world.spawn((info, make_material(desc))))
+        })
+        .collect();
+
+    let base_dir = source.parent().unwrap_or(Path::new("")).to_path_buf();
+    for (order, object) in parsed.objects.iter().enumerate() {
+        let error = |message: String| SceneError {
+            file: source.clone(),
+            line: Some(object.spot.line),
+            column: Some(object.spot.column),
+            message,
+        };
+        let desc = &object.desc;
+        let material = materials
+            .iter()
+            .find(|(name, _)| *name == desc.material)
+            .map(|&(_, entity)| entity)
+            .ok_or_else(|| {
+                let known: Vec<&str> = materials.iter().map(|(n, _)| n.as_str()).collect();
+                error(format!(
+                    "unknown material \"{}\" (defined: {})",
+                    desc.material,
+                    if known.is_empty() {
+                        "none".to_string()
+                    } else {
+                        known.join(", ")
+                    }
+                ))
+            })?;
+        let mesh = make_mesh(&desc.shape, &base_dir).map_err(error)?;
+        let mut entity = EntityBuilder::new();
+        entity.add_bundle((
+            ObjectInfo {
+                order: order as u32,
+                name: desc.name.clone(),
+            },
+            object.spot.clone(),
+            Shape(mesh),
+            Transform(make_transform(&desc.transform)),
+            MaterialRef(material),
+        ));
+        // Optional components: their absence is the common case.
+        if let Some(radiance) = desc.emission {
+            entity.add(Emission(radiance.0));
+        }
+        if desc.flip_normals {
+            entity.add(FlipNormals);
+        }
+        world.spawn(entity.build());
+    }
+    Ok(SceneWorld { world, source })
+}
+
+/// The camera frame: forward = normalize(look_at - position), right = normalize(forward x up),
+/// up = right x forward.
+fn make_camera(desc: &CameraDesc) -> Result<Camera, String> {
+    let position = desc.position.0;
+    let forward = (desc.look_at.0 - position)
+        .try_normalize()
+        .ok_or("camera position and look_at are the same point")?;
+    let up = desc
+        .up
+        .0
+        .try_normalize()
+        .ok_or("camera up vector is zero")?;
+    let side = forward.cross(up);
+    // sin of the angle between forward and up: below ~1e-6 the frame is undefined.
+    if side.length() < 1e-6 {
+        return Err("camera looks along its up vector: forward and up are parallel".to_string());
+    }
+    let right = side.normalize();
+    let up = right.cross(forward);
+    Ok(Camera {
+        position: position.as_vec3(),
+        forward: forward.as_vec3(),
+        right: right.as_vec3(),
+        up: up.as_vec3(),
+        fov_y_degrees: desc.fov.0 as f32,
+        width: desc.width.0,
+        height: desc.height.0,
+    })
+}
+
+fn make_material(desc: &MaterialDesc) -> Material {
+    match *desc {
+        MaterialDesc::Diffuse { reflectance } => Material::Diffuse {
+            reflectance: reflectance.0,
+        },
+        MaterialDesc::Dielectric { ior } => Material::Dielectric { ior: ior.0 },
+        MaterialDesc::Conductor { alpha, reflectance } => Material::Conductor {
+            alpha: alpha.0,
+            reflectance: reflectance.0,
+        },
+    }
+}
+
+fn make_mesh(shape: &ShapeDesc, base_dir: &Path) -> Result<Mesh, String> {
+    Ok(match shape {
+        ShapeDesc::Quad(a, b, c, d) => shapes::quad(a.0, b.0, c.0, d.0),
+        ShapeDesc::Triangle(a, b, c) => shapes::triangle(a.0, b.0, c.0),
+        ShapeDesc::Box { min, max } => {
+            if !min.0.cmplt(max.0).all() {
+                return Err(format!(
+                    "box min {:?} must be below max {:?} on every axis",
+                    min.0.to_array(),
+                    max.0.to_array()
+                ));
+            }
+            shapes::cuboid(min.0, max.0)
+        }
+        ShapeDesc::Icosphere { level, smooth } => shapes::icosphere(level.0, *smooth),
+        ShapeDesc::Torus {
+            major_radius,
+            minor_radius,
+            nu,
+            nv,
+        } => shapes::torus(major_radius.0, minor_radius.0, nu.0, nv.0),
+        ShapeDesc::Obj(file) => shapes::load_obj(&base_dir.join(file))?,
+    })
+}
+
+/// Composes the list, first entry applied first.
+fn make_transform(list: &[TransformDesc]) -> DAffine3 {
+    list.iter().fold(DAffine3::IDENTITY, |acc, t| {
+        let step = match *t {
+            TransformDesc::Translate(offset) => DAffine3::from_translation(offset.0),
+            TransformDesc::Rotate { axis, degrees } => DAffine3::from_quat(DQuat::from_axis_angle(
+                axis.0.normalize(),
+                degrees.0.to_radians(),
+            )),
+            TransformDesc::Scale(factors) => DAffine3::from_scale(factors.0),
+        };
+        step * acc
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::format::{Direction, Finite, Point, ScaleDesc};
+    use glam::DVec3;
+
+    #[test]
+    fn transforms_apply_in_order() {
+        let t = make_transform(&[
+            TransformDesc::Scale(ScaleDesc(DVec3::splat(2.0))),
+            TransformDesc::Rotate {
+                axis: Direction(DVec3::Y),
+                degrees: Finite(90.0),
+            },
+            TransformDesc::Translate(Point(DVec3::new(1.0, 0.0, 0.0))),
+        ]);
+        // (1,0,0) -> scale (2,0,0) -> rotate about y by 90 degrees (0,0,-2) -> (1,0,-2).
+        let p = t.transform_point3(DVec3::X);
+        assert!((p - DVec3::new(1.0, 0.0, -2.0)).length() < 1e-12, "{p}");
+    }
+}
