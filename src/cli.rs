@@ -206,13 +206,16 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
     image.write_exr(&output)?;
     let png = output.with_extension("png");
     image.write_png(&png)?;
-    print_report(&args.scene, args.integrator, threads, &outcome, cpu, &data);
-    println!("wrote {} and {}", output.display(), png.display());
+    let mut report = render_report(&args.scene, args.integrator, threads, &outcome, cpu, &data);
+    report += &format!("wrote {} and {}\n", output.display(), png.display());
     if outcome.interrupted {
-        println!(
-            "interrupted: saved the {} finished passes ({} samples)",
+        report += &format!(
+            "interrupted: saved the {} finished passes ({} samples)\n",
             outcome.passes, outcome.samples
         );
+    }
+    print_out(&report);
+    if outcome.interrupted {
         return Ok(EXIT_INTERRUPTED);
     }
     Ok(0)
@@ -278,17 +281,28 @@ fn mega(x: f64) -> String {
     }
 }
 
-fn print_report(
+/// Writes to stdout, ignoring a closed pipe (`stagelight render ... | head` is fine).
+fn print_out(text: &str) {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    let _ = out.write_all(text.as_bytes()).and_then(|_| out.flush());
+}
+
+/// The end-of-render report.
+pub fn render_report(
     scene: &Path,
     integrator: IntegratorName,
     threads: usize,
     o: &RenderOutcome,
     cpu: f64,
     data: &SceneData,
-) {
+) -> String {
+    use std::fmt::Write;
+    let mut r = String::new();
     let wall = o.wall.as_secs_f64();
     let cam = data.scene.camera;
-    println!(
+    let _ = writeln!(
+        r,
         "{} with {} at {}x{}, {} threads",
         scene.display(),
         integrator.as_str(),
@@ -296,27 +310,36 @@ fn print_report(
         cam.height,
         threads
     );
-    println!("  passes            {} ({} samples)", o.passes, o.samples);
-    println!(
+    let _ = writeln!(
+        r,
+        "  passes            {} ({} samples)",
+        o.passes, o.samples
+    );
+    let _ = writeln!(
+        r,
         "  time              {wall:.3} s wall, {cpu:.2} s CPU ({:.2} cores busy)",
         cpu / wall.max(1e-9)
     );
-    println!("  samples/s         {}", mega(o.samples as f64 / wall));
-    println!(
+    let _ = writeln!(r, "  samples/s         {}", mega(o.samples as f64 / wall));
+    let _ = writeln!(
+        r,
         "  closest-hit rays  {} ({}rays/s)",
         o.closest_rays(),
         mega(o.closest_rays() as f64 / wall)
     );
-    println!(
+    let _ = writeln!(
+        r,
         "  shadow rays       {} ({}rays/s)",
         o.shadow_rays(),
         mega(o.shadow_rays() as f64 / wall)
     );
-    println!(
+    let _ = writeln!(
+        r,
         "  NaN/Inf samples   {} (counted, never added)",
         o.film.nonfinite
     );
-    println!(
+    let _ = writeln!(
+        r,
         "  memory            peak {:.1} MiB; {} paths in flight x {} bytes/path = {:.1} MiB",
         peak_memory_bytes() as f64 / (1 << 20) as f64,
         o.wavefront,
@@ -324,9 +347,13 @@ fn print_report(
         (o.wavefront * o.bytes_per_path) as f64 / (1 << 20) as f64
     );
     let total = o.stats.total_time().as_secs_f64().max(1e-12);
-    println!("  systems           time share   runs   items taken -> emitted");
+    let _ = writeln!(
+        r,
+        "  systems           time share   runs   items taken -> emitted"
+    );
     for s in &o.stats.systems {
-        println!(
+        let _ = writeln!(
+            r,
             "    {:<32} {:>6.1}% {:>6} {:>14} -> {}",
             s.name,
             100.0 * s.time.as_secs_f64() / total,
@@ -335,6 +362,7 @@ fn print_report(
             s.emitted
         );
     }
+    r
 }
 
 fn diff_command(image: &Path, reference: &Path) -> Result<()> {
@@ -342,14 +370,18 @@ fn diff_command(image: &Path, reference: &Path) -> Result<()> {
     let b = Image::read_exr(reference)?;
     let m = crate::metrics::compare(&a, &b)
         .with_context(|| format!("{} against {}", image.display(), reference.display()))?;
-    println!("{} against {}", image.display(), reference.display());
-    println!("  relMSE  {:.6e}", m.relmse);
-    println!("  RMSE    {:.6e}", m.rmse);
-    println!("  MAE     {:.6e}", m.mae);
-    println!(
+    use std::fmt::Write;
+    let mut t = String::new();
+    let _ = writeln!(t, "{} against {}", image.display(), reference.display());
+    let _ = writeln!(t, "  relMSE  {:.6e}", m.relmse);
+    let _ = writeln!(t, "  RMSE    {:.6e}", m.rmse);
+    let _ = writeln!(t, "  MAE     {:.6e}", m.mae);
+    let _ = writeln!(
+        t,
         "  mean    ({:.6}, {:.6}, {:.6}) against ({:.6}, {:.6}, {:.6})",
         m.mean.x, m.mean.y, m.mean.z, m.reference_mean.x, m.reference_mean.y, m.reference_mean.z
     );
+    print_out(&t);
     Ok(())
 }
 
@@ -397,8 +429,11 @@ fn bench_command(
         shadow_per_s.push(o.shadow_rays() as f64 / wall);
         last = Some((o, cpu));
     }
+    use std::fmt::Write;
     let (o, cpu) = last.expect("at least one run");
-    println!(
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
         "bench {} ({}, {} spp, {} runs after a warm-up, {} threads)",
         scene.display(),
         integrator.as_str(),
@@ -406,38 +441,49 @@ fn bench_command(
         runs,
         pool.current_num_threads()
     );
-    println!("| measure | median | min | max |");
-    println!("|---|---|---|---|");
+    let _ = writeln!(t, "| measure | median | min | max |");
+    let _ = writeln!(t, "|---|---|---|---|");
     for (name, v) in [
         ("samples/s", &mut samples_per_s),
         ("closest-hit rays/s", &mut closest_per_s),
         ("shadow rays/s", &mut shadow_per_s),
     ] {
         v.sort_by(f64::total_cmp);
-        println!(
+        let _ = writeln!(
+            t,
             "| {name} | {} | {} | {} |",
             mega(v[v.len() / 2]),
             mega(v[0]),
             mega(v[v.len() - 1])
         );
     }
-    println!("| bytes per path in flight | {} | | |", o.bytes_per_path);
-    println!("| paths in flight | {} | | |", o.wavefront);
-    println!(
+    let _ = writeln!(t, "| bytes per path in flight | {} | | |", o.bytes_per_path);
+    let _ = writeln!(t, "| paths in flight | {} | | |", o.wavefront);
+    let _ = writeln!(
+        t,
         "| peak memory | {:.1} MiB | | |",
         peak_memory_bytes() as f64 / (1 << 20) as f64
     );
-    println!(
+    let _ = writeln!(
+        t,
         "| CPU s / wall s (last run) | {:.2} | | |",
         cpu / o.wall.as_secs_f64()
     );
-    println!("| NaN/Inf samples (last run) | {} | | |", o.film.nonfinite);
-    println!();
-    println!("| system (last run) | time share | runs | taken | emitted |");
-    println!("|---|---|---|---|---|");
+    let _ = writeln!(
+        t,
+        "| NaN/Inf samples (last run) | {} | | |",
+        o.film.nonfinite
+    );
+    let _ = writeln!(t);
+    let _ = writeln!(
+        t,
+        "| system (last run) | time share | runs | taken | emitted |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|");
     let total = o.stats.total_time().as_secs_f64().max(1e-12);
     for s in &o.stats.systems {
-        println!(
+        let _ = writeln!(
+            t,
             "| {} | {:.1}% | {} | {} | {} |",
             s.name,
             100.0 * s.time.as_secs_f64() / total,
@@ -446,5 +492,6 @@ fn bench_command(
             s.emitted
         );
     }
+    print_out(&t);
     Ok(())
 }

@@ -29,8 +29,8 @@ fn zero_samples_is_a_clear_error() {
 }
 
 #[test]
-fn negative_time_is_a_clear_error() {
-    let o = stagelight(&["render", "scenes/cornell_box.ron", "--time", "-3"]);
+fn non_positive_time_is_a_clear_error() {
+    let o = stagelight(&["render", "scenes/cornell_box.ron", "--time=-3"]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("positive"), "{}", stderr(&o));
 }
@@ -83,7 +83,13 @@ fn render_writes_exr_and_png_and_reports() {
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let report = String::from_utf8_lossy(&o.stdout);
-    for line in ["samples/s", "closest-hit rays", "shadow rays", "NaN/Inf samples", "bytes/path"] {
+    for line in [
+        "samples/s",
+        "closest-hit rays",
+        "shadow rays",
+        "NaN/Inf samples",
+        "bytes/path",
+    ] {
         assert!(report.contains(line), "report lacks {line}: {report}");
     }
     // The Cornell box is all diffuse: the report's systems say so.
@@ -98,7 +104,14 @@ fn ctrl_c_saves_the_finished_passes_and_exits_130() {
     let dir = temp_dir("sigint");
     let out = dir.join("long.exr");
     let child = Command::new(env!("CARGO_BIN_EXE_stagelight"))
-        .args(["render", "scenes/cornell_box.ron", "--spp", "1000000", "--quiet", "-o"])
+        .args([
+            "render",
+            "scenes/cornell_box.ron",
+            "--spp",
+            "1000000",
+            "--quiet",
+            "-o",
+        ])
         .arg(&out)
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .stdout(std::process::Stdio::piped())

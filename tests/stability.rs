@@ -8,7 +8,11 @@ use stagelight::scene::PreparedScene;
 
 fn translated(mut scene: PreparedScene, offset: Vec3) -> PreparedScene {
     let t = &mut scene.triangles;
-    for p in t.p0.iter_mut().chain(t.p1.iter_mut()).chain(t.p2.iter_mut()) {
+    for p in
+        t.p0.iter_mut()
+            .chain(t.p1.iter_mut())
+            .chain(t.p2.iter_mut())
+    {
         *p += offset;
     }
     scene.camera.position += offset;
@@ -35,7 +39,10 @@ fn cornell_box_far_from_the_origin_renders_the_same() {
         }
     }
     let block_noise = (sum_sq / n).sqrt();
-    assert!(block_noise > 0.0 && block_noise < 0.2, "noise {block_noise}");
+    assert!(
+        block_noise > 0.0 && block_noise < 0.2,
+        "noise {block_noise}"
+    );
 
     for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
         let far = translated(base.clone(), axis * 1e5);

@@ -109,7 +109,7 @@ impl WavePlan {
     /// The next wave (first sample id, length), or None when the budget is spent or a stop
     /// was asked for at a pass boundary.
     pub fn next_wave(&mut self, control: &Control) -> Option<(u64, usize)> {
-        let at_pass_boundary = self.next % self.pixels == 0;
+        let at_pass_boundary = self.next.is_multiple_of(self.pixels);
         if at_pass_boundary {
             if control.stopped() {
                 return None;
