@@ -115,11 +115,23 @@ impl Image {
     /// Writes float32 linear RGB, unscaled.
     pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
         create_parent(path)?;
-        exr::prelude::write_rgb_file(path, self.width, self.height, |x, y| {
-            let p = self.pixels[y * self.width + x];
+        use exr::prelude::*;
+        let channels = SpecificChannels::rgb(|position: Vec2<usize>| {
+            let p = self.pixels[position.y() * self.width + position.x()];
             (p.x, p.y, p.z)
-        })
-        .map_err(|e| image_error(path, format!("cannot write EXR: {e}")))
+        });
+        // Lossless ZIP scanlines in increasing order: the file's bytes depend only on the
+        // pixels, never on which compression thread finished first.
+        let layer = Layer::new(
+            (self.width, self.height),
+            LayerAttributes::default(),
+            Encoding::SMALL_LOSSLESS,
+            channels,
+        );
+        Image::from_layer(layer)
+            .write()
+            .to_file(path)
+            .map_err(|e| image_error(path, format!("cannot write EXR: {e}")))
     }
 
     /// Reads the first RGB(A) layer of an EXR file as linear RGB.
