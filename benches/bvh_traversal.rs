@@ -179,6 +179,10 @@ mod standin {
             p0: tris.iter().map(|t| t[0]).collect(),
             p1: tris.iter().map(|t| t[1]).collect(),
             p2: tris.iter().map(|t| t[2]).collect(),
+            normal: tris
+                .iter()
+                .map(|t| (t[1] - t[0]).cross(t[2] - t[0]).normalize_or_zero())
+                .collect(),
             material: vec![0; tris.len()],
             emitter: vec![NO_EMITTER; tris.len()],
             smooth: vec![FLAT; tris.len()],

@@ -18,6 +18,7 @@ pub mod shade {
     pub mod dielectric;
     pub mod diffuse;
     pub mod emitted_light;
+    pub mod interpolate_surfaces;
     pub mod russian_roulette;
     pub mod sort_by_material;
     mod surface;

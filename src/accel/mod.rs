@@ -221,7 +221,7 @@ pub fn surface_point(tris: &TriangleColumns, triangle: u32, b1: f32, b2: f32) ->
     let (w0, w1, w2) = (b0 * p0, b1 * p1, b2 * p2);
     let p = w0 + w1 + w2;
     let p_error = gamma(7) * (w0.abs() + w1.abs() + w2.abs());
-    let ng = (p1 - p0).cross(p2 - p0).normalize_or_zero();
+    let ng = tris.normal[i];
     let ns = match tris.smooth[i] {
         FLAT => ng,
         k => {

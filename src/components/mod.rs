@@ -8,10 +8,12 @@
 mod paths;
 mod rays;
 mod shadow;
+mod surfaces;
 
 pub use paths::{PathFlags, Paths, PathsChunk};
 pub use rays::{Hits, HitsChunk, MISS, Rays, RaysChunk};
 pub use shadow::{ShadowRays, ShadowRaysChunk};
+pub use surfaces::{Surfaces, SurfacesChunk};
 
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
 pub const CHUNK: usize = 1024;

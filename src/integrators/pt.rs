@@ -7,7 +7,7 @@
 //! ```text
 //! generate_camera_rays
 //! loop bounces (while paths are live):
-//!     trace_closest -> add_emitted_light -> sort_by_material
+//!     trace_closest -> add_emitted_light -> sort_by_material -> interpolate_surfaces
 //!     [sample_lights] -> [shade_diffuse] [shade_conductor] [shade_dielectric]
 //!     [trace_shadow -> apply_shadow_contributions]
 //!     russian_roulette_and_compaction
@@ -15,7 +15,7 @@
 //! ```
 
 use crate::bsdf::MaterialKind;
-use crate::components::{Hits, Paths, Rays, ShadowRays};
+use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};
 use crate::film::Film;
 use crate::integrators::SceneData;
 use crate::pipeline::{Graph, Node};
@@ -94,6 +94,7 @@ pub struct PtState {
     pub hits: Hits,
     pub paths: Paths,
     pub shadow: ShadowRays,
+    pub surfaces: Surfaces,
     /// Live paths occupy slots `0..active`.
     pub active: usize,
     pub ranges: MaterialRanges,
@@ -125,6 +126,7 @@ impl PtState {
             hits: Hits::new(capacity),
             paths: Paths::new(capacity),
             shadow: ShadowRays::new(capacity),
+            surfaces: Surfaces::new(capacity),
             active: 0,
             ranges: MaterialRanges::default(),
             sample_radiance: vec![Vec3::ZERO; capacity],
@@ -146,6 +148,7 @@ impl PtState {
     pub fn bytes_per_path() -> usize {
         2 * (Rays::bytes_per_item() + Hits::bytes_per_item() + Paths::bytes_per_item())
             + ShadowRays::bytes_per_item()
+            + Surfaces::bytes_per_item()
             + std::mem::size_of::<Vec3>()
             + std::mem::size_of::<u32>()
     }
@@ -180,6 +183,9 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
         bounce.push(Node::system(shade::emitted_light::AddEmittedLight));
     }
     bounce.push(Node::system(shade::sort_by_material::SortByMaterial));
+    bounce.push(Node::system(
+        shade::interpolate_surfaces::InterpolateSurfaces,
+    ));
     if light_sampling {
         bounce.push(Node::system(connect::sample_lights::SampleLights));
     }

@@ -40,6 +40,8 @@ pub struct TriangleColumns {
     pub p0: Vec<Vec3>,
     pub p1: Vec<Vec3>,
     pub p2: Vec<Vec3>,
+    /// Unit geometric normal, from the winding: (p1 - p0) x (p2 - p0), normalised.
+    pub normal: Vec<Vec3>,
     /// Index into `PreparedScene::materials`.
     pub material: Vec<u32>,
     /// Index into `PreparedScene::emitters`, or `NO_EMITTER`.

@@ -131,6 +131,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             triangles.p0.push(p0);
             triangles.p1.push(p1);
             triangles.p2.push(p2);
+            triangles.normal.push(e1.cross(e2).normalize().as_vec3());
             triangles.material.push(material);
 
             let vertex_normals = normals

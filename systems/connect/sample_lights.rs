@@ -20,14 +20,21 @@ impl System<PtState> for SampleLights {
         "sample_lights"
     }
     fn reads(&self) -> &'static [&'static str] {
-        &["hits", "rays.dir", "paths", "material_ranges", "emitters"]
+        &[
+            "hits",
+            "surfaces",
+            "rays.dir",
+            "paths",
+            "material_ranges",
+            "emitters",
+        ]
     }
     fn writes(&self) -> &'static [&'static str] {
         &["shadow_rays"]
     }
     fn run(&self, s: &mut PtState) -> Flow {
         let data = &*s.data;
-        let (hits, rays, paths) = (&s.hits, &s.rays, &s.paths);
+        let (hits, rays, paths, surfaces) = (&s.hits, &s.rays, &s.paths, &s.surfaces);
         let emitters = &data.scene.emitters;
         let tris = &data.scene.triangles;
         let range = s.ranges.non_delta();
@@ -41,13 +48,8 @@ impl System<PtState> for SampleLights {
                 for i in 0..c.len() {
                     let slot = c.start + i;
                     c.t_max[i] = 0.0;
-                    let surf = Surface::at(
-                        data,
-                        hits.triangle[slot],
-                        hits.b1[slot],
-                        hits.b2[slot],
-                        rays.dir[slot],
-                    );
+                    let surf =
+                        Surface::at(data, surfaces, hits.triangle[slot], slot, rays.dir[slot]);
                     let key = paths.key[slot];
                     let dim = bounce_dim(paths.depth[slot]);
                     let e = sample_cdf(&emitters.cdf, key.get(dim + DIM_LIGHT_PICK));

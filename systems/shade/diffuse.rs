@@ -12,7 +12,7 @@ impl System<PtState> for ShadeDiffuse {
         "shade_diffuse"
     }
     fn reads(&self) -> &'static [&'static str] {
-        &["hits", "rays.dir", "paths", "material_ranges"]
+        &["hits", "surfaces", "rays.dir", "paths", "material_ranges"]
     }
     fn writes(&self) -> &'static [&'static str] {
         &["rays", "paths"]

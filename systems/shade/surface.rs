@@ -1,8 +1,9 @@
 //! The shading point of a hit, shared by the systems that shade, sample lights or add
 //! emission: position with its error bound, normals, the shading frame and wo.
 
-use crate::accel::{offset_ray_origin, surface_point};
+use crate::accel::offset_ray_origin;
 use crate::bsdf::Material;
+use crate::components::Surfaces;
 use crate::integrators::SceneData;
 use crate::math::Frame;
 use glam::Vec3;
@@ -21,14 +22,20 @@ pub struct Surface {
 }
 
 impl Surface {
-    /// The shading point of triangle `triangle` at barycentrics (b1, b2), seen along `dir`.
+    /// The shading point of the path in `slot` (its hit's triangle and its interpolated
+    /// surface), seen along `dir`.
     #[inline]
-    pub fn at(data: &SceneData, triangle: u32, b1: f32, b2: f32, dir: Vec3) -> Surface {
+    pub fn at(
+        data: &SceneData,
+        surfaces: &Surfaces,
+        triangle: u32,
+        slot: usize,
+        dir: Vec3,
+    ) -> Surface {
         let tris = &data.scene.triangles;
         let material = data.scene.materials[tris.material[triangle as usize] as usize];
-        let sp = surface_point(tris, triangle, b1, b2);
-        let mut ng = sp.ng;
-        let mut ns = if sp.ns.dot(ng) < 0.0 { -sp.ns } else { sp.ns };
+        let mut ng = surfaces.ng[slot];
+        let mut ns = surfaces.ns[slot];
         let wo = -dir;
         // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
         if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
@@ -37,8 +44,8 @@ impl Surface {
         }
         let frame = Frame::from_normal(ns);
         Surface {
-            p: sp.p,
-            p_error: sp.p_error,
+            p: surfaces.p[slot],
+            p_error: surfaces.p_error[slot],
             ng,
             frame,
             wo,
@@ -80,7 +87,7 @@ pub fn scatter_paths(
     sample: impl Fn(&Surface, Vec2) -> Option<BsdfSample> + Sync,
 ) -> Flow {
     let data = &*s.data;
-    let hits = &s.hits;
+    let (hits, surfaces) = (&s.hits, &s.surfaces);
     let taken = range.len();
     let rays = s.rays.chunks_mut(range.clone());
     let paths = s.paths.chunks_mut(range);
@@ -91,13 +98,7 @@ pub fn scatter_paths(
             let mut scattered = 0;
             for i in 0..p.len() {
                 let slot = p.start + i;
-                let surf = Surface::at(
-                    data,
-                    hits.triangle[slot],
-                    hits.b1[slot],
-                    hits.b2[slot],
-                    r.dir[i],
-                );
+                let surf = Surface::at(data, surfaces, hits.triangle[slot], slot, r.dir[i]);
                 let u = p.key[i].get2(bounce_dim(p.depth[i]) + DIM_BSDF);
                 let next = sample(&surf, u).and_then(|bs| {
                     let wi = surf.frame.to_world(bs.wi).normalize();

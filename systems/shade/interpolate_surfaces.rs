@@ -1,0 +1,41 @@
+//! Computes the surface point of every path's hit once per bounce (position with its error
+//! bound, geometric and shading normals), for the light-sampling and shading systems.
+
+use crate::accel::surface_point;
+use crate::integrators::pt::PtState;
+use crate::pipeline::{Flow, System};
+use rayon::prelude::*;
+
+pub struct InterpolateSurfaces;
+
+impl System<PtState> for InterpolateSurfaces {
+    fn name(&self) -> &'static str {
+        "interpolate_surfaces"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["hits"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["surfaces"]
+    }
+    fn run(&self, s: &mut PtState) -> Flow {
+        let tris = &s.data.scene.triangles;
+        let hits = &s.hits;
+        let n = s.active;
+        s.surfaces.chunks_mut(0..n).into_par_iter().for_each(|c| {
+            for i in 0..c.len() {
+                let slot = c.start + i;
+                let sp = surface_point(tris, hits.triangle[slot], hits.b1[slot], hits.b2[slot]);
+                c.p[i] = sp.p;
+                c.p_error[i] = sp.p_error;
+                c.ng[i] = sp.ng;
+                c.ns[i] = if sp.ns.dot(sp.ng) < 0.0 {
+                    -sp.ns
+                } else {
+                    sp.ns
+                };
+            }
+        });
+        Flow::new(n, n)
+    }
+}
