@@ -111,6 +111,8 @@ pub struct Scratch {
     pub hits: Hits,
     pub paths: Paths,
     pub order: Vec<u32>,
+    /// Queue of each slot, for sorting.
+    pub queue: Vec<u8>,
 }
 
 impl PtState {
@@ -136,6 +138,7 @@ impl PtState {
                 hits: Hits::new(capacity),
                 paths: Paths::new(capacity),
                 order: Vec::with_capacity(capacity),
+                queue: vec![0; capacity],
             },
         }
     }
@@ -151,6 +154,7 @@ impl PtState {
             + Surfaces::bytes_per_item()
             + std::mem::size_of::<Vec3>()
             + std::mem::size_of::<u32>()
+            + std::mem::size_of::<u8>()
     }
 }
 

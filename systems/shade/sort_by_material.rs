@@ -3,14 +3,15 @@
 //! (after their emission was added), end here.
 
 use crate::bsdf::MaterialKind;
-use crate::components::MISS;
+use crate::components::{CHUNK, MISS};
 use crate::integrators::pt::{MaterialRanges, PtState};
 use crate::pipeline::{Flow, System};
+use rayon::prelude::*;
 
 pub struct SortByMaterial;
 
 /// Queue of each kind, in slot order: non-delta kinds first (see `MaterialRanges`).
-fn queue_of(kind: MaterialKind) -> usize {
+fn queue_of(kind: MaterialKind) -> u8 {
     match kind {
         MaterialKind::Diffuse => 0,
         MaterialKind::Conductor => 1,
@@ -18,7 +19,7 @@ fn queue_of(kind: MaterialKind) -> usize {
     }
 }
 
-const DROPPED: usize = 3;
+const DROPPED: u8 = 3;
 
 impl System<PtState> for SortByMaterial {
     fn name(&self) -> &'static str {
@@ -39,32 +40,40 @@ impl System<PtState> for SortByMaterial {
     fn run(&self, s: &mut PtState) -> Flow {
         let taken = s.active;
         let max_depth = s.settings.max_depth;
-        let classify = |s: &PtState, slot: usize| -> usize {
-            let tri = s.hits.triangle[slot];
-            if tri == MISS || s.paths.depth[slot] >= max_depth {
-                return DROPPED;
-            }
-            let scene = &s.data.scene;
-            queue_of(scene.materials[scene.triangles.material[tri as usize] as usize].kind())
-        };
+        let scene = &s.data.scene;
+        let (hits, depth) = (&s.hits, &s.paths.depth);
+        // The material lookups run in parallel; the placement below is a cheap serial pass.
+        s.scratch.queue[..taken]
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, queue)| {
+                for (i, q) in queue.iter_mut().enumerate() {
+                    let slot = c * CHUNK + i;
+                    let tri = hits.triangle[slot];
+                    *q = if tri == MISS || depth[slot] >= max_depth {
+                        DROPPED
+                    } else {
+                        let material = scene.triangles.material[tri as usize];
+                        queue_of(scene.materials[material as usize].kind())
+                    };
+                }
+            });
         let mut counts = [0usize; 4];
-        for slot in 0..taken {
-            let q = classify(s, slot);
-            counts[q] += 1;
-            if q == DROPPED {
-                s.finish_path(slot);
-            }
+        for &q in &s.scratch.queue[..taken] {
+            counts[q as usize] += 1;
         }
-        let mut next = [0, counts[0], counts[0] + counts[1]];
+        let mut next = [0, counts[0], counts[0] + counts[1], 0];
         let kept = counts[0] + counts[1] + counts[2];
         let mut order = std::mem::take(&mut s.scratch.order);
         order.clear();
         order.resize(kept, 0);
         for slot in 0..taken {
-            let q = classify(s, slot);
-            if q != DROPPED {
-                order[next[q]] = slot as u32;
-                next[q] += 1;
+            let q = s.scratch.queue[slot];
+            if q == DROPPED {
+                s.finish_path(slot);
+            } else {
+                order[next[q as usize]] = slot as u32;
+                next[q as usize] += 1;
             }
         }
         s.scratch.order = order;
