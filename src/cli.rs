@@ -346,20 +346,15 @@ pub fn render_report(
         o.bytes_per_path,
         (o.wavefront * o.bytes_per_path) as f64 / (1 << 20) as f64
     );
-    let total = o.stats.total_time().as_secs_f64().max(1e-12);
     let _ = writeln!(
         r,
         "  systems           time share   runs   items taken -> emitted"
     );
-    for s in &o.stats.systems {
+    for (s, share) in o.stats.time_shares() {
+        let (name, runs, taken, emitted) = (s.name, s.runs, s.taken, s.emitted);
         let _ = writeln!(
             r,
-            "    {:<32} {:>6.1}% {:>6} {:>14} -> {}",
-            s.name,
-            100.0 * s.time.as_secs_f64() / total,
-            s.runs,
-            s.taken,
-            s.emitted
+            "    {name:<32} {share:>6.1}% {runs:>6} {taken:>14} -> {emitted}"
         );
     }
     r
@@ -480,17 +475,9 @@ fn bench_command(
         "| system (last run) | time share | runs | taken | emitted |"
     );
     let _ = writeln!(t, "|---|---|---|---|---|");
-    let total = o.stats.total_time().as_secs_f64().max(1e-12);
-    for s in &o.stats.systems {
-        let _ = writeln!(
-            t,
-            "| {} | {:.1}% | {} | {} | {} |",
-            s.name,
-            100.0 * s.time.as_secs_f64() / total,
-            s.runs,
-            s.taken,
-            s.emitted
-        );
+    for (s, share) in o.stats.time_shares() {
+        let (name, runs, taken, emitted) = (s.name, s.runs, s.taken, s.emitted);
+        let _ = writeln!(t, "| {name} | {share:.1}% | {runs} | {taken} | {emitted} |");
     }
     print_out(&t);
     Ok(())

@@ -79,6 +79,14 @@ impl Stats {
         self.systems.iter().map(|s| s.time).sum()
     }
 
+    /// Each system with its share of the total time, in percent.
+    pub fn time_shares(&self) -> impl Iterator<Item = (&SystemStats, f64)> {
+        let total = self.total_time().as_secs_f64().max(1e-12);
+        self.systems
+            .iter()
+            .map(move |s| (s, 100.0 * s.time.as_secs_f64() / total))
+    }
+
     pub fn get(&self, name: &str) -> Option<&SystemStats> {
         self.systems.iter().find(|s| s.name == name)
     }
