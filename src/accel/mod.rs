@@ -24,7 +24,7 @@ use glam::{DVec3, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use std::time::Duration;
-use triangle::TraversalRay;
+use triangle::{TraversalRay, columns};
 
 /// A closest hit: distance along the (unnormalised) direction, triangle id, barycentrics of
 /// p1 and p2.
@@ -56,9 +56,10 @@ pub struct Accel {
     tris: LeafTriangles,
 }
 
-/// The triangles in leaf order: vertices and the id of each in `TriangleColumns`.
+/// The triangles in leaf order: vertices (as per-axis columns, the layout of the triangle
+/// test) and the id of each in `TriangleColumns`.
 pub(crate) struct LeafTriangles {
-    verts: Vec<[Vec3; 3]>,
+    verts: Vec<triangle::TriangleColumns>,
     ids: Vec<u32>,
 }
 
@@ -145,7 +146,7 @@ impl Accel {
             .iter()
             .map(|&i| {
                 let i = i as usize;
-                [triangles.p0[i], triangles.p1[i], triangles.p2[i]]
+                columns(&[triangles.p0[i], triangles.p1[i], triangles.p2[i]])
             })
             .collect();
         Accel {
@@ -208,7 +209,7 @@ pub fn intersect_triangle(
     if is_degenerate(p0, p1, p2) {
         return None;
     }
-    TraversalRay::new(origin, dir).intersect(triangle, t_max)
+    TraversalRay::new(origin, dir).intersect(&columns(triangle), t_max)
 }
 
 /// The surface point of a hit, with its error bound and normals.

@@ -8,7 +8,7 @@
 //! function that rounds to exactly zero is recomputed in double precision, where the products
 //! of the (single precision) inputs are exact.
 
-use glam::{Vec3, Vec3Swizzles};
+use glam::{Vec3, Vec3A, Vec3Swizzles};
 
 /// `gamma(n) = n u / (1 - n u)` with `u = f32::EPSILON / 2`: the relative error bound of `n`
 /// successive rounded operations (Higham).
@@ -27,13 +27,24 @@ pub struct TraversalRay {
     pub inv_dir: Vec3,
     /// Whether each direction component has its sign bit set (matches the sign of `inv_dir`).
     pub neg: [bool; 3],
-    /// The axis along which the direction is largest in magnitude: the vertices are rotated
-    /// (a cyclic permutation) so that it becomes z.
-    kz: u8,
+    /// The axes that become x, y and z: z is the axis along which the direction is largest in
+    /// magnitude, and the vertices are rotated (a cyclic permutation, so handedness is kept).
+    k: [usize; 3],
     /// Shear constants: `-d[kx] / d[kz]`, `-d[ky] / d[kz]`, `1 / d[kz]`.
     sx: f32,
     sy: f32,
     sz: f32,
+    /// The origin's coordinates along the axes `k`, each in all three lanes.
+    o_k: [Vec3A; 3],
+}
+
+/// A triangle laid out for the test: for each axis, the coordinates of p0, p1 and p2.
+pub type TriangleColumns = [Vec3A; 3];
+
+/// The columns of the triangle `v`.
+#[inline]
+pub fn columns(v: &[Vec3; 3]) -> TriangleColumns {
+    [0, 1, 2].map(|axis| Vec3A::new(v[0][axis], v[1][axis], v[2][axis]))
 }
 
 impl TraversalRay {
@@ -48,8 +59,9 @@ impl TraversalRay {
         } else {
             2
         };
-        let d = rotate(dir, kz);
-        let sz = 1.0 / d.z;
+        let k = [(kz + 1) % 3, (kz + 2) % 3, kz];
+        let d = dir.to_array();
+        let sz = 1.0 / d[kz];
         TraversalRay {
             origin,
             inv_dir: Vec3::ONE / dir,
@@ -58,34 +70,44 @@ impl TraversalRay {
                 dir.y.is_sign_negative(),
                 dir.z.is_sign_negative(),
             ],
-            kz,
-            sx: -d.x * sz,
-            sy: -d.y * sz,
+            k,
+            sx: -d[k[0]] * sz,
+            sy: -d[k[1]] * sz,
             sz,
+            o_k: k.map(|axis| Vec3A::splat(origin[axis])),
         }
     }
 
     /// Intersects the triangle `v`: the hit's `(t, b1, b2)` when it lies in `(0, t_max)`.
     #[inline(always)]
-    pub fn intersect(&self, v: &[Vec3; 3], t_max: f32) -> Option<(f32, f32, f32)> {
-        let a = rotate(v[0] - self.origin, self.kz);
-        let b = rotate(v[1] - self.origin, self.kz);
-        let c = rotate(v[2] - self.origin, self.kz);
+    pub fn intersect(&self, cols: &TriangleColumns, t_max: f32) -> Option<(f32, f32, f32)> {
+        let [kx, ky, kz] = self.k;
+        // The vertices relative to the origin, rotated so that the ray runs along z: lane i is
+        // vertex i. Each lane is computed as the scalar `v[i][k] - origin[k]`.
+        let x = cols[kx] - self.o_k[0];
+        let y = cols[ky] - self.o_k[1];
+        let z = cols[kz] - self.o_k[2];
 
         // Shear into ray space (the ray becomes the z axis through the origin).
-        let (az, bz, cz) = (a.z, b.z, c.z);
-        let ax = a.x + self.sx * az;
-        let ay = a.y + self.sy * az;
-        let bx = b.x + self.sx * bz;
-        let by = b.y + self.sy * bz;
-        let cx = c.x + self.sx * cz;
-        let cy = c.y + self.sy * cz;
+        let x = x + self.sx * z;
+        let y = y + self.sy * z;
 
         // Edge functions: twice the signed areas of the sub-triangles opposite each vertex, so
-        // e0, e1, e2 are the (unnormalised) barycentric weights of p0, p1, p2.
-        let mut e0 = cx * by - cy * bx;
-        let mut e1 = ax * cy - ay * cx;
-        let mut e2 = bx * ay - by * ax;
+        // e0, e1, e2 are the (unnormalised) barycentric weights of p0, p1, p2:
+        // e0 = cx by - cy bx, e1 = ax cy - ay cx, e2 = bx ay - by ax (no fused multiply-add, so
+        // each lane is rounded exactly as the scalar expression would be).
+        let e = x.zxy() * y.yzx() - y.zxy() * x.yzx();
+        if e.cmplt(Vec3A::ZERO).any() && e.cmpgt(Vec3A::ZERO).any() {
+            // On both sides of the edges (a zero edge function cannot change this sign test
+            // unless it flips, which only an exact recomputation can decide: see below).
+            if !e.cmpeq(Vec3A::ZERO).any() {
+                return None;
+            }
+        }
+        let [ax, bx, cx] = x.to_array();
+        let [ay, by, cy] = y.to_array();
+        let [az, bz, cz] = z.to_array();
+        let [mut e0, mut e1, mut e2] = e.to_array();
         if e0 == 0.0 || e1 == 0.0 || e2 == 0.0 {
             // A product of two f32 is exact in f64, so the sign of each difference is exact.
             let f = |px: f32, py: f32, qx: f32, qy: f32| {
@@ -139,15 +161,5 @@ impl TraversalRay {
         } else {
             None
         }
-    }
-}
-
-/// Rotates the axes so that axis `kz` becomes z (a cyclic permutation, so handedness is kept).
-#[inline(always)]
-fn rotate(v: Vec3, kz: u8) -> Vec3 {
-    match kz {
-        0 => v.yzx(),
-        1 => v.zxy(),
-        _ => v,
     }
 }
