@@ -243,21 +243,13 @@ pub fn offset_ray_origin(p: Vec3, p_error: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
         offset = -offset;
     }
     let po = p + offset;
-    // The addition rounded to nearest; step one float further from p to be sure.
-    let step = |po: f32, off: f32| {
-        if off > 0.0 {
-            po.next_up()
-        } else if off < 0.0 {
-            po.next_down()
-        } else {
-            po
-        }
-    };
-    Vec3::new(
-        step(po.x, offset.x),
-        step(po.y, offset.y),
-        step(po.z, offset.z),
-    )
+    // The addition rounded to nearest, possibly back towards p: move each component on by
+    // |po| * 2^-23, which is at least one ulp of po (and never less than the smallest normal
+    // float), in the direction of the offset. Branch-free, so it vectorises.
+    let bump = (po.abs() * f32::EPSILON).max(Vec3::splat(f32::MIN_POSITIVE));
+    let away = Vec3::select(offset.cmpgt(Vec3::ZERO), bump, Vec3::ZERO)
+        - Vec3::select(offset.cmplt(Vec3::ZERO), bump, Vec3::ZERO);
+    po + away
 }
 
 /// How much of a shadow ray's length is left unchecked at its far end (pbrt's value).
