@@ -54,3 +54,65 @@ fn furnace_graph_has_no_dielectric_or_conductor_system() {
     assert!(!o.systems.contains(&"shade_dielectric"));
     assert!(!o.systems.contains(&"shade_conductor"));
 }
+
+/// The furnace with an object inside it: the radiance field is uniform (2 everywhere), so a
+/// lossless dielectric is invisible (entering scales radiance by 1/eta^2, leaving by eta^2),
+/// and a white near-mirror conductor shows 2 times its albedo, which is just under 1. (A
+/// coloured conductor would absorb, and the field would no longer be uniform.)
+fn furnace_with(object: &str) -> stagelight::scene::PreparedScene {
+    let text = format!(
+        r#"Scene(
+    camera: (position: (0, 0, 0), look_at: (0, 0, 1), up: (0, 1, 0), fov: 60, width: 32, height: 32),
+    materials: {{
+        "grey": Diffuse(reflectance: (0.5, 0.5, 0.5)),
+        "glass": Dielectric(ior: 1.5),
+        "mirror": Conductor(alpha: 0.01, reflectance: (1, 1, 1)),
+    }},
+    objects: [
+        (material: "grey", emission: Some((1, 1, 1)), shape: Icosphere(level: 3), flip_normals: true),
+        {object}
+    ],
+)"#
+    );
+    stagelight::scene::load_from_str(std::path::Path::new("furnace_with_object.ron"), &text)
+        .expect("scene loads")
+}
+
+#[test]
+fn glass_in_the_furnace_is_invisible() {
+    let scene = furnace_with(
+        r#"(material: "glass", shape: Icosphere(level: 3, smooth: true), transform: [Scale(0.3), Translate((0, 0, 0.5))]),"#,
+    );
+    let o = render_pt(scene, 64, 3, u32::MAX);
+    assert!(o.systems.contains(&"shade_dielectric"));
+    assert_eq!(o.film.nonfinite, 0);
+    let image = o.film.image();
+    let (mean, sd) = pixel_stats(&image, 0);
+    let stderr = sd / (image.pixels.len() as f64).sqrt();
+    assert!(
+        (mean - 2.0).abs() < 5.0 * stderr,
+        "mean {mean}, stderr {stderr}"
+    );
+    // The pixels that see the sphere through its centre: still 2.
+    let centre = block_means(&image, 8)[4 + 1 + 4];
+    assert!((centre[0] - 2.0).abs() < 0.1, "centre block {centre:?}");
+}
+
+#[test]
+fn near_mirror_conductor_in_the_furnace_shows_its_albedo() {
+    let scene = furnace_with(
+        r#"(material: "mirror", shape: Box(min: (-0.5, -0.5, 0.6), max: (0.5, 0.5, 0.8))),"#,
+    );
+    let o = render_pt(scene, 32, 5, u32::MAX);
+    assert!(o.systems.contains(&"shade_conductor"));
+    assert_eq!(o.film.nonfinite, 0);
+    // The central pixels see the box's front face head-on: 2 x the albedo of GGX at alpha
+    // 0.01 (a near-mirror loses well under 1% to single-scattering Smith masking).
+    let image = o.film.image();
+    // The 8 x 8 pixels at the centre of the image.
+    let c = block_means(&image, 8)[4 + 1 + 4];
+    for ch in 0..3 {
+        let v = c[ch] / 2.0;
+        assert!((0.97..=1.01).contains(&v), "channel {ch}: {} for 2", c[ch]);
+    }
+}
