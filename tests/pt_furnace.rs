@@ -111,8 +111,8 @@ fn near_mirror_conductor_in_the_furnace_shows_its_albedo() {
     let image = o.film.image();
     // The 8 x 8 pixels at the centre of the image.
     let c = block_means(&image, 8)[4 + 1 + 4];
-    for ch in 0..3 {
-        let v = c[ch] / 2.0;
-        assert!((0.97..=1.01).contains(&v), "channel {ch}: {} for 2", c[ch]);
+    for (ch, value) in c.iter().enumerate() {
+        let v = value / 2.0;
+        assert!((0.97..=1.01).contains(&v), "channel {ch}: {value} for 2");
     }
 }
