@@ -144,8 +144,8 @@ impl<S> Graph<S> {
     }
 
     /// Checks that every column a system reads is written by some system of the graph or
-    /// listed in `inputs` (columns the state holds before the graph runs). Returns the
-    /// offending (system, column) pairs.
+    /// listed in `inputs` (columns the state holds before the graph runs). Names are
+    /// `component` or `component.column`. Returns the offending (system, column) pairs.
     pub fn unsatisfied_reads(&self, inputs: &[&str]) -> Vec<(&'static str, &'static str)> {
         fn collect<S>(nodes: &[Node<S>], f: &mut dyn FnMut(&dyn System<S>)) {
             for n in nodes {
@@ -157,10 +157,16 @@ impl<S> Graph<S> {
         }
         let mut written: Vec<&str> = inputs.to_vec();
         collect(&self.nodes, &mut |s| written.extend(s.writes()));
+        // "paths" covers "paths.depth" and the other way round: a component or one column.
+        let covers = |w: &str, r: &str| {
+            w == r
+                || r.strip_prefix(w).is_some_and(|rest| rest.starts_with('.'))
+                || w.strip_prefix(r).is_some_and(|rest| rest.starts_with('.'))
+        };
         let mut missing = Vec::new();
         collect(&self.nodes, &mut |s| {
             for r in s.reads() {
-                if !written.contains(r) {
+                if !written.iter().any(|w| covers(w, r)) {
                     missing.push((s.name(), *r));
                 }
             }
