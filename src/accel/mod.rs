@@ -1,11 +1,13 @@
 //! The acceleration structure over the scene's triangles (obvhs), watertight ray-triangle
 //! intersection, and robust spawning of rays from surfaces.
 //!
-//! The tree is obvhs' compressed wide BVH8 (CWBVH, built from a PLOC binary BVH); traversal is
-//! our own, over obvhs' nodes, with a conservative box test (no box that holds a hit triangle
-//! is ever culled) and the watertight triangle test of Woop, Benthin and Wald, so that rays
-//! never slip through shared edges or vertices. The triangles are copied into the tree's leaf order, so a leaf's triangles are
-//! contiguous in memory.
+//! The tree is built by obvhs (a compressed wide BVH8 from a PLOC binary BVH) and converted
+//! into our own eight-wide nodes with exact f32 child boxes (see `cwbvh`); traversal is our
+//! own, nearest child first, with a conservative box test (no box that holds a hit triangle
+//! is ever culled) and the watertight triangle test of Woop, Benthin and Wald, four triangles
+//! (one leaf) at a time, so that rays never slip through shared edges or vertices. The
+//! triangles are copied into the tree's leaf order, so a leaf's triangles are contiguous in
+//! memory.
 //!
 //! Measured against a binary BVH (obvhs' BVH2, SAH-collapsed leaves of up to 8 triangles, with
 //! our own traversal of the same robustness: nearest child first, entry distances on the
