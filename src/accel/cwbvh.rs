@@ -1,26 +1,67 @@
-//! Traversal of obvhs' compressed wide BVH8 (Ylitie et al. 2017): eight children per node,
-//! child boxes quantised to 8 bits per plane on a power-of-two grid anchored at the node's
-//! minimum corner, children visited nearest octant first.
+//! An eight-wide BVH with uncompressed child boxes, converted from obvhs' compressed wide BVH8
+//! (Ylitie et al. 2017; obvhs does the build and the SAH collapse), with each leaf's (up to
+//! three) triangles in one four-lane packet.
+//!
+//! Each node stores its children's boxes as exact f32 planes (the min and max of the
+//! children's triangle vertices, recomputed here), eight per plane, so that one node is
+//! tested against a ray with a few SSE2 instructions. The box test is made conservative by
+//! one padding per ray (see `BoxRay`), not per node. Children are visited nearest first, and
+//! the entry distance of each pending child is kept on the stack, so a closest-hit ray skips
+//! the children beyond its nearest hit so far.
 
+use super::LeafTriangles;
+use super::TriangleHit;
 use super::stack::TraversalStack;
-use super::triangle::TraversalRay;
-use super::{LeafTriangles, TriangleHit};
+use super::triangle::{TraversalRay, TrianglePacket};
+use glam::Vec3;
 use obvhs::cwbvh::CwBvh;
-use obvhs::cwbvh::node::{CwBvhNode, extract_byte64};
 
-/// Relative padding of the decoded child boxes, far above the few roundings of decoding and of
-/// the slab distances (about 2^-22 relative to the magnitudes involved): with it, the box test
-/// is conservative and a ray never misses a box that holds a triangle it hits.
-const PAD: f32 = 1.0 / (1u32 << 20) as f32;
+/// A child reference: a node index, or (with `LEAF` set) a packet index times four plus the
+/// packet's triangle count.
+const LEAF: u32 = 1 << 31;
+
+#[derive(Clone, Copy, Debug)]
+#[repr(C, align(32))]
+struct Node {
+    /// `planes[axis][0]` are the children's minima along `axis`, `planes[axis][1]` their
+    /// maxima. Empty slots hold an inverted box (+inf, -inf) and are also left out of `valid`.
+    planes: [[[f32; 8]; 2]; 3],
+    child: [u32; 8],
+    valid: u32,
+}
 
 pub(crate) struct CwBvhAccel {
-    nodes: Vec<CwBvhNode>,
+    nodes: Vec<Node>,
+    /// The largest magnitude of any vertex coordinate: the scale of the box padding.
+    scale: f32,
 }
 
 impl CwBvhAccel {
-    /// Takes the built tree; returns it with the permutation from leaf slots to input indices.
-    pub(crate) fn new(bvh: CwBvh) -> (CwBvhAccel, Vec<u32>) {
-        (CwBvhAccel { nodes: bvh.nodes }, bvh.primitive_indices)
+    /// Converts the built tree over `verts` (indexed like the boxes it was built from).
+    /// Returns it with the input indices of the leaf slots (four per packet, `u32::MAX` for an
+    /// unused lane) and the packets.
+    pub(crate) fn new(
+        bvh: CwBvh,
+        verts: &[[Vec3; 3]],
+    ) -> (CwBvhAccel, Vec<u32>, Vec<TrianglePacket>) {
+        let mut out = Builder {
+            bvh: &bvh,
+            verts,
+            nodes: Vec::new(),
+            slots: Vec::new(),
+            packets: Vec::new(),
+        };
+        out.convert(0);
+        let scale = verts
+            .iter()
+            .flatten()
+            .map(|v| v.abs().max_element())
+            .fold(0.0f32, f32::max);
+        let accel = CwBvhAccel {
+            nodes: out.nodes,
+            scale,
+        };
+        (accel, out.slots, out.packets)
     }
 
     /// Closest hit (`ANY = false`) or the first hit found (`ANY = true`) with t in (0, t_max).
@@ -34,47 +75,85 @@ impl CwBvhAccel {
         if self.nodes.is_empty() {
             return None;
         }
+        let box_ray = BoxRay::new(ray, self.scale);
         let mut hit = None;
-        let oct_inv4 = octant_inv4(ray);
-        // A group is (base index, bits): the high byte of bits marks the children still to
-        // visit among the nodes from `base`, the low byte is the parent's inner-node mask; for a
-        // primitive group, the low 24 bits mark triangles from `base`.
-        let mut stack = TraversalStack::<(u32, u32), 32>::new();
-        let mut nodes_group = (0u32, 0x8000_0000u32);
-        let mut prims_group = (0u32, 0u32);
+        // Pending children: the entry distance (non-negative, so its bits order like the
+        // value) in the high half, the child reference in the low half.
+        let mut stack = TraversalStack::<u64, 16>::new();
+        let mut current = 0u32;
         loop {
-            while prims_group.1 != 0 {
-                let bit = 31 - prims_group.1.leading_zeros();
-                prims_group.1 &= !(1 << bit);
-                let slot = (prims_group.0 + bit) as usize;
-                if tris.intersect_range::<ANY>(ray, slot..slot + 1, &mut t_max, &mut hit) && ANY {
-                    return hit;
+            if current & LEAF == 0 {
+                let node = &self.nodes[current as usize];
+                let (mut mask, t_near) = box_hits8(node, &box_ray, t_max);
+                mask &= node.valid;
+                if mask != 0 && mask & (mask - 1) == 0 {
+                    current = node.child[mask.trailing_zeros() as usize];
+                    continue;
                 }
-            }
-
-            if nodes_group.1 & 0xff00_0000 != 0 {
-                let hits = nodes_group.1;
-                let bit = 31 - hits.leading_zeros();
-                nodes_group.1 &= !(1 << bit);
-                if nodes_group.1 & 0xff00_0000 != 0 {
-                    stack.push(nodes_group);
+                if ANY && mask != 0 {
+                    // Any hit will do: no need for an order.
+                    current = node.child[mask.trailing_zeros() as usize];
+                    mask &= mask - 1;
+                    while mask != 0 {
+                        let c = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        stack.push(u64::from(node.child[c]));
+                    }
+                    continue;
                 }
-                let slot = (bit - 24) ^ (oct_inv4 & 0xff);
-                let relative = (hits & !(u32::MAX << slot)).count_ones();
-                let node = &self.nodes[(nodes_group.0 + relative) as usize];
-                let mask = child_hits(node, ray, t_max, oct_inv4);
-                nodes_group = (
-                    node.child_base_idx,
-                    (mask & 0xff00_0000) | node.imask as u32,
-                );
-                prims_group = (node.primitive_base_idx, mask & 0x00ff_ffff);
+                if mask != 0 {
+                    // Sort the hit children farthest first (insertion sort of at most
+                    // eight keys), push all but the nearest, and go on with the nearest.
+                    let mut keys = [0u64; 8];
+                    let mut n = 0;
+                    while mask != 0 {
+                        let c = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        let key = (u64::from(t_near[c].to_bits()) << 32) | u64::from(node.child[c]);
+                        let mut j = n;
+                        while j > 0 && keys[j - 1] < key {
+                            keys[j] = keys[j - 1];
+                            j -= 1;
+                        }
+                        keys[j] = key;
+                        n += 1;
+                    }
+                    for &key in &keys[..n - 1] {
+                        stack.push(key);
+                    }
+                    current = keys[n - 1] as u32;
+                    continue;
+                }
             } else {
-                nodes_group = (0, 0);
+                let packet = ((current & !LEAF) >> 2) as usize;
+                let count = current & 3;
+                let base = packet * 4;
+                if let Some((lane, (t, b1, b2))) = ray.intersect4::<ANY>(
+                    &tris.packets[packet],
+                    &tris.verts[base..base + 4],
+                    count,
+                    &mut t_max,
+                ) {
+                    hit = Some(TriangleHit {
+                        t,
+                        slot: (base as u32) + lane,
+                        b1,
+                        b2,
+                    });
+                    if ANY {
+                        return hit;
+                    }
+                }
             }
-
-            if prims_group.1 == 0 && nodes_group.1 & 0xff00_0000 == 0 {
+            // The next pending child that may still hold a hit before t_max.
+            loop {
                 match stack.pop() {
-                    Some(group) => nodes_group = group,
+                    Some(key) => {
+                        if f32::from_bits((key >> 32) as u32) <= t_max {
+                            current = key as u32;
+                            break;
+                        }
+                    }
                     None => return hit,
                 }
             }
@@ -82,132 +161,176 @@ impl CwBvhAccel {
     }
 }
 
-/// The ray's octant in the form the builder's child ordering expects (the same in each byte).
-#[inline(always)]
-fn octant_inv4(ray: &TraversalRay) -> u32 {
-    (if ray.neg[0] { 0 } else { 0x0404_0404 })
-        | (if ray.neg[1] { 0 } else { 0x0202_0202 })
-        | (if ray.neg[2] { 0 } else { 0x0101_0101 })
+struct Builder<'a> {
+    bvh: &'a CwBvh,
+    verts: &'a [[Vec3; 3]],
+    nodes: Vec<Node>,
+    slots: Vec<u32>,
+    packets: Vec<TrianglePacket>,
 }
 
-/// Tests the ray against the eight child boxes of `node`: the node's hit mask (inner children
-/// in the high byte, in traversal order; leaf triangles in the low 24 bits).
-#[inline(always)]
-fn child_hits(node: &CwBvhNode, ray: &TraversalRay, t_max: f32, oct_inv4: u32) -> u32 {
-    let hit8 = box_hits8(node, ray, t_max);
-    if hit8 == 0 {
-        return 0;
-    }
-    let (child_bits8, bit_index8) = node.get_child_and_index_bits(oct_inv4);
-    let mut mask = 0;
-    let mut left = hit8;
-    while left != 0 {
-        let c = left.trailing_zeros();
-        left &= left - 1;
-        mask |= extract_byte64(child_bits8, c as usize) << extract_byte64(bit_index8, c as usize);
-    }
-    mask
-}
-
-/// The per-axis constants of the slab test of a node's children: for each axis, the node's
-/// origin relative to the ray's, padded outwards on the near and on the far side.
-#[inline(always)]
-fn slab_bases(node: &CwBvhNode, ray: &TraversalRay) -> ([f32; 3], [f32; 3], [f32; 3]) {
-    let extent = node.compute_extent().to_array();
-    let p = node.p.to_array();
-    let o = ray.origin.to_array();
-    let mut near = [0.0; 3];
-    let mut far = [0.0; 3];
-    for axis in 0..3 {
-        let e = extent[axis];
-        let pad = (p[axis].abs() + o[axis].abs() + 256.0 * e) * PAD;
-        let base = p[axis] - o[axis];
-        if ray.neg[axis] {
-            (near[axis], far[axis]) = (base + pad, base - pad);
-        } else {
-            (near[axis], far[axis]) = (base - pad, base + pad);
+impl Builder<'_> {
+    /// Converts the obvhs node `index`; returns the new node's index and its exact box.
+    fn convert(&mut self, index: usize) -> (u32, Vec3, Vec3) {
+        let src = self.bvh.nodes[index];
+        let me = self.nodes.len();
+        self.nodes.push(Node {
+            planes: [[[f32::INFINITY; 8], [f32::NEG_INFINITY; 8]]; 3],
+            child: [0; 8],
+            valid: 0,
+        });
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for c in 0..8 {
+            if src.is_child_empty(c) {
+                continue;
+            }
+            let (child, clo, chi) = if src.is_leaf(c) {
+                let (start, count) = src.child_primitives(c);
+                assert!(
+                    (1..=3).contains(&count),
+                    "a CWBVH leaf holds 1 to 3 primitives"
+                );
+                let packet = self.packets.len() as u32;
+                let mut p = TrianglePacket::default();
+                let (mut clo, mut chi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+                for lane in 0..4 {
+                    if lane < count as usize {
+                        let prim = self.bvh.primitive_indices[start as usize + lane];
+                        let tri = self.verts[prim as usize];
+                        for (vertex, v) in tri.iter().enumerate() {
+                            for axis in 0..3 {
+                                p.v[vertex][axis][lane] = v[axis];
+                            }
+                            clo = clo.min(*v);
+                            chi = chi.max(*v);
+                        }
+                        self.slots.push(prim);
+                    } else {
+                        self.slots.push(u32::MAX);
+                    }
+                }
+                self.packets.push(p);
+                (LEAF | (packet << 2) | count, clo, chi)
+            } else {
+                self.convert(src.child_node_index(c) as usize)
+            };
+            let node = &mut self.nodes[me];
+            for axis in 0..3 {
+                node.planes[axis][0][c] = clo[axis];
+                node.planes[axis][1][c] = chi[axis];
+            }
+            node.child[c] = child;
+            node.valid |= 1 << c;
+            lo = lo.min(clo);
+            hi = hi.max(chi);
         }
+        (me as u32, lo, hi)
     }
-    (near, far, extent)
 }
 
-/// The quantised near and far planes of the children along `axis`, for the ray's direction.
-#[inline(always)]
-fn planes<'a>(node: &'a CwBvhNode, ray: &TraversalRay, axis: usize) -> (&'a [u8; 8], &'a [u8; 8]) {
-    let (lo, hi) = match axis {
-        0 => (&node.child_min_x, &node.child_max_x),
-        1 => (&node.child_min_y, &node.child_max_y),
-        _ => (&node.child_min_z, &node.child_max_z),
-    };
-    if ray.neg[axis] { (hi, lo) } else { (lo, hi) }
+/// The ray as the box test sees it. The test computes `(plane - o) * inv_dir` per slab, with
+/// the origin moved by `pad` along each axis so that every box is in effect enlarged by `pad`
+/// on each side: `pad = 2^-18 (max |o| + scale)`, with `scale` the largest vertex coordinate
+/// magnitude, is far above the rounding of `o +- pad` (2^-24 of it), of the subtraction and of
+/// the product with the rounded reciprocal (relative 3 * 2^-24 of `|plane - o| <= |o| +
+/// scale`, which the padding also dominates in t, as it adds `pad |inv_dir|` on each side),
+/// and above the rounding of the triangle test (a few 2^-24 of the same magnitudes). So the
+/// box test is conservative: a ray never misses a box that holds a triangle it hits.
+struct BoxRay {
+    /// Per axis: the index (0: minima, 1: maxima) of the planes the ray enters by.
+    near: [usize; 3],
+    /// The origin moved back along the ray by `pad` (for the entry planes) and forwards (for
+    /// the exit planes).
+    o_near: [f32; 3],
+    o_far: [f32; 3],
+    inv: [f32; 3],
 }
 
-/// Which of the eight child slots the ray's padded slab test passes (bit c for slot c; empty
-/// slots, whose quantised boxes are inverted, fail or are masked out by the child bits).
+impl BoxRay {
+    #[inline(always)]
+    fn new(ray: &TraversalRay, scale: f32) -> BoxRay {
+        let o = ray.origin;
+        let pad = (o.abs().max_element() + scale) * (1.0 / (1u32 << 18) as f32);
+        let mut b = BoxRay {
+            near: [0; 3],
+            o_near: [0.0; 3],
+            o_far: [0.0; 3],
+            inv: ray.inv_dir.to_array(),
+        };
+        for axis in 0..3 {
+            // Entering through min - pad (positive direction): (min - pad) - o =
+            // min - (o + pad); through max + pad (negative direction): max - (o - pad).
+            let (n, pn) = if ray.neg[axis] { (1, -pad) } else { (0, pad) };
+            b.near[axis] = n;
+            b.o_near[axis] = o[axis] + pn;
+            b.o_far[axis] = o[axis] - pn;
+        }
+        b
+    }
+}
+
+/// Which children's padded boxes the ray enters with t in [0, t_max] (bit c for slot c), and
+/// the entry distances.
 /// SSE2 (always present on x86_64), four children per instruction; the same arithmetic, in
-/// the same order, as the portable version below, so both give identical masks.
+/// the same order, as the portable version below, so both give identical results.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn box_hits8(node: &CwBvhNode, ray: &TraversalRay, t_max: f32) -> u32 {
+fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
     use std::arch::x86_64::*;
     // SAFETY: SSE2 is part of the x86_64 baseline, so these intrinsics are always available;
-    // none of them accesses memory through a pointer.
+    // the loads and stores are unaligned ones on `[f32; 8]` arrays borrowed (or owned) here.
     unsafe {
-        let (near_base, far_base, extent) = slab_bases(node, ray);
-        let inv = ray.inv_dir.to_array();
-        let zero = _mm_setzero_si128();
-        // Eight quantised planes as two vectors of four f32 (exact: integers up to 255).
-        let widen = |q: &[u8; 8]| {
-            let v = _mm_cvtsi64_si128(i64::from_le_bytes(*q));
-            let w = _mm_unpacklo_epi8(v, zero);
-            (
-                _mm_cvtepi32_ps(_mm_unpacklo_epi16(w, zero)),
-                _mm_cvtepi32_ps(_mm_unpackhi_epi16(w, zero)),
-            )
-        };
         let mut t0 = (_mm_setzero_ps(), _mm_setzero_ps());
         let mut t1 = (_mm_set1_ps(t_max), _mm_set1_ps(t_max));
         for axis in 0..3 {
-            let (q_near, q_far) = planes(node, ray, axis);
-            let e = _mm_set1_ps(extent[axis]);
-            let inv = _mm_set1_ps(inv[axis]);
-            let bn = _mm_set1_ps(near_base[axis]);
-            let bf = _mm_set1_ps(far_base[axis]);
-            let (n_lo, n_hi) = widen(q_near);
-            let (f_lo, f_hi) = widen(q_far);
-            let near = |q| _mm_mul_ps(_mm_add_ps(bn, _mm_mul_ps(q, e)), inv);
-            let far = |q| _mm_mul_ps(_mm_add_ps(bf, _mm_mul_ps(q, e)), inv);
+            let n = ray.near[axis];
+            let near = &node.planes[axis][n];
+            let far = &node.planes[axis][1 - n];
+            let inv = _mm_set1_ps(ray.inv[axis]);
+            let on = _mm_set1_ps(ray.o_near[axis]);
+            let of = _mm_set1_ps(ray.o_far[axis]);
+            let slab = |p: &[f32; 8], o, half: usize| {
+                _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(p.as_ptr().add(half)), o), inv)
+            };
             // max_ps(a, b) is `a > b ? a : b` and min_ps(a, b) is `a < b ? a : b`: a NaN slab
             // distance (0 * inf: the ray runs in a slab's plane) constrains nothing.
-            t0 = (_mm_max_ps(near(n_lo), t0.0), _mm_max_ps(near(n_hi), t0.1));
-            t1 = (_mm_min_ps(far(f_lo), t1.0), _mm_min_ps(far(f_hi), t1.1));
+            t0 = (
+                _mm_max_ps(slab(near, on, 0), t0.0),
+                _mm_max_ps(slab(near, on, 4), t0.1),
+            );
+            t1 = (
+                _mm_min_ps(slab(far, of, 0), t1.0),
+                _mm_min_ps(slab(far, of, 4), t1.1),
+            );
         }
         let lo = _mm_movemask_ps(_mm_cmple_ps(t0.0, t1.0)) as u32;
         let hi = _mm_movemask_ps(_mm_cmple_ps(t0.1, t1.1)) as u32;
-        lo | (hi << 4)
+        let mut t = [0.0f32; 8];
+        _mm_storeu_ps(t.as_mut_ptr(), t0.0);
+        _mm_storeu_ps(t.as_mut_ptr().add(4), t0.1);
+        (lo | (hi << 4), t)
     }
 }
 
-/// Which of the eight child slots the ray's padded slab test passes (portable version).
+/// Which children's padded boxes the ray enters (portable version).
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn box_hits8(node: &CwBvhNode, ray: &TraversalRay, t_max: f32) -> u32 {
-    let (near_base, far_base, extent) = slab_bases(node, ray);
-    let inv = ray.inv_dir.to_array();
+fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
     let mut t0 = [0.0f32; 8];
     let mut t1 = [t_max; 8];
     for axis in 0..3 {
-        let (q_near, q_far) = planes(node, ray, axis);
-        let (e, inv) = (extent[axis], inv[axis]);
+        let n = ray.near[axis];
+        let (near, far) = (&node.planes[axis][n], &node.planes[axis][1 - n]);
+        let inv = ray.inv[axis];
         for c in 0..8 {
-            let near = (near_base[axis] + f32::from(q_near[c]) * e) * inv;
-            let far = (far_base[axis] + f32::from(q_far[c]) * e) * inv;
+            let tn = (near[c] - ray.o_near[axis]) * inv;
+            let tf = (far[c] - ray.o_far[axis]) * inv;
             // NaN (0 * inf: the ray runs in a slab's plane) constrains nothing.
-            if near > t0[c] {
-                t0[c] = near;
+            if tn > t0[c] {
+                t0[c] = tn;
             }
-            if far < t1[c] {
-                t1[c] = far;
+            if tf < t1[c] {
+                t1[c] = tf;
             }
         }
     }
@@ -217,5 +340,5 @@ fn box_hits8(node: &CwBvhNode, ray: &TraversalRay, t_max: f32) -> u32 {
             hits |= 1 << c;
         }
     }
-    hits
+    (hits, t0)
 }

@@ -1,11 +1,13 @@
 //! The acceleration structure over the scene's triangles (obvhs), watertight ray-triangle
 //! intersection, and robust spawning of rays from surfaces.
 //!
-//! The tree is obvhs' compressed wide BVH8 (CWBVH, built from a PLOC binary BVH); traversal is
-//! our own, over obvhs' nodes, with a conservative box test (no box that holds a hit triangle
-//! is ever culled) and the watertight triangle test of Woop, Benthin and Wald, so that rays
-//! never slip through shared edges or vertices. The triangles are copied into the tree's leaf order, so a leaf's triangles are
-//! contiguous in memory.
+//! The tree is built by obvhs (a compressed wide BVH8 from a PLOC binary BVH) and converted
+//! into our own eight-wide nodes with exact f32 child boxes (see `cwbvh`); traversal is our
+//! own, nearest child first, with a conservative box test (no box that holds a hit triangle
+//! is ever culled) and the watertight triangle test of Woop, Benthin and Wald, four triangles
+//! (one leaf) at a time, so that rays never slip through shared edges or vertices. The
+//! triangles are copied into the tree's leaf order, so a leaf's triangles are contiguous in
+//! memory.
 //!
 //! Measured against a binary BVH (obvhs' BVH2, SAH-collapsed leaves of up to 8 triangles, with
 //! our own traversal of the same robustness: nearest child first, entry distances on the
@@ -56,11 +58,15 @@ pub struct Accel {
     tris: LeafTriangles,
 }
 
-/// The triangles in leaf order: vertices (as per-axis columns, the layout of the triangle
-/// test) and the id of each in `TriangleColumns`.
+/// The triangles in leaf order, four slots per leaf (unused slots are zero triangles, never
+/// tested): vertices as per-axis columns (the layout of the one-triangle test), as four-lane
+/// packets (one per leaf), and the id of each in `TriangleColumns`.
 pub(crate) struct LeafTriangles {
     verts: Vec<triangle::TriangleColumns>,
+    packets: Vec<triangle::TrianglePacket>,
     ids: Vec<u32>,
+    /// The number of triangles (used slots).
+    len: usize,
 }
 
 /// A hit on the triangle at leaf slot `slot`.
@@ -70,38 +76,6 @@ pub(crate) struct TriangleHit {
     slot: u32,
     b1: f32,
     b2: f32,
-}
-
-impl LeafTriangles {
-    /// Tests the triangles at `slots`, narrowing `t_max` and recording the closest hit
-    /// (`ANY = false`), or stopping at the first hit (`ANY = true`). Returns whether any of
-    /// them was hit.
-    #[inline(always)]
-    pub(crate) fn intersect_range<const ANY: bool>(
-        &self,
-        ray: &TraversalRay,
-        slots: std::ops::Range<usize>,
-        t_max: &mut f32,
-        hit: &mut Option<TriangleHit>,
-    ) -> bool {
-        let mut found = false;
-        for slot in slots {
-            if let Some((t, b1, b2)) = ray.intersect(&self.verts[slot], *t_max) {
-                *t_max = t;
-                *hit = Some(TriangleHit {
-                    t,
-                    slot: slot as u32,
-                    b1,
-                    b2,
-                });
-                found = true;
-                if ANY {
-                    break;
-                }
-            }
-        }
-        found
-    }
 }
 
 /// Whether the triangle has exactly zero area (or a non-finite vertex). The differences of
@@ -126,7 +100,9 @@ impl Accel {
                 tree: None,
                 tris: LeafTriangles {
                     verts: Vec::new(),
+                    packets: Vec::new(),
                     ids: Vec::new(),
+                    len: 0,
                 },
             };
         }
@@ -140,28 +116,49 @@ impl Accel {
             .collect();
         let params = BvhBuildParams::medium_build();
         let bvh = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params, &mut Duration::default());
-        let (tree, order) = CwBvhAccel::new(bvh);
-        let ids: Vec<u32> = order.iter().map(|&k| kept[k as usize]).collect();
-        let verts = ids
+        let kept_verts: Vec<[Vec3; 3]> = kept
             .iter()
             .map(|&i| {
                 let i = i as usize;
-                columns(&[triangles.p0[i], triangles.p1[i], triangles.p2[i]])
+                [triangles.p0[i], triangles.p1[i], triangles.p2[i]]
+            })
+            .collect();
+        let (tree, order, packets) = CwBvhAccel::new(bvh, &kept_verts);
+        let ids: Vec<u32> = order
+            .iter()
+            .map(|&k| {
+                if k == u32::MAX {
+                    u32::MAX
+                } else {
+                    kept[k as usize]
+                }
+            })
+            .collect();
+        let verts = order
+            .iter()
+            .map(|&k| match kept_verts.get(k as usize) {
+                Some(v) => columns(v),
+                None => columns(&[Vec3::ZERO; 3]),
             })
             .collect();
         Accel {
             tree: Some(tree),
-            tris: LeafTriangles { verts, ids },
+            tris: LeafTriangles {
+                verts,
+                packets,
+                ids,
+                len: kept.len(),
+            },
         }
     }
 
     /// The number of triangles in the tree (those with a non-zero area).
     pub fn len(&self) -> usize {
-        self.tris.ids.len()
+        self.tris.len
     }
 
     pub fn is_empty(&self) -> bool {
-        self.tris.ids.is_empty()
+        self.tris.len == 0
     }
 
     #[inline(always)]

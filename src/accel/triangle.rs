@@ -59,7 +59,11 @@ impl TraversalRay {
         } else {
             2
         };
-        let k = [(kz + 1) % 3, (kz + 2) % 3, kz];
+        let k = match kz {
+            0 => [1, 2, 0],
+            1 => [2, 0, 1],
+            _ => [0, 1, 2],
+        };
         let d = dir.to_array();
         let sz = 1.0 / d[kz];
         TraversalRay {
@@ -132,6 +136,33 @@ impl TraversalRay {
         let bz = self.sz * bz;
         let cz = self.sz * cz;
         let t_scaled = e0 * az + e1 * bz + e2 * cz;
+        finish(
+            [ax, bx, cx],
+            [ay, by, cy],
+            [az, bz, cz],
+            [e0, e1, e2],
+            det,
+            t_scaled,
+            t_max,
+        )
+    }
+}
+
+/// The end of the test, shared by the one-triangle and the four-triangle versions: the range
+/// test of the scaled distance and the error bound of t. `x`, `y` are the sheared vertex
+/// coordinates, `z` the scaled ones, `e` the edge functions (on one side), `det` their sum
+/// (non-zero) and `t_scaled` the scaled distance.
+#[inline(always)]
+fn finish(
+    [ax, bx, cx]: [f32; 3],
+    [ay, by, cy]: [f32; 3],
+    [az, bz, cz]: [f32; 3],
+    [e0, e1, e2]: [f32; 3],
+    det: f32,
+    t_scaled: f32,
+    t_max: f32,
+) -> Option<(f32, f32, f32)> {
+    {
         if det < 0.0 {
             if t_scaled >= 0.0 || t_scaled < t_max * det {
                 return None;
@@ -161,5 +192,179 @@ impl TraversalRay {
         } else {
             None
         }
+    }
+}
+
+/// Four triangles laid out for the four-lane test: `v[vertex][axis][lane]`. Unused lanes hold
+/// zeros and are masked out by the leaf's triangle count.
+#[derive(Clone, Copy, Debug, Default)]
+#[repr(C, align(16))]
+pub struct TrianglePacket {
+    pub v: [[[f32; 4]; 3]; 3],
+}
+
+impl TraversalRay {
+    /// Tests the first `count` triangles of `packet` (whose single-triangle columns are
+    /// `cols`), in lane order, exactly as `intersect` would one after another: each hit
+    /// narrows `t_max`; with `ANY`, the first hit ends the test. Returns the lane and the hit
+    /// of the last hit found (the closest one), if any.
+    ///
+    /// SSE2 (always present on x86_64): the sheared coordinates, edge functions and scaled
+    /// distances of the four triangles, lane by lane the same operations in the same order as
+    /// the scalar test, so that the result is bit-identical and shared edges stay watertight.
+    /// A lane with an edge function of exactly zero is handed to the scalar test (which
+    /// recomputes it exactly); lanes that pass the range test finish in scalar code.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub fn intersect4<const ANY: bool>(
+        &self,
+        packet: &TrianglePacket,
+        cols: &[TriangleColumns],
+        count: u32,
+        t_max: &mut f32,
+    ) -> Option<(u32, (f32, f32, f32))> {
+        use std::arch::x86_64::*;
+        let [kx, ky, kz] = self.k;
+        let valid = (1u32 << count) - 1;
+        // SAFETY: SSE2 is part of the x86_64 baseline, so these intrinsics are always
+        // available; the loads and stores are `_mm_loadu_ps`/`_mm_storeu_ps` on `[f32; 4]`
+        // arrays that are borrowed (or owned) for the duration of the call.
+        unsafe {
+            let ox = _mm_set1_ps(self.o_k[0].x);
+            let oy = _mm_set1_ps(self.o_k[1].x);
+            let oz = _mm_set1_ps(self.o_k[2].x);
+            let sx = _mm_set1_ps(self.sx);
+            let sy = _mm_set1_ps(self.sy);
+            let sz = _mm_set1_ps(self.sz);
+            let vertex = |i: usize| {
+                let x = _mm_sub_ps(_mm_loadu_ps(packet.v[i][kx].as_ptr()), ox);
+                let y = _mm_sub_ps(_mm_loadu_ps(packet.v[i][ky].as_ptr()), oy);
+                let z = _mm_sub_ps(_mm_loadu_ps(packet.v[i][kz].as_ptr()), oz);
+                (
+                    _mm_add_ps(x, _mm_mul_ps(sx, z)),
+                    _mm_add_ps(y, _mm_mul_ps(sy, z)),
+                    z,
+                )
+            };
+            let (x0, y0, z0) = vertex(0);
+            let (x1, y1, z1) = vertex(1);
+            let (x2, y2, z2) = vertex(2);
+            let e0 = _mm_sub_ps(_mm_mul_ps(x2, y1), _mm_mul_ps(y2, x1));
+            let e1 = _mm_sub_ps(_mm_mul_ps(x0, y2), _mm_mul_ps(y0, x2));
+            let e2 = _mm_sub_ps(_mm_mul_ps(x1, y0), _mm_mul_ps(y1, x0));
+            let zero = _mm_setzero_ps();
+            let any_lt = _mm_or_ps(
+                _mm_or_ps(_mm_cmplt_ps(e0, zero), _mm_cmplt_ps(e1, zero)),
+                _mm_cmplt_ps(e2, zero),
+            );
+            let any_gt = _mm_or_ps(
+                _mm_or_ps(_mm_cmpgt_ps(e0, zero), _mm_cmpgt_ps(e1, zero)),
+                _mm_cmpgt_ps(e2, zero),
+            );
+            let any_eq = _mm_or_ps(
+                _mm_or_ps(_mm_cmpeq_ps(e0, zero), _mm_cmpeq_ps(e1, zero)),
+                _mm_cmpeq_ps(e2, zero),
+            );
+            let exact = _mm_movemask_ps(any_eq) as u32 & valid;
+            let both_sides = _mm_movemask_ps(_mm_and_ps(any_lt, any_gt)) as u32;
+            let mut lanes = valid & !exact & !both_sides;
+            if lanes != 0 {
+                let det = _mm_add_ps(_mm_add_ps(e0, e1), e2);
+                let az = _mm_mul_ps(sz, z0);
+                let bz = _mm_mul_ps(sz, z1);
+                let cz = _mm_mul_ps(sz, z2);
+                let t_scaled = _mm_add_ps(
+                    _mm_add_ps(_mm_mul_ps(e0, az), _mm_mul_ps(e1, bz)),
+                    _mm_mul_ps(e2, cz),
+                );
+                // The range test with the sign of det moved onto both sides (exact): lanes
+                // with 0 < t_scaled <= t_max |det|; also fails for det == 0 and for NaN.
+                let sign = _mm_and_ps(det, _mm_set1_ps(-0.0));
+                let ts = _mm_xor_ps(t_scaled, sign);
+                let limit = _mm_xor_ps(_mm_mul_ps(_mm_set1_ps(*t_max), det), sign);
+                let in_range = _mm_and_ps(_mm_cmpgt_ps(ts, zero), _mm_cmple_ps(ts, limit));
+                lanes &= _mm_movemask_ps(in_range) as u32;
+                if lanes | exact == 0 {
+                    return None;
+                }
+                let mut hit = None;
+                let store = |v: __m128| {
+                    let mut a = [0.0f32; 4];
+                    _mm_storeu_ps(a.as_mut_ptr(), v);
+                    a
+                };
+                let (x0, x1, x2) = (store(x0), store(x1), store(x2));
+                let (y0, y1, y2) = (store(y0), store(y1), store(y2));
+                let (az, bz, cz) = (store(az), store(bz), store(cz));
+                let (e0, e1, e2) = (store(e0), store(e1), store(e2));
+                let (det, t_scaled) = (store(det), store(t_scaled));
+                let mut left = lanes | exact;
+                while left != 0 {
+                    let i = left.trailing_zeros() as usize;
+                    left &= left - 1;
+                    let h = if exact & (1 << i) != 0 {
+                        self.intersect(&cols[i], *t_max)
+                    } else {
+                        finish(
+                            [x0[i], x1[i], x2[i]],
+                            [y0[i], y1[i], y2[i]],
+                            [az[i], bz[i], cz[i]],
+                            [e0[i], e1[i], e2[i]],
+                            det[i],
+                            t_scaled[i],
+                            *t_max,
+                        )
+                    };
+                    if let Some(h) = h {
+                        *t_max = h.0;
+                        hit = Some((i as u32, h));
+                        if ANY {
+                            break;
+                        }
+                    }
+                }
+                hit
+            } else if exact != 0 {
+                self.intersect_lanes::<ANY>(cols, exact, t_max)
+            } else {
+                None
+            }
+        }
+    }
+
+    /// The four-triangle test (portable version): the scalar test, lane by lane.
+    #[cfg(not(target_arch = "x86_64"))]
+    #[inline(always)]
+    pub fn intersect4<const ANY: bool>(
+        &self,
+        _packet: &TrianglePacket,
+        cols: &[TriangleColumns],
+        count: u32,
+        t_max: &mut f32,
+    ) -> Option<(u32, (f32, f32, f32))> {
+        self.intersect_lanes::<ANY>(cols, (1u32 << count) - 1, t_max)
+    }
+
+    /// The scalar test of the triangles `cols[i]` for the bits i of `lanes`, in order.
+    #[inline(always)]
+    fn intersect_lanes<const ANY: bool>(
+        &self,
+        cols: &[TriangleColumns],
+        mut lanes: u32,
+        t_max: &mut f32,
+    ) -> Option<(u32, (f32, f32, f32))> {
+        let mut hit = None;
+        while lanes != 0 {
+            let i = lanes.trailing_zeros();
+            lanes &= lanes - 1;
+            if let Some(h) = self.intersect(&cols[i as usize], *t_max) {
+                *t_max = h.0;
+                hit = Some((i, h));
+                if ANY {
+                    break;
+                }
+            }
+        }
+        hit
     }
 }
