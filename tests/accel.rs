@@ -7,7 +7,6 @@ use stagelight::accel::{
 };
 use stagelight::sampling::{SampleKey, uniform_sphere};
 use stagelight::scene::{FLAT, NO_EMITTER, TriangleColumns};
-use std::collections::HashMap;
 
 /// A counter-based random stream over `SampleKey`.
 struct Rng {
@@ -68,68 +67,12 @@ fn random_soup(rng: &mut Rng, n: usize, lo: Vec3, hi: Vec3, size: f32) -> Vec<[V
         .collect()
 }
 
-/// An icosphere (closed, outward winding) of the given level.
+/// An icosphere (closed, outward winding) of the given level, from the scene module's shapes.
 fn icosphere(level: u32, centre: Vec3, radius: f32) -> Vec<[Vec3; 3]> {
-    let phi = (1.0 + 5.0f32.sqrt()) / 2.0;
-    let mut verts: Vec<Vec3> = [
-        (-1.0, phi, 0.0),
-        (1.0, phi, 0.0),
-        (-1.0, -phi, 0.0),
-        (1.0, -phi, 0.0),
-        (0.0, -1.0, phi),
-        (0.0, 1.0, phi),
-        (0.0, -1.0, -phi),
-        (0.0, 1.0, -phi),
-        (phi, 0.0, -1.0),
-        (phi, 0.0, 1.0),
-        (-phi, 0.0, -1.0),
-        (-phi, 0.0, 1.0),
-    ]
-    .iter()
-    .map(|&(x, y, z)| Vec3::new(x, y, z).normalize())
-    .collect();
-    let mut faces: Vec<[usize; 3]> = vec![
-        [0, 11, 5],
-        [0, 5, 1],
-        [0, 1, 7],
-        [0, 7, 10],
-        [0, 10, 11],
-        [1, 5, 9],
-        [5, 11, 4],
-        [11, 10, 2],
-        [10, 7, 6],
-        [7, 1, 8],
-        [3, 9, 4],
-        [3, 4, 2],
-        [3, 2, 6],
-        [3, 6, 8],
-        [3, 8, 9],
-        [4, 9, 5],
-        [2, 4, 11],
-        [6, 2, 10],
-        [8, 6, 7],
-        [9, 8, 1],
-    ];
-    for _ in 0..level {
-        let mut mids: HashMap<(usize, usize), usize> = HashMap::new();
-        let mut mid = |a: usize, b: usize, verts: &mut Vec<Vec3>| {
-            *mids.entry((a.min(b), a.max(b))).or_insert_with(|| {
-                verts.push(((verts[a] + verts[b]) * 0.5).normalize());
-                verts.len() - 1
-            })
-        };
-        let mut next = Vec::with_capacity(faces.len() * 4);
-        for [a, b, c] in faces {
-            let ab = mid(a, b, &mut verts);
-            let bc = mid(b, c, &mut verts);
-            let ca = mid(c, a, &mut verts);
-            next.extend([[a, ab, ca], [b, bc, ab], [c, ca, bc], [ab, bc, ca]]);
-        }
-        faces = next;
-    }
-    faces
+    let mesh = stagelight::scene::shapes::icosphere(level, false);
+    mesh.triangles
         .iter()
-        .map(|f| f.map(|i| centre + radius * verts[i]))
+        .map(|t| t.map(|i| centre + radius * mesh.positions[i as usize].as_vec3()))
         .collect()
 }
 
