@@ -10,7 +10,7 @@
 //!     trace_closest -> add_emitted_light -> sort_by_material -> interpolate_surfaces
 //!     [sample_lights] -> [shade_diffuse] [shade_conductor] [shade_dielectric]
 //!     [trace_shadow -> apply_shadow_contributions]
-//!     russian_roulette_and_compaction
+//!     russian_roulette
 //! accumulate_film
 //! ```
 
@@ -206,9 +206,7 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
             connect::apply_shadow::ApplyShadowContributions,
         ));
     }
-    bounce.push(Node::system(
-        shade::russian_roulette::RussianRouletteAndCompaction,
-    ));
+    bounce.push(Node::system(shade::russian_roulette::RussianRoulette));
 
     Graph::new(
         "pt",
@@ -231,18 +229,16 @@ impl PtState {
         self.sample_radiance[self.paths.sample[slot] as usize] = self.paths.radiance[slot];
     }
 
-    /// Moves the paths listed in `scratch.order` to slots `0..order.len()` (rays and paths,
-    /// and hits when `with_hits`), leaving every other path behind.
-    pub fn reorder(&mut self, with_hits: bool) {
+    /// Moves the paths listed in `scratch.order` (rays, hits and path state) to slots
+    /// `0..order.len()`, leaving every other path behind.
+    pub fn reorder(&mut self) {
         let order = &self.scratch.order;
         self.scratch.rays.gather_from(&self.rays, order);
         self.scratch.paths.gather_from(&self.paths, order);
+        self.scratch.hits.gather_from(&self.hits, order);
         std::mem::swap(&mut self.rays, &mut self.scratch.rays);
         std::mem::swap(&mut self.paths, &mut self.scratch.paths);
-        if with_hits {
-            self.scratch.hits.gather_from(&self.hits, order);
-            std::mem::swap(&mut self.hits, &mut self.scratch.hits);
-        }
+        std::mem::swap(&mut self.hits, &mut self.scratch.hits);
         self.active = order.len();
     }
 }

@@ -1,50 +1,54 @@
-//! Russian roulette by path throughput, then compaction: ended paths give their radiance to
-//! their sample and the live ones move to the front.
+//! Russian roulette by path throughput. A path that ends here (or ended in shading) gets an
+//! empty ray: tracing finds nothing for it, and `sort_by_material` retires it with the paths
+//! that left the scene. So the wavefront is compacted once per bounce, not twice.
 
 use crate::components::PathFlags;
 use crate::integrators::pt::{DIM_ROULETTE, PtState, ROULETTE_DEPTH, bounce_dim};
 use crate::pipeline::{Flow, System};
+use glam::Vec3;
 use rayon::prelude::*;
 
-pub struct RussianRouletteAndCompaction;
+pub struct RussianRoulette;
 
-impl System<PtState> for RussianRouletteAndCompaction {
+impl System<PtState> for RussianRoulette {
     fn name(&self) -> &'static str {
-        "russian_roulette_and_compaction"
+        "russian_roulette"
     }
     fn reads(&self) -> &'static [&'static str] {
         &["paths"]
     }
     fn writes(&self) -> &'static [&'static str] {
-        &["paths", "rays", "sample_radiance"]
+        &["paths.throughput", "paths.flags", "rays.dir"]
     }
     fn run(&self, s: &mut PtState) -> Flow {
         let taken = s.active;
-        s.paths.chunks_mut(0..taken).into_par_iter().for_each(|p| {
-            for i in 0..p.len() {
-                if p.flags[i].has(PathFlags::DEAD) || p.depth[i] < ROULETTE_DEPTH {
-                    continue;
+        let rays = s.rays.chunks_mut(0..taken);
+        let survivors: usize = s
+            .paths
+            .chunks_mut(0..taken)
+            .into_par_iter()
+            .zip(rays)
+            .map(|(p, r)| {
+                let mut survivors = 0;
+                for i in 0..p.len() {
+                    if !p.flags[i].has(PathFlags::DEAD) && p.depth[i] >= ROULETTE_DEPTH {
+                        let survive = p.throughput[i].max_element().min(1.0);
+                        let u = p.key[i].get(bounce_dim(p.depth[i] - 1) + DIM_ROULETTE);
+                        if u >= survive {
+                            p.flags[i].set(PathFlags::DEAD, true);
+                        } else {
+                            p.throughput[i] /= survive;
+                        }
+                    }
+                    if p.flags[i].has(PathFlags::DEAD) {
+                        r.dir[i] = Vec3::ZERO;
+                    } else {
+                        survivors += 1;
+                    }
                 }
-                let survive = p.throughput[i].max_element().min(1.0);
-                let u = p.key[i].get(bounce_dim(p.depth[i] - 1) + DIM_ROULETTE);
-                if u >= survive {
-                    p.flags[i].set(PathFlags::DEAD, true);
-                } else {
-                    p.throughput[i] /= survive;
-                }
-            }
-        });
-        let mut order = std::mem::take(&mut s.scratch.order);
-        order.clear();
-        for slot in 0..taken {
-            if s.paths.flags[slot].has(PathFlags::DEAD) {
-                s.finish_path(slot);
-            } else {
-                order.push(slot as u32);
-            }
-        }
-        s.scratch.order = order;
-        s.reorder(false);
-        Flow::new(taken, s.active)
+                survivors
+            })
+            .sum();
+        Flow::new(taken, survivors)
     }
 }

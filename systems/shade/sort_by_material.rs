@@ -1,6 +1,7 @@
 //! Compacts the paths after tracing and groups them by material kind, so that each shading
-//! system runs over one contiguous queue. Paths that left the scene, or reached the depth cap
-//! (after their emission was added), end here.
+//! system runs over one contiguous queue. Paths end here when their ray found nothing (they
+//! left the scene, or shading or Russian roulette ended them and left them no ray), or when
+//! they reached the depth cap (after their emission was added).
 
 use crate::bsdf::MaterialKind;
 use crate::components::{CHUNK, MISS};
@@ -77,7 +78,7 @@ impl System<PtState> for SortByMaterial {
             }
         }
         s.scratch.order = order;
-        s.reorder(true);
+        s.reorder();
         s.ranges = MaterialRanges {
             diffuse: 0..counts[0],
             conductor: counts[0]..counts[0] + counts[1],

@@ -3,9 +3,11 @@
 use crate::accel::Accel;
 use crate::components::{Hits, MISS, Rays};
 use crate::pipeline::{Flow, System};
+use glam::Vec3;
 use rayon::prelude::*;
 
-/// A state with a queue of rays to trace for closest hits (slots `0..len`).
+/// A state with a queue of rays to trace for closest hits (slots `0..len`). A ray whose
+/// direction is zero is absent (its path has ended): it is not traced and finds nothing.
 pub trait ClosestHitQueue {
     fn closest_hit_queue(&mut self) -> (&Accel, &Rays, &mut Hits, usize);
 }
@@ -24,13 +26,18 @@ impl<S: ClosestHitQueue + Send> System<S> for TraceClosest {
     }
     fn run(&self, state: &mut S) -> Flow {
         let (accel, rays, hits, len) = state.closest_hit_queue();
-        let found: usize = hits
+        let (traced, found) = hits
             .chunks_mut(0..len)
             .into_par_iter()
             .map(|h| {
-                let mut found = 0;
+                let (mut traced, mut found) = (0, 0);
                 for i in 0..h.len() {
                     let slot = h.start + i;
+                    if rays.dir[slot] == Vec3::ZERO {
+                        h.triangle[i] = MISS;
+                        continue;
+                    }
+                    traced += 1;
                     match accel.closest_hit(rays.origin[slot], rays.dir[slot], f32::INFINITY) {
                         Some(hit) => {
                             h.t[i] = hit.t;
@@ -42,9 +49,9 @@ impl<S: ClosestHitQueue + Send> System<S> for TraceClosest {
                         None => h.triangle[i] = MISS,
                     }
                 }
-                found
+                (traced, found)
             })
-            .sum();
-        Flow::new(len, found)
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        Flow::new(traced, found)
     }
 }
