@@ -210,6 +210,7 @@ pub fn intersect_triangle(
 }
 
 /// The surface point of a hit, with its error bound and normals.
+#[inline(always)]
 pub fn surface_point(tris: &TriangleColumns, triangle: u32, b1: f32, b2: f32) -> SurfacePoint {
     let i = triangle as usize;
     let (p0, p1, p2) = (tris.p0[i], tris.p1[i], tris.p2[i]);

@@ -10,24 +10,24 @@ mod rays;
 mod shadow;
 mod surfaces;
 
-pub use paths::{PathFlags, Paths, PathsChunk};
-pub use rays::{Hits, HitsChunk, MISS, Rays, RaysChunk};
-pub use shadow::{ShadowRays, ShadowRaysChunk};
-pub use surfaces::{Surfaces, SurfacesChunk};
+pub use paths::{PathFlags, Paths, PathsChunk, PathsView};
+pub use rays::{Hits, HitsChunk, HitsView, MISS, Rays, RaysChunk, RaysView};
+pub use shadow::{ShadowRays, ShadowRaysChunk, ShadowRaysView};
+pub use surfaces::{Surfaces, SurfacesChunk, SurfacesView};
 
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
 pub const CHUNK: usize = 1024;
 
 /// Declares a structure-of-arrays store and its chunk view.
 ///
-/// `soa! { pub struct Rays, RaysChunk { origin: Vec3, dir: Vec3 } }` makes `Rays` with one
-/// `Vec` per field and `RaysChunk<'a>` with one `&'a mut [T]` per field plus the chunk's
-/// first slot, and the methods: `new(capacity)`, `capacity()`, `chunks_mut(range)` (views over
+/// `soa! { pub struct Rays, RaysChunk, RaysView { origin: Vec3, dir: Vec3 } }` makes `Rays` with
+/// one `Vec` per field, `RaysChunk<'a>` with one `&'a mut [T]` per field plus the chunk's first
+/// slot, `RaysView<'a>` with one `&'a [T]` per field, and the methods: `view(range)`, `new(capacity)`, `capacity()`, `chunks_mut(range)` (views over
 /// the slots of `range` in `CHUNK`-sized pieces), `gather_from(source, order)` (slot i takes
 /// source's slot `order[i]`, in parallel per column), and `bytes_per_item()`.
 #[macro_export]
 macro_rules! soa {
-    ($(#[$meta:meta])* pub struct $name:ident, $chunk:ident { $($(#[$fmeta:meta])* $field:ident : $ty:ty),+ $(,)? }) => {
+    ($(#[$meta:meta])* pub struct $name:ident, $chunk:ident, $view:ident { $($(#[$fmeta:meta])* $field:ident : $ty:ty),+ $(,)? }) => {
         $(#[$meta])*
         #[derive(Clone, Debug, Default)]
         pub struct $name {
@@ -39,6 +39,12 @@ macro_rules! soa {
             /// Slot of the chunk's first item.
             pub start: usize,
             $(pub $field: &'a mut [$ty],)+
+        }
+
+        /// A read-only view of a range of slots, indexed from 0. Systems take one per chunk so
+        /// that indexing inside the chunk's loop needs no bounds checks.
+        pub struct $view<'a> {
+            $(pub $field: &'a [$ty],)+
         }
 
         impl $chunk<'_> {
@@ -77,6 +83,12 @@ macro_rules! soa {
                     });
                 }
                 views
+            }
+
+            /// A read-only view of the slots in `range`.
+            #[inline]
+            pub fn view(&self, range: std::ops::Range<usize>) -> $view<'_> {
+                $view { $($field: &self.$field[range.clone()],)+ }
             }
 
             /// Slot `i` takes `source`'s slot `order[i]`, for `i < order.len()`.

@@ -26,10 +26,10 @@ impl System<PtState> for ApplyShadowContributions {
             .into_par_iter()
             .map(|p| {
                 let mut applied = 0;
+                let shadow = shadow.view(p.start..p.start + p.len());
                 for i in 0..p.len() {
-                    let slot = p.start + i;
-                    if shadow.unoccluded[slot] {
-                        p.radiance[i] += shadow.contribution[slot];
+                    if shadow.unoccluded[i] {
+                        p.radiance[i] += shadow.contribution[i];
                         applied += 1;
                     }
                 }

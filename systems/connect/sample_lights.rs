@@ -45,13 +45,16 @@ impl System<PtState> for SampleLights {
             .into_par_iter()
             .map(|c| {
                 let mut cast = 0;
+                let range = c.start..c.start + c.len();
+                let hits = hits.view(range.clone());
+                let rays = rays.view(range.clone());
+                let paths = paths.view(range.clone());
+                let surfaces = surfaces.view(range);
                 for i in 0..c.len() {
-                    let slot = c.start + i;
                     c.t_max[i] = 0.0;
-                    let surf =
-                        Surface::at(data, surfaces, hits.triangle[slot], slot, rays.dir[slot]);
-                    let key = paths.key[slot];
-                    let dim = bounce_dim(paths.depth[slot]);
+                    let surf = Surface::at(data, &surfaces, hits.triangle[i], i, rays.dir[i]);
+                    let key = paths.key[i];
+                    let dim = bounce_dim(paths.depth[i]);
                     let e = sample_cdf(&emitters.cdf, key.get(dim + DIM_LIGHT_PICK));
                     let b = uniform_triangle(key.get2(dim + DIM_LIGHT_POINT));
                     let light = surface_point(tris, emitters.triangle[e], b.x, b.y);
@@ -75,7 +78,7 @@ impl System<PtState> for SampleLights {
                     c.origin[i] = origin;
                     c.dir[i] = target - origin;
                     c.t_max[i] = 1.0 - SHADOW_EPSILON;
-                    c.contribution[i] = paths.throughput[slot]
+                    c.contribution[i] = paths.throughput[i]
                         * f
                         * (wi_local.z.abs() * weight / light_pdf)
                         * emitters.radiance[e];

@@ -38,9 +38,10 @@ impl System<PtState> for AddEmittedLight {
             .into_par_iter()
             .map(|p| {
                 let mut found = 0;
+                let range = p.start..p.start + p.len();
+                let (hits, rays) = (hits.view(range.clone()), rays.view(range));
                 for i in 0..p.len() {
-                    let slot = p.start + i;
-                    let tri = hits.triangle[slot];
+                    let tri = hits.triangle[i];
                     if tri == MISS {
                         continue;
                     }
@@ -48,8 +49,8 @@ impl System<PtState> for AddEmittedLight {
                     if e == NO_EMITTER {
                         continue;
                     }
-                    let sp = surface_point(tris, tri, hits.b1[slot], hits.b2[slot]);
-                    let cos_light = -rays.dir[slot].dot(sp.ng);
+                    let sp = surface_point(tris, tri, hits.b1[i], hits.b2[i]);
+                    let cos_light = -rays.dir[i].dot(sp.ng);
                     if cos_light <= 0.0 {
                         continue; // emitters are one-sided
                     }
@@ -58,7 +59,7 @@ impl System<PtState> for AddEmittedLight {
                     let weight = if p.flags[i].has(PathFlags::SPECULAR) {
                         1.0
                     } else {
-                        let t = hits.t[slot];
+                        let t = hits.t[i];
                         let light_pdf =
                             emitters.pmf[e as usize] / emitters.area[e as usize] * t * t
                                 / cos_light;

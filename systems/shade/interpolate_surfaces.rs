@@ -23,9 +23,9 @@ impl System<PtState> for InterpolateSurfaces {
         let hits = &s.hits;
         let n = s.active;
         s.surfaces.chunks_mut(0..n).into_par_iter().for_each(|c| {
+            let hits = hits.view(c.start..c.start + c.len());
             for i in 0..c.len() {
-                let slot = c.start + i;
-                let sp = surface_point(tris, hits.triangle[slot], hits.b1[slot], hits.b2[slot]);
+                let sp = surface_point(tris, hits.triangle[i], hits.b1[i], hits.b2[i]);
                 c.p[i] = sp.p;
                 c.p_error[i] = sp.p_error;
                 c.ng[i] = sp.ng;

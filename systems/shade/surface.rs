@@ -3,7 +3,7 @@
 
 use crate::accel::offset_ray_origin;
 use crate::bsdf::Material;
-use crate::components::Surfaces;
+use crate::components::SurfacesView;
 use crate::integrators::SceneData;
 use crate::math::Frame;
 use glam::Vec3;
@@ -22,20 +22,20 @@ pub struct Surface {
 }
 
 impl Surface {
-    /// The shading point of the path in `slot` (its hit's triangle and its interpolated
-    /// surface), seen along `dir`.
-    #[inline]
+    /// The shading point of item `i` of a chunk's view of the surfaces (its hit's triangle
+    /// given), seen along `dir`.
+    #[inline(always)]
     pub fn at(
         data: &SceneData,
-        surfaces: &Surfaces,
+        surfaces: &SurfacesView,
         triangle: u32,
-        slot: usize,
+        i: usize,
         dir: Vec3,
     ) -> Surface {
         let tris = &data.scene.triangles;
         let material = data.scene.materials[tris.material[triangle as usize] as usize];
-        let mut ng = surfaces.ng[slot];
-        let mut ns = surfaces.ns[slot];
+        let mut ng = surfaces.ng[i];
+        let mut ns = surfaces.ns[i];
         let wo = -dir;
         // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
         if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
@@ -44,8 +44,8 @@ impl Surface {
         }
         let frame = Frame::from_normal(ns);
         Surface {
-            p: surfaces.p[slot],
-            p_error: surfaces.p_error[slot],
+            p: surfaces.p[i],
+            p_error: surfaces.p_error[i],
             ng,
             frame,
             wo,
@@ -96,9 +96,10 @@ pub fn scatter_paths(
         .zip(paths)
         .map(|(r, p)| {
             let mut scattered = 0;
+            let range = p.start..p.start + p.len();
+            let (hits, surfaces) = (hits.view(range.clone()), surfaces.view(range));
             for i in 0..p.len() {
-                let slot = p.start + i;
-                let surf = Surface::at(data, surfaces, hits.triangle[slot], slot, r.dir[i]);
+                let surf = Surface::at(data, &surfaces, hits.triangle[i], i, r.dir[i]);
                 let u = p.key[i].get2(bounce_dim(p.depth[i]) + DIM_BSDF);
                 let next = sample(&surf, u).and_then(|bs| {
                     let wi = surf.frame.to_world(bs.wi).normalize();

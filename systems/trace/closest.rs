@@ -31,14 +31,14 @@ impl<S: ClosestHitQueue + Send> System<S> for TraceClosest {
             .into_par_iter()
             .map(|h| {
                 let (mut traced, mut found) = (0, 0);
+                let rays = rays.view(h.start..h.start + h.len());
                 for i in 0..h.len() {
-                    let slot = h.start + i;
-                    if rays.dir[slot] == Vec3::ZERO {
+                    if rays.dir[i] == Vec3::ZERO {
                         h.triangle[i] = MISS;
                         continue;
                     }
                     traced += 1;
-                    match accel.closest_hit(rays.origin[slot], rays.dir[slot], f32::INFINITY) {
+                    match accel.closest_hit(rays.origin[i], rays.dir[i], f32::INFINITY) {
                         Some(hit) => {
                             h.t[i] = hit.t;
                             h.triangle[i] = hit.triangle;
