@@ -18,6 +18,19 @@ pub use surfaces::{Surfaces, SurfacesChunk, SurfacesView};
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
 pub const CHUNK: usize = 1024;
 
+/// `dst[i] = src[order[i]]` for `i < order.len()`, in parallel over fixed-size chunks.
+pub fn gather_column<T: Copy + Send + Sync>(dst: &mut [T], src: &[T], order: &[u32]) {
+    use rayon::prelude::*;
+    dst[..order.len()]
+        .par_chunks_mut(CHUNK)
+        .zip(order.par_chunks(CHUNK))
+        .for_each(|(dst, idx)| {
+            for (d, &i) in dst.iter_mut().zip(idx) {
+                *d = src[i as usize];
+            }
+        });
+}
+
 /// Declares a structure-of-arrays store and its chunk view.
 ///
 /// `soa! { pub struct Rays, RaysChunk, RaysView { origin: Vec3, dir: Vec3 } }` makes `Rays` with
@@ -93,17 +106,7 @@ macro_rules! soa {
 
             /// Slot `i` takes `source`'s slot `order[i]`, for `i < order.len()`.
             pub fn gather_from(&mut self, source: &Self, order: &[u32]) {
-                use rayon::prelude::*;
-                $(
-                    self.$field[..order.len()]
-                        .par_chunks_mut($crate::components::CHUNK)
-                        .zip(order.par_chunks($crate::components::CHUNK))
-                        .for_each(|(dst, idx)| {
-                            for (d, &i) in dst.iter_mut().zip(idx) {
-                                *d = source.$field[i as usize];
-                            }
-                        });
-                )+
+                $($crate::components::gather_column(&mut self.$field, &source.$field, order);)+
             }
         }
     };

@@ -229,17 +229,27 @@ impl PtState {
         self.sample_radiance[self.paths.sample[slot] as usize] = self.paths.radiance[slot];
     }
 
-    /// Moves the paths listed in `scratch.order` (rays, hits and path state) to slots
-    /// `0..order.len()`, leaving every other path behind.
+    /// Moves the paths listed in `scratch.order` to slots `0..order.len()`, leaving every
+    /// other path behind. Only what later systems of the bounce read moves: the path state,
+    /// the ray direction (wo) and the hit's triangle and barycentrics. The ray origins and hit
+    /// distances left behind are stale until shading and tracing write them again.
     pub fn reorder(&mut self) {
-        let order = &self.scratch.order;
-        self.scratch.rays.gather_from(&self.rays, order);
-        self.scratch.paths.gather_from(&self.paths, order);
-        self.scratch.hits.gather_from(&self.hits, order);
-        std::mem::swap(&mut self.rays, &mut self.scratch.rays);
-        std::mem::swap(&mut self.paths, &mut self.scratch.paths);
-        std::mem::swap(&mut self.hits, &mut self.scratch.hits);
+        use crate::components::gather_column;
+        use std::mem::swap;
+        let order = std::mem::take(&mut self.scratch.order);
+        let scratch = &mut self.scratch;
+        scratch.paths.gather_from(&self.paths, &order);
+        gather_column(&mut scratch.rays.dir, &self.rays.dir, &order);
+        gather_column(&mut scratch.hits.triangle, &self.hits.triangle, &order);
+        gather_column(&mut scratch.hits.b1, &self.hits.b1, &order);
+        gather_column(&mut scratch.hits.b2, &self.hits.b2, &order);
+        swap(&mut self.paths, &mut scratch.paths);
+        swap(&mut self.rays.dir, &mut scratch.rays.dir);
+        swap(&mut self.hits.triangle, &mut scratch.hits.triangle);
+        swap(&mut self.hits.b1, &mut scratch.hits.b1);
+        swap(&mut self.hits.b2, &mut scratch.hits.b2);
         self.active = order.len();
+        self.scratch.order = order;
     }
 }
 

@@ -31,8 +31,10 @@ impl System<PtState> for SortByMaterial {
     }
     fn writes(&self) -> &'static [&'static str] {
         &[
-            "rays",
-            "hits",
+            "rays.dir",
+            "hits.triangle",
+            "hits.b1",
+            "hits.b2",
             "paths",
             "sample_radiance",
             "material_ranges",
