@@ -37,8 +37,9 @@ pub enum Command {
         /// Timed runs (after one warm-up run); the table gives their median and spread.
         #[arg(long, default_value_t = 5, value_parser = clap::value_parser!(u32).range(1..))]
         runs: u32,
-        #[arg(long)]
-        threads: Option<usize>,
+        /// Worker threads (default: all cores).
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+        threads: Option<u64>,
     },
 }
 
@@ -133,7 +134,7 @@ fn run(cli: Cli) -> Result<i32> {
             runs,
             threads,
         } => {
-            bench_command(&scene, integrator, spp, runs, threads)?;
+            bench_command(&scene, integrator, spp, runs, threads.map(|t| t as usize))?;
             Ok(0)
         }
     }
