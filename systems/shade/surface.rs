@@ -2,11 +2,15 @@
 //! emission: position with its error bound, normals, the shading frame and wo.
 
 use crate::accel::offset_ray_origin;
-use crate::bsdf::Material;
-use crate::components::SurfacesView;
+use crate::bsdf::{BsdfSample, Material};
+use crate::components::{PathFlags, SurfacesView};
 use crate::integrators::SceneData;
+use crate::integrators::pt::{DIM_BSDF, PtState, bounce_dim};
 use crate::math::Frame;
-use glam::Vec3;
+use crate::pipeline::Flow;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::ops::Range;
 
 pub struct Surface {
     pub p: Vec3,
@@ -67,14 +71,6 @@ impl Surface {
         wi.dot(self.ng) * self.wo.dot(self.ng) > 0.0
     }
 }
-
-use crate::bsdf::BsdfSample;
-use crate::components::PathFlags;
-use crate::integrators::pt::{DIM_BSDF, PtState, bounce_dim};
-use crate::pipeline::Flow;
-use glam::Vec2;
-use rayon::prelude::*;
-use std::ops::Range;
 
 /// The scattering step every shading system shares: at each path of `range`, `sample`
 /// draws wi (local frame) from the surface's BSDF; the path's throughput, next ray and MIS
