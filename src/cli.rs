@@ -171,7 +171,10 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
             .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
         PathBuf::from("render").join(format!("{stem}_{}.exr", args.integrator.as_str()))
     });
-    if output.extension().is_none_or(|e| e != "exr") {
+    if output
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+    {
         bail!("{}: the output must be an .exr file", output.display());
     }
     let stop = Arc::new(AtomicBool::new(false));

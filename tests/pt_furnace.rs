@@ -116,3 +116,19 @@ fn near_mirror_conductor_in_the_furnace_shows_its_albedo() {
         assert!((0.97..=1.01).contains(&v), "channel {ch}: {value} for 2");
     }
 }
+
+/// A closed white furnace (reflectance 1) has no finite answer, but every render of it must
+/// still end: Russian roulette never lets a path survive with probability 1.
+#[test]
+fn a_closed_white_scene_still_terminates() {
+    let text = r#"Scene(
+    camera: (position: (0, 0, 0), look_at: (0, 0, 1), fov: 90, width: 8, height: 8),
+    materials: { "white": Diffuse(reflectance: (1, 1, 1)) },
+    objects: [(material: "white", emission: Some((1, 1, 1)), shape: Icosphere(level: 2), flip_normals: true)],
+)"#;
+    let scene = stagelight::scene::load_from_str(std::path::Path::new("white.ron"), text)
+        .expect("scene loads");
+    let o = render_pt(scene, 2, 1, u32::MAX);
+    assert_eq!(o.samples, 128);
+    assert_eq!(o.film.nonfinite, 0);
+}

@@ -9,7 +9,7 @@ impl PathFlags {
     /// The last scattering was a delta lobe (or the path is a camera ray): emission found
     /// next counts fully, as light sampling could not have found it.
     pub const SPECULAR: u8 = 1;
-    /// The path has ended (absorbed, terminated by Russian roulette, or depth cap).
+    /// The path has ended (its BSDF sample carried nothing, or Russian roulette ended it).
     pub const DEAD: u8 = 2;
 
     #[inline]

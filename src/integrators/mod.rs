@@ -136,6 +136,12 @@ impl WavePlan {
         Some((first, len as usize))
     }
 
+    /// True when a sample budget has been rendered in full (a time budget never is: it ends
+    /// when the time is up).
+    pub fn budget_spent(&self) -> bool {
+        self.total.is_some_and(|t| self.next >= t)
+    }
+
     pub fn passes_done(&self) -> u64 {
         self.next / self.pixels
     }

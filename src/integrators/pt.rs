@@ -45,6 +45,10 @@ pub const WAVEFRONT: usize = 1 << 18;
 
 /// Russian roulette starts after this many bounces.
 pub const ROULETTE_DEPTH: u32 = 3;
+/// Highest survival probability of Russian roulette: even a path whose throughput stays at 1
+/// (a closed scene of reflectance 1) ends after about 1 / (1 - 0.95) = 20 more bounces on
+/// average, so every wave terminates.
+pub const ROULETTE_MAX_SURVIVAL: f32 = 0.95;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PtSettings {
@@ -286,7 +290,8 @@ pub fn render(
         graph.run(&mut state, &mut stats);
         (control.progress)(plan.passes_done(), plan.total_passes());
     }
-    if control.stopped() {
+    // A stop that arrives after the last wave interrupts nothing.
+    if control.stopped() && !plan.budget_spent() {
         interrupted = true;
     }
     RenderOutcome {

@@ -3,7 +3,9 @@
 //! that left the scene. So the wavefront is compacted once per bounce, not twice.
 
 use crate::components::PathFlags;
-use crate::integrators::pt::{DIM_ROULETTE, PtState, ROULETTE_DEPTH, bounce_dim};
+use crate::integrators::pt::{
+    DIM_ROULETTE, PtState, ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL, bounce_dim,
+};
 use crate::pipeline::{Flow, System};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -32,7 +34,7 @@ impl System<PtState> for RussianRoulette {
                 let mut survivors = 0;
                 for i in 0..p.len() {
                     if !p.flags[i].has(PathFlags::DEAD) && p.depth[i] >= ROULETTE_DEPTH {
-                        let survive = p.throughput[i].max_element().min(1.0);
+                        let survive = p.throughput[i].max_element().min(ROULETTE_MAX_SURVIVAL);
                         let u = p.key[i].get(bounce_dim(p.depth[i] - 1) + DIM_ROULETTE);
                         if u >= survive {
                             p.flags[i].set(PathFlags::DEAD, true);
