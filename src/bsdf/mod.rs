@@ -32,14 +32,6 @@ pub enum MaterialKind {
     Conductor = 2,
 }
 
-impl MaterialKind {
-    pub const ALL: [MaterialKind; 3] = [
-        MaterialKind::Diffuse,
-        MaterialKind::Dielectric,
-        MaterialKind::Conductor,
-    ];
-}
-
 impl Material {
     pub fn kind(&self) -> MaterialKind {
         match self {
@@ -47,11 +39,6 @@ impl Material {
             Material::Dielectric { .. } => MaterialKind::Dielectric,
             Material::Conductor { .. } => MaterialKind::Conductor,
         }
-    }
-
-    /// True when every lobe is a Dirac delta (no light sampling can reach it).
-    pub fn is_delta(&self) -> bool {
-        matches!(self, Material::Dielectric { .. })
     }
 }
 

@@ -27,10 +27,6 @@ impl Film {
         }
     }
 
-    pub fn pixel_count(&self) -> usize {
-        self.width * self.height
-    }
-
     /// Adds one sample to a pixel; a sample with a NaN or infinite channel is counted instead.
     #[inline]
     pub fn add_sample(&mut self, pixel: usize, value: Vec3) {
@@ -40,12 +36,6 @@ impl Film {
         } else {
             self.nonfinite += 1;
         }
-    }
-
-    /// Samples taken in a pixel (rejected non-finite ones included: they count as zero, which
-    /// keeps the estimator's normalisation).
-    pub fn samples_in(&self, pixel: usize) -> u64 {
-        self.samples[pixel]
     }
 
     pub fn total_samples(&self) -> u64 {

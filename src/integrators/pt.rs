@@ -147,10 +147,6 @@ impl PtState {
         }
     }
 
-    pub fn capacity(&self) -> usize {
-        self.paths.capacity()
-    }
-
     /// Bytes of wavefront state per path slot (double buffers included).
     pub fn bytes_per_path() -> usize {
         2 * (Rays::bytes_per_item() + Hits::bytes_per_item() + Paths::bytes_per_item())

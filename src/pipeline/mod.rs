@@ -91,23 +91,6 @@ impl Stats {
         self.systems.iter().find(|s| s.name == name)
     }
 
-    /// Adds another record of the same graph (for merging runs).
-    pub fn merge(&mut self, other: &Stats) {
-        for s in &other.systems {
-            let entry = self.entry(s.name);
-            entry.runs += s.runs;
-            entry.time += s.time;
-            entry.taken += s.taken;
-            entry.emitted += s.emitted;
-        }
-        for &(name, n) in &other.loops {
-            match self.loops.iter_mut().find(|(l, _)| *l == name) {
-                Some(l) => l.1 += n,
-                None => self.loops.push((name, n)),
-            }
-        }
-    }
-
     fn entry(&mut self, name: &'static str) -> &mut SystemStats {
         let i = match self.systems.iter().position(|s| s.name == name) {
             Some(i) => i,

@@ -2,16 +2,13 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
-use crate::accel::{offset_ray_origin, surface_point};
+use crate::accel::{spawn_ray_to, surface_point};
 use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
 use crate::pipeline::{Flow, System};
 use crate::sampling::{power_heuristic, sample_cdf, uniform_triangle};
 use crate::systems::shade::Surface;
 use glam::Vec3;
 use rayon::prelude::*;
-
-/// Shadow rays stop this fraction short of the light point, which lies on the light itself.
-const SHADOW_EPSILON: f32 = 1e-4;
 
 pub struct SampleLights;
 
@@ -73,11 +70,17 @@ impl System<PtState> for SampleLights {
                     let light_pdf = emitters.pmf[e] / emitters.area[e] * dist2 / cos_light;
                     let weight =
                         power_heuristic(light_pdf, surf.material.pdf(surf.wo_local, wi_local));
-                    let origin = surf.spawn(wi);
-                    let target = offset_ray_origin(light.p, light.p_error, light.ng, -wi);
+                    let (origin, dir, t_max) = spawn_ray_to(
+                        surf.p,
+                        surf.p_error,
+                        surf.ng,
+                        light.p,
+                        light.p_error,
+                        light.ng,
+                    );
                     c.origin[i] = origin;
-                    c.dir[i] = target - origin;
-                    c.t_max[i] = 1.0 - SHADOW_EPSILON;
+                    c.dir[i] = dir;
+                    c.t_max[i] = t_max;
                     c.contribution[i] = paths.throughput[i]
                         * f
                         * (wi_local.z.abs() * weight / light_pdf)
