@@ -1,7 +1,8 @@
 //! The `stagelight` command line: render, diff and bench.
 
 use crate::film::Image;
-use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pt};
+use crate::integrators::{Budget, Control, RenderOutcome, SceneData, bdpt, pt};
+use crate::path::MisHeuristic;
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
@@ -47,12 +48,15 @@ pub enum Command {
 pub enum IntegratorName {
     /// Path tracing with next-event estimation and MIS.
     Pt,
+    /// Bidirectional path tracing: every strategy (s, t), MIS-weighted.
+    Bdpt,
 }
 
 impl IntegratorName {
     pub fn as_str(self) -> &'static str {
         match self {
             IntegratorName::Pt => "pt",
+            IntegratorName::Bdpt => "bdpt",
         }
     }
 }
@@ -77,12 +81,71 @@ pub struct RenderArgs {
     /// Maximum number of bounces (default: unlimited; Russian roulette ends paths).
     #[arg(long)]
     pub max_depth: Option<u32>,
+    /// MIS heuristic of bidirectional strategies (bdpt).
+    #[arg(long, value_enum, default_value_t = MisName::Power)]
+    pub mis: MisName,
+    /// Also write each strategy's weighted contribution as DIR/s{S}_t{T}.exr (bdpt).
+    #[arg(long, value_name = "DIR")]
+    pub strategy_images: Option<PathBuf>,
     /// Output EXR (default render/SCENE_INTEGRATOR.exr); a PNG preview is written beside it.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum MisName {
+    /// Veach's power heuristic (exponent 2).
+    Power,
+    /// The balance heuristic.
+    Balance,
+}
+
+impl MisName {
+    pub fn heuristic(self) -> MisHeuristic {
+        match self {
+            MisName::Power => MisHeuristic::Power,
+            MisName::Balance => MisHeuristic::Balance,
+        }
+    }
+}
+
+/// What an integrator is asked for, whichever it is.
+#[derive(Clone, Copy, Debug)]
+pub struct RenderRequest {
+    pub integrator: IntegratorName,
+    pub seed: u64,
+    pub max_depth: u32,
+    pub mis: MisHeuristic,
+    pub strategy_images: bool,
+}
+
+/// Runs the requested integrator; returns its outcome and any auxiliary images it made.
+pub fn run_integrator(
+    request: RenderRequest,
+    data: Arc<SceneData>,
+    budget: Budget,
+    control: &Control,
+) -> (RenderOutcome, Vec<(String, Image)>) {
+    match request.integrator {
+        IntegratorName::Pt => {
+            let settings = pt::PtSettings {
+                seed: request.seed,
+                max_depth: request.max_depth,
+            };
+            (pt::render(data, settings, budget, control), Vec::new())
+        }
+        IntegratorName::Bdpt => {
+            let settings = bdpt::BdptSettings {
+                mis: request.mis,
+                strategy_images: request.strategy_images,
+                ..bdpt::BdptSettings::new(request.seed, request.max_depth)
+            };
+            bdpt::render_with_images(data, settings, budget, control)
+        }
+    }
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
@@ -197,12 +260,19 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
         stop: &stop,
         progress: &progress,
     };
-    let settings = pt::PtSettings {
+    if args.strategy_images.is_some() && args.integrator != IntegratorName::Bdpt {
+        bail!("--strategy-images needs --integrator bdpt");
+    }
+    let request = RenderRequest {
+        integrator: args.integrator,
         seed: args.seed,
         max_depth: args.max_depth.unwrap_or(u32::MAX),
+        mis: args.mis.heuristic(),
+        strategy_images: args.strategy_images.is_some(),
     };
     let cpu_start = cpu_seconds();
-    let outcome = pool.install(|| pt::render(data.clone(), settings, budget, &control));
+    let (outcome, layers) =
+        pool.install(|| run_integrator(request, data.clone(), budget, &control));
     let cpu = cpu_seconds() - cpu_start;
     bar.finish_and_clear();
 
@@ -210,6 +280,11 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
     image.write_exr(&output)?;
     let png = output.with_extension("png");
     image.write_png(&png)?;
+    if let Some(dir) = &args.strategy_images {
+        for (name, layer) in &layers {
+            layer.write_exr(&dir.join(format!("{name}.exr")))?;
+        }
+    }
     let mut report = render_report(&args.scene, args.integrator, threads, &outcome, cpu, &data);
     report += &format!("wrote {} and {}\n", output.display(), png.display());
     if outcome.interrupted {
@@ -398,20 +473,24 @@ fn bench_command(
         stop: &stop,
         progress: &|_, _| {},
     };
-    let settings = pt::PtSettings {
-        seed: 0,
-        max_depth: u32::MAX,
-    };
     let run_once = |seed: u64| {
         let cpu0 = cpu_seconds();
         let t = Instant::now();
+        let request = RenderRequest {
+            integrator,
+            seed,
+            max_depth: u32::MAX,
+            mis: MisHeuristic::Power,
+            strategy_images: false,
+        };
         let o = pool.install(|| {
-            pt::render(
+            run_integrator(
+                request,
                 data.clone(),
-                pt::PtSettings { seed, ..settings },
                 Budget::SamplesPerPixel(spp),
                 &control,
             )
+            .0
         });
         let wall = t.elapsed().as_secs_f64();
         (o, wall, cpu_seconds() - cpu0)

@@ -14,6 +14,7 @@ pub mod film;
 pub mod integrators;
 pub mod math;
 pub mod metrics;
+pub mod path;
 pub mod pipeline;
 pub mod sampling;
 pub mod scene;

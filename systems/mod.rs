@@ -4,6 +4,7 @@
 /// Making new work: camera rays (and later light paths and photons).
 pub mod generate {
     pub mod camera_rays;
+    pub mod subpaths;
 }
 
 /// Ray casting against the scene.
@@ -14,10 +15,12 @@ pub mod trace {
 
 /// What happens at a surface: emission found, queues by material, scattering, roulette.
 pub mod shade {
+    pub mod compact_subpaths;
     pub mod conductor;
     pub mod dielectric;
     pub mod diffuse;
     pub mod emitted_light;
+    pub mod extend_subpaths;
     pub mod interpolate_surfaces;
     pub mod russian_roulette;
     pub mod sort_by_material;
@@ -29,9 +32,11 @@ pub mod shade {
 pub mod connect {
     pub mod apply_shadow;
     pub mod sample_lights;
+    pub mod strategies;
 }
 
 /// Collecting finished work into the film.
 pub mod gather {
+    pub mod connections;
     pub mod film;
 }

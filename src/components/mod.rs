@@ -9,11 +9,16 @@ mod paths;
 mod rays;
 mod shadow;
 mod surfaces;
+mod vertices;
 
 pub use paths::{PathFlags, Paths, PathsChunk, PathsView};
 pub use rays::{Hits, HitsChunk, HitsView, MISS, Rays, RaysChunk, RaysView};
 pub use shadow::{ShadowRays, ShadowRaysChunk, ShadowRaysView};
 pub use surfaces::{Surfaces, SurfacesChunk, SurfacesView};
+pub use vertices::{
+    CAMERA_VERTEX, Connections, ConnectionsChunk, ConnectionsView, PathVertices, PathVerticesChunk,
+    PathVerticesView, Walkers, WalkersChunk, WalkersView,
+};
 
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
 pub const CHUNK: usize = 1024;
@@ -29,6 +34,27 @@ pub fn gather_column<T: Copy + Send + Sync>(dst: &mut [T], src: &[T], order: &[u
                 *d = src[i as usize];
             }
         });
+}
+
+/// Splits `slice[..end]` into consecutive pieces: piece k is `starts[k]..starts[k + 1]` (the
+/// last one ends at `end`). Panics if `starts` decreases or passes `end`.
+pub fn split_ranges<'a, T>(slice: &'a mut [T], starts: &[usize], end: usize) -> Vec<&'a mut [T]> {
+    let mut rest = &mut slice[..end];
+    let mut at = 0;
+    let mut out = Vec::with_capacity(starts.len());
+    for (k, &start) in starts.iter().enumerate() {
+        let stop = starts.get(k + 1).copied().unwrap_or(end);
+        assert!(
+            at <= start && start <= stop,
+            "split_ranges: ranges out of order"
+        );
+        let (_, tail) = std::mem::take(&mut rest).split_at_mut(start - at);
+        let (piece, tail) = tail.split_at_mut(stop - start);
+        rest = tail;
+        at = stop;
+        out.push(piece);
+    }
+    out
 }
 
 /// Declares a structure-of-arrays store and its chunk view.
@@ -96,6 +122,21 @@ macro_rules! soa {
                     });
                 }
                 views
+            }
+
+            /// Mutable views of consecutive ranges: view k covers `starts[k]..starts[k + 1]`
+            /// (the last one ends at `end`). `starts` must be non-decreasing and end at most at
+            /// `end`. For work split by something other than fixed chunks (each chunk of a
+            /// queue owning the slots of the items it holds).
+            pub fn split_mut(&mut self, starts: &[usize], end: usize) -> Vec<$chunk<'_>> {
+                $(let mut $field = $crate::components::split_ranges(&mut self.$field, starts, end).into_iter();)+
+                starts
+                    .iter()
+                    .map(|&start| $chunk {
+                        start,
+                        $($field: $field.next().expect("one slice per range"),)+
+                    })
+                    .collect()
             }
 
             /// A read-only view of the slots in `range`.

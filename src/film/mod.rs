@@ -12,6 +12,10 @@ pub struct Film {
     pub height: usize,
     sum: Vec<DVec3>,
     samples: Vec<u64>,
+    /// Splatted contributions (light tracing): they land in any pixel, not the one sampled,
+    /// and are divided by the number of passes (light paths per pixel), not by the pixel's
+    /// own sample count. Empty until the first splat.
+    splat: Vec<DVec3>,
     /// Samples rejected because a channel was NaN or infinite.
     pub nonfinite: u64,
 }
@@ -23,6 +27,7 @@ impl Film {
             height,
             sum: vec![DVec3::ZERO; width * height],
             samples: vec![0; width * height],
+            splat: Vec::new(),
             nonfinite: 0,
         }
     }
@@ -38,22 +43,40 @@ impl Film {
         }
     }
 
+    /// Adds a splat to a pixel; a non-finite one is counted instead.
+    #[inline]
+    pub fn add_splat(&mut self, pixel: usize, value: Vec3) {
+        if !value.is_finite() {
+            self.nonfinite += 1;
+            return;
+        }
+        if self.splat.is_empty() {
+            self.splat = vec![DVec3::ZERO; self.width * self.height];
+        }
+        self.splat[pixel] += value.as_dvec3();
+    }
+
     pub fn total_samples(&self) -> u64 {
         self.samples.iter().sum()
     }
 
-    /// The per-pixel mean as an image.
+    /// The per-pixel mean as an image, plus the splats divided by the passes (samples per
+    /// pixel on average).
     pub fn image(&self) -> Image {
+        let passes = self.total_samples() as f64 / (self.width * self.height).max(1) as f64;
         let pixels = self
             .sum
             .iter()
             .zip(&self.samples)
-            .map(|(s, &n)| {
-                if n == 0 {
-                    Vec3::ZERO
-                } else {
-                    (*s / n as f64).as_vec3()
+            .enumerate()
+            .map(|(i, (s, &n))| {
+                let mut v = if n == 0 { DVec3::ZERO } else { *s / n as f64 };
+                if let Some(&splat) = self.splat.get(i)
+                    && passes > 0.0
+                {
+                    v += splat / passes;
                 }
+                v.as_vec3()
             })
             .collect();
         Image {

@@ -1,5 +1,6 @@
 //! Integrators: one file each, with its graph of systems and its parameters.
 
+pub mod bdpt;
 pub mod pt;
 
 use crate::accel::Accel;

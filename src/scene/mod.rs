@@ -1,6 +1,7 @@
 //! Scenes: the RON description, OBJ loading, procedural shapes, the hecs world of scene
 //! entities, and "prepare", which flattens that world once into render data.
 
+mod camera;
 pub mod format;
 pub mod parse;
 pub mod prepare;

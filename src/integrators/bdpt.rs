@@ -1,0 +1,336 @@
+//! Bidirectional path tracing (`--integrator bdpt`, Veach 1997): every sample traces a camera
+//! subpath and a light subpath, then joins them by every strategy (s, t), weighting each by
+//! multiple importance sampling (power heuristic by default, computed by the ratio walk of
+//! `crate::path`).
+//!
+//! The graph:
+//!
+//! ```text
+//! start_subpaths                      camera vertex + ray, light vertex + ray, per sample
+//! loop subpath_bounces (while subpaths are live):
+//!     trace_closest -> extend_subpaths -> compact_subpaths
+//! connect_strategies                  every (s, t): contribution, MIS weight, shadow ray
+//! trace_shadow                        all connections of the wave as one batch
+//! accumulate_connections              per-sample sums to the film, t = 1 splats in order
+//! ```
+//!
+//! Subpath vertices are stored depth by depth (`PathVertices`, one store per depth, slot =
+//! subpath), so a bounce writes one store and a store is allocated only the first time any
+//! wave reaches its depth. Russian roulette (after `ROULETTE_DEPTH` vertices) ends subpaths;
+//! it is left out of the MIS densities, which keeps every estimator unbiased (its weights still
+//! sum to one) at a small cost in weighting quality.
+
+use crate::components::{Connections, Hits, PathVertices, Rays, ShadowRays, Walkers};
+use crate::film::{Film, Image};
+use crate::integrators::pt::{ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL, Wave};
+use crate::integrators::{Budget, Control, RenderOutcome, SceneData, WavePlan};
+use crate::path::MisHeuristic;
+use crate::pipeline::{Graph, Node, Stats};
+use crate::sampling::SampleKey;
+use crate::systems::{connect, gather, generate, shade, trace};
+use glam::{DVec3, Vec3};
+use std::collections::BTreeMap;
+use std::ops::Range;
+use std::sync::Arc;
+
+/// Samples per wave. Each holds two subpaths and their connections, about ten times a path
+/// tracer's state, so the wave is smaller than PT's.
+pub const WAVEFRONT: usize = 1 << 15;
+
+/// Samples per chunk of the connection work (much heavier per item than a bounce).
+pub const CONNECT_CHUNK: usize = 64;
+
+/// Random-number dimensions of a camera subpath: the pixel jitter, then per vertex z_d
+/// (d >= 1) `CAMERA_DIMS_PER_VERTEX` numbers: BSDF sample (2), roulette (1), and the light
+/// sample of strategy s = 1 joined at z_d (pick 1, point 2).
+pub const CAMERA_DIM_PIXEL: u32 = 0;
+pub const CAMERA_DIMS_PER_VERTEX: u32 = 6;
+pub const DIM_BSDF: u32 = 0;
+pub const DIM_ROULETTE: u32 = 2;
+pub const DIM_LIGHT_PICK: u32 = 3;
+pub const DIM_LIGHT_POINT: u32 = 4;
+
+/// Light subpaths draw from their own stream: emitter pick (1), point (2), direction (2),
+/// then per vertex y_d (d >= 1) a BSDF sample (2) and roulette (1).
+pub const LIGHT_DIM_PICK: u32 = 0;
+pub const LIGHT_DIM_POINT: u32 = 1;
+pub const LIGHT_DIM_DIRECTION: u32 = 3;
+pub const LIGHT_DIMS_PER_VERTEX: u32 = 3;
+
+/// First dimension of camera vertex `d` (d >= 1).
+#[inline]
+pub fn camera_vertex_dim(d: usize) -> u32 {
+    2 + (d as u32 - 1) * CAMERA_DIMS_PER_VERTEX
+}
+
+/// First dimension of light vertex `d` (d >= 1).
+#[inline]
+pub fn light_vertex_dim(d: usize) -> u32 {
+    5 + (d as u32 - 1) * LIGHT_DIMS_PER_VERTEX
+}
+
+/// The stream of a light subpath: the sample's pixel with the top bit set, so that it never
+/// meets a camera stream.
+#[inline]
+pub fn light_key(seed: u64, pixel: u64, sample_index: u64) -> SampleKey {
+    SampleKey::new(seed, pixel | 1 << 63, sample_index)
+}
+
+/// Which strategies count, and how.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum StrategyFilter {
+    /// Every strategy, MIS-weighted.
+    #[default]
+    All,
+    /// Only the strategies matching `s` and `t` (`None` matches any), unweighted: for
+    /// studying (and testing) each estimator alone.
+    Only { s: Option<u16>, t: Option<u16> },
+}
+
+impl StrategyFilter {
+    #[inline]
+    pub fn keeps(&self, s: usize, t: usize) -> bool {
+        match *self {
+            StrategyFilter::All => true,
+            StrategyFilter::Only { s: fs, t: ft } => {
+                fs.is_none_or(|v| v as usize == s) && ft.is_none_or(|v| v as usize == t)
+            }
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BdptSettings {
+    pub seed: u64,
+    /// Maximum number of scattering events (path vertices between camera and light);
+    /// `u32::MAX` for unlimited.
+    pub max_depth: u32,
+    pub mis: MisHeuristic,
+    pub strategies: StrategyFilter,
+    /// Keep each strategy's weighted contribution as its own image.
+    pub strategy_images: bool,
+}
+
+impl BdptSettings {
+    pub fn new(seed: u64, max_depth: u32) -> BdptSettings {
+        BdptSettings {
+            seed,
+            max_depth,
+            mis: MisHeuristic::Power,
+            strategies: StrategyFilter::All,
+            strategy_images: false,
+        }
+    }
+
+    /// Highest vertex index a camera subpath (false) or light subpath (true) may reach: a
+    /// path of depth D has D + 2 vertices, at least one on each side.
+    #[inline]
+    pub fn last_vertex(&self, light: bool) -> usize {
+        let d = self.max_depth as usize;
+        if light { d } else { d.saturating_add(1) }
+    }
+
+    /// Whether strategy (s, t) may contribute: a camera vertex, at least two vertices in all,
+    /// a path within the depth cap, and kept by the filter.
+    #[inline]
+    pub fn uses(&self, s: usize, t: usize) -> bool {
+        t >= 1 && s + t >= 2 && s + t - 2 <= self.max_depth as usize && self.strategies.keeps(s, t)
+    }
+}
+
+/// The wavefront state of bidirectional path tracing.
+pub struct BdptState {
+    pub data: Arc<SceneData>,
+    pub settings: BdptSettings,
+    pub pixels: u64,
+    pub wave: Wave,
+    /// Samples a wave may hold; light subpath k of the wave is subpath `capacity + k`.
+    pub capacity: usize,
+    /// Rays of the live walkers, slots `0..active`, in increasing subpath order.
+    pub rays: Rays,
+    pub hits: Hits,
+    pub walkers: Walkers,
+    pub active: usize,
+    /// Index of the vertex the rays in flight will make.
+    pub depth: usize,
+    /// `vertices[d]` holds vertex d of every subpath (2 x capacity slots).
+    pub vertices: Vec<PathVertices>,
+    /// Vertices of each subpath.
+    pub subpath_len: Vec<u32>,
+    /// Connection slots of sample k: `connection_start[k]..connection_start[k + 1]`.
+    pub connection_start: Vec<usize>,
+    pub connections_len: usize,
+    pub shadow: ShadowRays,
+    pub connections: Connections,
+    /// What each sample's own pixel receives (strategies with t >= 2).
+    pub sample_radiance: Vec<Vec3>,
+    pub film: Film,
+    /// Weighted contribution of each strategy (s, t), summed per pixel.
+    pub strategy_sums: BTreeMap<(u16, u16), Vec<DVec3>>,
+    pub scratch: Scratch,
+}
+
+#[derive(Default)]
+pub struct Scratch {
+    pub rays: Rays,
+    pub walkers: Walkers,
+    pub order: Vec<u32>,
+}
+
+impl BdptState {
+    pub fn new(data: Arc<SceneData>, settings: BdptSettings, capacity: usize) -> BdptState {
+        let cam = data.scene.camera;
+        let pixels = cam.width as u64 * cam.height as u64;
+        let subpaths = 2 * capacity;
+        BdptState {
+            data,
+            settings,
+            pixels,
+            wave: Wave::default(),
+            capacity,
+            rays: Rays::new(subpaths),
+            hits: Hits::new(subpaths),
+            walkers: Walkers::new(subpaths),
+            active: 0,
+            depth: 0,
+            vertices: vec![PathVertices::new(subpaths)],
+            subpath_len: vec![0; subpaths],
+            connection_start: vec![0; capacity + 1],
+            connections_len: 0,
+            shadow: ShadowRays::default(),
+            connections: Connections::default(),
+            sample_radiance: vec![Vec3::ZERO; capacity],
+            film: Film::new(cam.width as usize, cam.height as usize),
+            strategy_sums: BTreeMap::new(),
+            scratch: Scratch {
+                rays: Rays::new(subpaths),
+                walkers: Walkers::new(subpaths),
+                order: Vec::with_capacity(subpaths),
+            },
+        }
+    }
+
+    /// Makes sure the store for vertex `depth` exists (allocated once, kept for later waves).
+    pub fn ensure_depth(&mut self, depth: usize) {
+        while self.vertices.len() <= depth {
+            self.vertices.push(PathVertices::new(2 * self.capacity));
+        }
+    }
+
+    /// Bytes of state per sample in flight, excluding the vertex stores and connections,
+    /// whose size follows the subpaths' lengths (see `bytes_per_vertex`).
+    pub fn bytes_per_sample() -> usize {
+        2 * 2 * (Rays::bytes_per_item() + Walkers::bytes_per_item())
+            + 2 * Hits::bytes_per_item()
+            + 2 * std::mem::size_of::<u32>()
+            + std::mem::size_of::<usize>()
+            + std::mem::size_of::<Vec3>()
+    }
+
+    pub fn bytes_per_vertex() -> usize {
+        PathVertices::bytes_per_item()
+    }
+}
+
+impl crate::systems::trace::closest::ClosestHitQueue for BdptState {
+    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
+        (&self.data.accel, &self.rays, &mut self.hits, self.active)
+    }
+}
+
+impl crate::systems::trace::shadow::ShadowQueue for BdptState {
+    fn shadow_queue(&mut self) -> (&crate::accel::Accel, &mut ShadowRays, Range<usize>) {
+        (&self.data.accel, &mut self.shadow, 0..self.connections_len)
+    }
+}
+
+/// The BDPT graph (the same for every scene: material code runs only for materials present).
+pub fn graph() -> Graph<BdptState> {
+    Graph::new(
+        "bdpt",
+        vec![
+            Node::system(generate::subpaths::StartSubpaths),
+            Node::Loop {
+                name: "subpath_bounces",
+                queue_len: |s: &BdptState| s.active,
+                body: vec![
+                    Node::system(trace::closest::TraceClosest),
+                    Node::system(shade::extend_subpaths::ExtendSubpaths),
+                    Node::system(shade::compact_subpaths::CompactSubpaths),
+                ],
+            },
+            Node::system(connect::strategies::ConnectStrategies),
+            Node::system(trace::shadow::TraceShadow),
+            Node::system(gather::connections::AccumulateConnections),
+        ],
+    )
+}
+
+/// Roulette survival probability of a subpath with throughput `beta`, started at `scale`.
+#[inline]
+pub fn survival(beta: Vec3, scale: f32) -> f32 {
+    (beta.max_element() / scale).min(ROULETTE_MAX_SURVIVAL)
+}
+
+/// Whether vertex `d` is deep enough for Russian roulette.
+#[inline]
+pub fn roulette_applies(d: usize) -> bool {
+    d >= ROULETTE_DEPTH as usize
+}
+
+/// Renders with BDPT until the budget is spent or a stop is asked for.
+pub fn render(
+    data: Arc<SceneData>,
+    settings: BdptSettings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    render_with_images(data, settings, budget, control).0
+}
+
+/// As `render`, also returning each strategy's image (named `s{s}_t{t}`) when
+/// `settings.strategy_images` is set.
+pub fn render_with_images(
+    data: Arc<SceneData>,
+    settings: BdptSettings,
+    budget: Budget,
+    control: &Control,
+) -> (RenderOutcome, Vec<(String, Image)>) {
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let graph = graph();
+    let mut plan = WavePlan::new(pixels, budget, WAVEFRONT);
+    let mut state = BdptState::new(data, settings, plan.capacity());
+    let mut stats = Stats::default();
+    while let Some((first, len)) = plan.next_wave(control) {
+        state.wave = Wave { first, len };
+        graph.run(&mut state, &mut stats);
+        (control.progress)(plan.passes_done(), plan.total_passes());
+    }
+    let interrupted = control.stopped() && !plan.budget_spent();
+    let passes = plan.passes_done().max(1) as f64;
+    let images = state
+        .strategy_sums
+        .iter()
+        .map(|(&(s, t), sums)| {
+            let image = Image {
+                width: cam.width as usize,
+                height: cam.height as usize,
+                pixels: sums.iter().map(|v| (*v / passes).as_vec3()).collect(),
+            };
+            (format!("s{s}_t{t}"), image)
+        })
+        .collect();
+    let outcome = RenderOutcome {
+        samples: plan.next,
+        passes: plan.passes_done(),
+        wall: plan.elapsed(),
+        film: state.film,
+        stats,
+        interrupted,
+        systems: graph.system_names(),
+        bytes_per_path: BdptState::bytes_per_sample(),
+        wavefront: plan.capacity(),
+    };
+    (outcome, images)
+}

@@ -1,0 +1,432 @@
+//! Path-space building blocks of bidirectional methods (BDPT now; MLT over BDPT later): a
+//! subpath vertex as a connection sees it, the densities of sampling one vertex from another
+//! in area measure, the unweighted contribution of each connection strategy (s, t), and its
+//! multiple-importance weight by Veach's ratio walk.
+//!
+//! Conventions follow Veach's thesis (ch. 10) and pbrt: a camera subpath z_0 .. z_{t-1}
+//! (z_0 on the camera), a light subpath y_0 .. y_{s-1} (y_0 on an emitter), and strategy
+//! (s, t) joins y_{s-1} to z_{t-1}. Each vertex stores `pdf_fwd`, the area density with which
+//! its own subpath sampled it, and `pdf_rev`, the area density with which the other direction
+//! would have; a strategy's weight needs only ratios of the two along the path, so the weight
+//! of every strategy is found in one walk instead of by evaluating each from scratch.
+
+use crate::bsdf::{Material, TransportMode};
+use crate::components::{CAMERA_VERTEX, PathVerticesView};
+use crate::math::Frame;
+use crate::scene::{NO_EMITTER, PreparedScene};
+use glam::Vec3;
+use std::f32::consts::FRAC_1_PI;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VertexKind {
+    Camera,
+    /// The first vertex of a light subpath (or a point sampled on an emitter): it emits.
+    Light,
+    Surface,
+}
+
+/// One vertex of a subpath, gathered from the `PathVertices` columns for a connection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vertex {
+    pub kind: VertexKind,
+    pub p: Vec3,
+    pub p_error: Vec3,
+    pub ng: Vec3,
+    pub ns: Vec3,
+    pub triangle: u32,
+    pub beta: Vec3,
+    pub pdf_fwd: f32,
+    pub pdf_rev: f32,
+    pub delta: bool,
+}
+
+impl Vertex {
+    /// Vertex `i` of a view of the store of depth `depth` (a light subpath's vertex 0 is its
+    /// light vertex; a camera subpath's is marked `CAMERA_VERTEX`).
+    #[inline]
+    pub fn from_store(store: &PathVerticesView, i: usize, depth: usize) -> Vertex {
+        let triangle = store.triangle[i];
+        let kind = match (depth, triangle) {
+            (_, CAMERA_VERTEX) => VertexKind::Camera,
+            (0, _) => VertexKind::Light,
+            _ => VertexKind::Surface,
+        };
+        Vertex {
+            kind,
+            p: store.p[i],
+            p_error: store.p_error[i],
+            ng: store.ng[i],
+            ns: store.ns[i],
+            triangle,
+            beta: store.beta[i],
+            pdf_fwd: store.pdf_fwd[i],
+            pdf_rev: store.pdf_rev[i],
+            delta: store.delta[i],
+        }
+    }
+
+    pub fn is_on_surface(&self) -> bool {
+        self.kind != VertexKind::Camera
+    }
+}
+
+/// Which MIS heuristic weighs the strategies.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum MisHeuristic {
+    /// Veach's power heuristic with exponent 2.
+    #[default]
+    Power,
+    Balance,
+}
+
+/// The scene as path-space functions see it.
+#[derive(Clone, Copy)]
+pub struct PathContext<'a> {
+    pub scene: &'a PreparedScene,
+}
+
+/// `0 -> 1`: a zero density (a delta lobe's neighbour) stands for "no choice here" in the
+/// ratio walk, and the delta checks drop the strategies that would need it.
+#[inline]
+fn remap0(x: f32) -> f32 {
+    if x != 0.0 { x } else { 1.0 }
+}
+
+/// The area density at `to` of a direction density `pdf_dir` at `from`.
+#[inline]
+pub fn to_area(pdf_dir: f32, from: &Vertex, to: &Vertex) -> f32 {
+    let d = to.p - from.p;
+    let dist2 = d.length_squared();
+    if dist2 == 0.0 {
+        return 0.0;
+    }
+    let mut pdf = pdf_dir / dist2;
+    if to.is_on_surface() {
+        pdf *= to.ng.dot(d).abs() / dist2.sqrt();
+    }
+    pdf
+}
+
+/// The shading frame and geometric normal of a surface vertex seen from `wo`: Lambertian
+/// surfaces reflect on both sides, so their normals turn to `wo`'s side.
+#[inline]
+pub fn local_frame(material: &Material, v: &Vertex, wo: Vec3) -> (Frame, Vec3) {
+    let (mut ng, mut ns) = (v.ng, v.ns);
+    if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
+        ng = -ng;
+        ns = -ns;
+    }
+    (Frame::from_normal(ns), ng)
+}
+
+impl PathContext<'_> {
+    #[inline]
+    pub fn material(&self, v: &Vertex) -> Material {
+        let tris = &self.scene.triangles;
+        self.scene.materials[tris.material[v.triangle as usize] as usize]
+    }
+
+    /// Whether a strategy may join a subpath at this vertex: not at a delta surface.
+    #[inline]
+    pub fn is_connectible(&self, v: &Vertex) -> bool {
+        match v.kind {
+            VertexKind::Camera | VertexKind::Light => true,
+            VertexKind::Surface => !matches!(self.material(v), Material::Dielectric { .. }),
+        }
+    }
+
+    /// The emitter index of the triangle under `v`, if it emits.
+    #[inline]
+    pub fn emitter(&self, v: &Vertex) -> Option<usize> {
+        if v.kind == VertexKind::Camera {
+            return None;
+        }
+        let e = self.scene.triangles.emitter[v.triangle as usize];
+        (e != NO_EMITTER).then_some(e as usize)
+    }
+
+    /// Radiance `v` emits towards `w` (unit): one-sided, on the geometric normal's side.
+    #[inline]
+    pub fn emitted(&self, v: &Vertex, w: Vec3) -> Vec3 {
+        match self.emitter(v) {
+            Some(e) if w.dot(v.ng) > 0.0 => self.scene.emitters.radiance[e],
+            _ => Vec3::ZERO,
+        }
+    }
+
+    /// Area density of choosing `v` as a light subpath's first vertex: the emitter by power,
+    /// the point uniformly on it.
+    #[inline]
+    pub fn pdf_light_origin(&self, v: &Vertex) -> f32 {
+        match self.emitter(v) {
+            Some(e) => self.scene.emitters.pmf[e] / self.scene.emitters.area[e],
+            None => 0.0,
+        }
+    }
+
+    /// Area density at `to` of the direction a light subpath leaves `light` by (cosine
+    /// distributed about the emitting side).
+    #[inline]
+    pub fn pdf_light_dir(&self, light: &Vertex, to: &Vertex) -> f32 {
+        let w = (to.p - light.p).normalize_or_zero();
+        let cos = w.dot(light.ng);
+        if cos <= 0.0 {
+            return 0.0;
+        }
+        to_area(cos * FRAC_1_PI, light, to)
+    }
+
+    /// f(wo, wi) at a surface vertex (no cosine), with `wo` towards the vertex the subpath
+    /// came from and `wi` towards the one it goes to. Reflection that would cross the
+    /// geometric surface is refused (shading normals must not leak light). A subpath from a
+    /// light carries importance, and there shading normals break the symmetry of the BSDF:
+    /// the factor |wo.ns| |wi.ng| / (|wo.ng| |wi.ns|) restores it (Veach, sec. 5.3).
+    /// At a light vertex (y_0), 1 on the emitting side (its radiance is in `beta`).
+    pub fn f(&self, v: &Vertex, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
+        match v.kind {
+            VertexKind::Camera => Vec3::ZERO,
+            VertexKind::Light => {
+                if wi.dot(v.ng) > 0.0 {
+                    Vec3::ONE
+                } else {
+                    Vec3::ZERO
+                }
+            }
+            VertexKind::Surface => {
+                let material = self.material(v);
+                let (frame, ng) = local_frame(&material, v, wo);
+                if wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                    // Only reflection is connectible (the dielectric, which refracts, is not).
+                    return Vec3::ZERO;
+                }
+                let f = material.eval(frame.to_local(wo), frame.to_local(wi));
+                match mode {
+                    TransportMode::Radiance => f,
+                    TransportMode::Importance => f * shading_correction(v, wo, wi),
+                }
+            }
+        }
+    }
+
+    /// Solid-angle density with which the subpath at `v`, arrived from direction `wo`,
+    /// samples `wi`. At a camera vertex: the camera's ray density; at a light vertex: the
+    /// emission's cosine density.
+    pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
+        match v.kind {
+            VertexKind::Camera => self.scene.camera.pdf_dir(wi),
+            VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
+            VertexKind::Surface => {
+                let material = self.material(v);
+                let (frame, ng) = local_frame(&material, v, wo);
+                if wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                    return 0.0;
+                }
+                material.pdf(frame.to_local(wo), frame.to_local(wi))
+            }
+        }
+    }
+
+    /// Area density at `next` of `v` sampling it, `v` having been reached from `prev` (none
+    /// at a subpath's first vertex).
+    pub fn pdf_area(&self, v: &Vertex, prev: Option<&Vertex>, next: &Vertex) -> f32 {
+        let wi = (next.p - v.p).normalize_or_zero();
+        let wo = prev.map_or(Vec3::ZERO, |p| (p.p - v.p).normalize_or_zero());
+        to_area(self.pdf_dir(v, wo, wi), v, next)
+    }
+}
+
+/// The shading-normal factor of an importance-carrying scattering at `v` (1 where the shading
+/// normal is the geometric one).
+#[inline]
+pub fn shading_correction(v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
+    if v.ns == v.ng {
+        return 1.0;
+    }
+    let den = wo.dot(v.ng).abs() * wi.dot(v.ns).abs();
+    if den == 0.0 {
+        return 0.0;
+    }
+    wo.dot(v.ns).abs() * wi.dot(v.ng).abs() / den
+}
+
+/// A strategy's connection: its unweighted contribution and the segment whose visibility it
+/// needs (none for s = 0, where the camera subpath itself reached the light).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Connection {
+    pub contribution: Vec3,
+    /// The two vertices joined, light side first, when a shadow ray must test them.
+    pub segment: Option<(Vertex, Vertex)>,
+    /// For t = 1, the pixel the light vertex projects to.
+    pub pixel: Option<usize>,
+}
+
+impl PathContext<'_> {
+    /// The unweighted contribution of strategy (s, t), given the camera subpath `camera`
+    /// (at least t vertices) and the light subpath `light` (at least s vertices; for s = 1
+    /// pass the freshly sampled light vertex as `light[0]`). `None` when the strategy cannot
+    /// contribute (a delta vertex at the joint, a back-facing emitter, outside the image...).
+    pub fn connect(
+        &self,
+        camera: &[Vertex],
+        light: &[Vertex],
+        s: usize,
+        t: usize,
+    ) -> Option<Connection> {
+        if s == 0 {
+            // The camera subpath found the light by itself.
+            let z = &camera[t - 1];
+            let wo = (camera[t - 2].p - z.p).normalize_or_zero();
+            let le = self.emitted(z, wo);
+            let contribution = z.beta * le;
+            return (contribution != Vec3::ZERO).then_some(Connection {
+                contribution,
+                segment: None,
+                pixel: None,
+            });
+        }
+        let y = &light[s - 1];
+        if !self.is_connectible(y) {
+            return None;
+        }
+        let y_wo = if s >= 2 {
+            (light[s - 2].p - y.p).normalize_or_zero()
+        } else {
+            Vec3::ZERO
+        };
+        if t == 1 {
+            // Light tracing: the light vertex seen by the camera.
+            let cam = &self.scene.camera;
+            let to_y = y.p - cam.position;
+            let dist2 = to_y.length_squared();
+            let dir = to_y / dist2.sqrt();
+            let pixel = cam.pixel_of(dir)?;
+            let wi = -dir;
+            let f = self.f(y, y_wo, wi, TransportMode::Importance);
+            let cos_y = if y.kind == VertexKind::Light {
+                wi.dot(y.ng).abs()
+            } else {
+                wi.dot(y.ns).abs()
+            };
+            let contribution = y.beta * f * (cos_y * cam.importance(dir) / dist2);
+            return (contribution != Vec3::ZERO).then_some(Connection {
+                contribution,
+                segment: Some((*y, camera[0])),
+                pixel: Some(pixel),
+            });
+        }
+        let z = &camera[t - 1];
+        if !self.is_connectible(z) {
+            return None;
+        }
+        let d = y.p - z.p;
+        let dist2 = d.length_squared();
+        if dist2 == 0.0 {
+            return None;
+        }
+        let w = d / dist2.sqrt(); // from z towards y
+        let z_wo = (camera[t - 2].p - z.p).normalize_or_zero();
+        let fz = self.f(z, z_wo, w, TransportMode::Radiance);
+        if fz == Vec3::ZERO {
+            return None;
+        }
+        let fy = self.f(y, y_wo, -w, TransportMode::Importance);
+        let cos_y = if y.kind == VertexKind::Light {
+            w.dot(y.ng).abs()
+        } else {
+            w.dot(y.ns).abs()
+        };
+        let g = w.dot(z.ns).abs() * cos_y / dist2;
+        let contribution = z.beta * fz * y.beta * fy * g;
+        (contribution != Vec3::ZERO).then_some(Connection {
+            contribution,
+            segment: Some((*y, *z)),
+            pixel: None,
+        })
+    }
+
+    /// The MIS weight of strategy (s, t) for the path its connection makes, by Veach's ratio
+    /// walk over the stored forward and reverse densities; the densities the connection itself
+    /// changes (at the two joined vertices and their predecessors) are recomputed here.
+    pub fn mis_weight(
+        &self,
+        camera: &[Vertex],
+        light: &[Vertex],
+        s: usize,
+        t: usize,
+        heuristic: MisHeuristic,
+    ) -> f32 {
+        // Reverse densities at the joint, as the connection makes them.
+        let z_last = camera.get(t.wrapping_sub(1)).filter(|_| t >= 1);
+        let y_last = light.get(s.wrapping_sub(1)).filter(|_| s >= 1);
+        let mut z_rev = [0.0f32; 2]; // for z_{t-1}, z_{t-2}
+        let mut y_rev = [0.0f32; 2]; // for y_{s-1}, y_{s-2}
+        if let Some(z) = z_last {
+            z_rev[0] = if s > 0 {
+                let y = y_last.expect("s > 0");
+                self.pdf_area(y, if s >= 2 { Some(&light[s - 2]) } else { None }, z)
+            } else {
+                self.pdf_light_origin(z)
+            };
+            if t >= 2 {
+                z_rev[1] = if s > 0 {
+                    self.pdf_area(z, y_last, &camera[t - 2])
+                } else {
+                    self.pdf_light_dir(z, &camera[t - 2])
+                };
+            }
+        }
+        if let Some(y) = y_last {
+            let z = z_last.expect("t >= 1");
+            y_rev[0] = self.pdf_area(z, if t >= 2 { Some(&camera[t - 2]) } else { None }, y);
+            if s >= 2 {
+                y_rev[1] = self.pdf_area(y, z_last, &light[s - 2]);
+            }
+        }
+        let h = |r: f32| match heuristic {
+            MisHeuristic::Power => r * r,
+            MisHeuristic::Balance => r,
+        };
+        // The joined vertices are connectible, so never delta for this walk.
+        let camera_rev = |i: usize| {
+            if i + 1 == t {
+                z_rev[0]
+            } else if i + 2 == t {
+                z_rev[1]
+            } else {
+                camera[i].pdf_rev
+            }
+        };
+        let camera_delta = |i: usize| i + 1 != t && camera[i].delta;
+        let light_rev = |i: usize| {
+            if i + 1 == s {
+                y_rev[0]
+            } else if i + 2 == s {
+                y_rev[1]
+            } else {
+                light[i].pdf_rev
+            }
+        };
+        let light_delta = |i: usize| i + 1 != s && light[i].delta;
+
+        let mut sum = 0.0f32;
+        let mut ratio = 1.0f32;
+        // Strategies with fewer camera vertices: (s + 1, t - 1), (s + 2, t - 2), ..., down
+        // to t = 1 (a pinhole camera is never hit, so t = 0 does not exist).
+        for i in (1..t).rev() {
+            ratio *= remap0(camera_rev(i)) / remap0(camera[i].pdf_fwd);
+            if !camera_delta(i) && !camera_delta(i - 1) {
+                sum += h(ratio);
+            }
+        }
+        // Strategies with fewer light vertices, down to s = 0 (area lights are not delta).
+        ratio = 1.0;
+        for i in (0..s).rev() {
+            ratio *= remap0(light_rev(i)) / remap0(light[i].pdf_fwd);
+            let delta_before = i > 0 && light_delta(i - 1);
+            if !light_delta(i) && !delta_before {
+                sum += h(ratio);
+            }
+        }
+        1.0 / (1.0 + sum)
+    }
+}

@@ -1,0 +1,133 @@
+//! The pinhole camera's geometry and importance: the mapping between raster positions and
+//! directions, and the directional density of its rays, which bidirectional methods need to
+//! connect light subpaths to the camera and to weigh those connections.
+//!
+//! The image plane sits at distance 1 along `forward` and spans `2 tan(fov/2) aspect` by
+//! `2 tan(fov/2)`; raster x runs right and raster y down, in pixels.
+
+use super::Camera;
+use glam::{Vec2, Vec3};
+
+impl Camera {
+    /// `tan` of half the vertical field of view.
+    #[inline]
+    pub fn tan_half_fov(&self) -> f32 {
+        (self.fov_y_degrees.to_radians() * 0.5).tan()
+    }
+
+    #[inline]
+    pub fn aspect(&self) -> f32 {
+        self.width as f32 / self.height as f32
+    }
+
+    /// The unit direction through raster position `raster` (pixels, y down).
+    #[inline]
+    pub fn direction(&self, raster: Vec2) -> Vec3 {
+        let tan_half = self.tan_half_fov();
+        let (w, h) = (self.width as f32, self.height as f32);
+        let sx = (2.0 * raster.x / w - 1.0) * tan_half * self.aspect();
+        let sy = (1.0 - 2.0 * raster.y / h) * tan_half;
+        (self.forward + self.right * sx + self.up * sy).normalize()
+    }
+
+    /// The area of the image plane at distance 1.
+    #[inline]
+    pub fn image_plane_area(&self) -> f32 {
+        let tan_half = self.tan_half_fov();
+        4.0 * tan_half * tan_half * self.aspect()
+    }
+
+    /// The raster position a direction from the camera projects to, or `None` when it points
+    /// outside the image (or backwards).
+    pub fn raster_of(&self, dir: Vec3) -> Option<Vec2> {
+        let cos = dir.dot(self.forward);
+        if cos <= 0.0 {
+            return None;
+        }
+        let q = dir / cos;
+        let tan_half = self.tan_half_fov();
+        let (w, h) = (self.width as f32, self.height as f32);
+        let x = (q.dot(self.right) / (tan_half * self.aspect()) + 1.0) * 0.5 * w;
+        let y = (1.0 - q.dot(self.up) / tan_half) * 0.5 * h;
+        ((0.0..w).contains(&x) && (0.0..h).contains(&y)).then_some(Vec2::new(x, y))
+    }
+
+    /// The pixel index a direction from the camera lands in, if any.
+    pub fn pixel_of(&self, dir: Vec3) -> Option<usize> {
+        let r = self.raster_of(dir)?;
+        let (x, y) = (r.x as usize, r.y as usize);
+        // Rounding at the far edge can give x == width: that direction is outside.
+        (x < self.width as usize && y < self.height as usize).then_some(y * self.width as usize + x)
+    }
+
+    /// Solid-angle density of a camera ray's direction `dir` (unit), with the raster position
+    /// uniform over the whole image: `1 / (A cos^3)`, A the image plane's area at distance 1.
+    /// Zero outside the image.
+    pub fn pdf_dir(&self, dir: Vec3) -> f32 {
+        if self.raster_of(dir).is_none() {
+            return 0.0;
+        }
+        let cos = dir.dot(self.forward);
+        1.0 / (self.image_plane_area() * cos * cos * cos)
+    }
+
+    /// The camera's importance towards `dir` (unit) for a measurement averaged over the whole
+    /// image, times the cosine at the lens: what a light vertex connected to the camera
+    /// contributes per unit of incident radiance and solid angle, before division by the
+    /// number of light paths per pixel. Equal to `pdf_dir` for a pinhole with a box filter.
+    pub fn importance(&self, dir: Vec3) -> f32 {
+        self.pdf_dir(dir)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn camera() -> Camera {
+        Camera {
+            position: Vec3::ZERO,
+            forward: Vec3::Z,
+            right: Vec3::NEG_X,
+            up: Vec3::Y,
+            fov_y_degrees: 40.0,
+            width: 64,
+            height: 48,
+        }
+    }
+
+    #[test]
+    fn raster_round_trips() {
+        let c = camera();
+        for &(x, y) in &[(0.5, 0.5), (10.25, 40.75), (63.9, 0.1), (32.0, 24.0)] {
+            let r = c.raster_of(c.direction(Vec2::new(x, y))).unwrap();
+            assert!(
+                (r.x - x).abs() < 1e-3 && (r.y - y).abs() < 1e-3,
+                "{r} vs {x},{y}"
+            );
+        }
+        assert!(c.raster_of(-Vec3::Z).is_none());
+        assert!(c.raster_of(Vec3::new(0.0, 5.0, 1.0).normalize()).is_none());
+    }
+
+    #[test]
+    fn pdf_integrates_to_one_over_the_image() {
+        // Sum of pdf * solid angle of each raster cell: dw = cos^3 dA on the plane at 1.
+        let c = camera();
+        let n = 256;
+        let cell = c.image_plane_area() / (n * n) as f32;
+        let mut total = 0.0f64;
+        for i in 0..n {
+            for j in 0..n {
+                let raster = Vec2::new(
+                    (i as f32 + 0.5) / n as f32 * c.width as f32,
+                    (j as f32 + 0.5) / n as f32 * c.height as f32,
+                );
+                let d = c.direction(raster);
+                let cos = d.dot(c.forward);
+                total += (c.pdf_dir(d) * cell * cos * cos * cos) as f64;
+            }
+        }
+        assert!((total - 1.0).abs() < 1e-3, "{total}");
+    }
+}

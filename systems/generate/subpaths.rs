@@ -1,0 +1,139 @@
+//! Starts both subpaths of every sample of the wave: the camera vertex and a camera ray
+//! (uniform inside the sample's pixel), and a light vertex (an emitter picked by power, a
+//! point uniform on it) with a cosine-distributed ray leaving its emitting side.
+
+use crate::accel::{offset_ray_origin, surface_point};
+use crate::components::CAMERA_VERTEX;
+use crate::integrators::bdpt::{
+    BdptState, CAMERA_DIM_PIXEL, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT, light_key,
+};
+use crate::math::Frame;
+use crate::pipeline::{Flow, System};
+use crate::sampling::{SampleKey, cosine_hemisphere, sample_cdf, uniform_triangle};
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+use std::f32::consts::FRAC_1_PI;
+
+pub struct StartSubpaths;
+
+impl System<BdptState> for StartSubpaths {
+    fn name(&self) -> &'static str {
+        "start_subpaths"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["wave", "camera", "emitters"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["path_vertices", "walkers", "rays", "subpath_len"]
+    }
+    fn run(&self, s: &mut BdptState) -> Flow {
+        let n = s.wave.len;
+        let cap = s.capacity;
+        let data = &*s.data;
+        let cam = data.scene.camera;
+        let (first, pixels, seed) = (s.wave.first, s.pixels, s.settings.seed);
+        let w = cam.width as u64;
+        let emitters = &data.scene.emitters;
+        let tris = &data.scene.triangles;
+        let has_light = !emitters.triangle.is_empty();
+        let sample_of = |k: usize| {
+            let g = first + k as u64;
+            (g % pixels, g / pixels)
+        };
+
+        // Camera subpaths: subpath k, walker slot k.
+        let vertices = &mut s.vertices[0];
+        let views = vertices.chunks_mut(0..n);
+        let walkers = s.walkers.chunks_mut(0..n);
+        let rays = s.rays.chunks_mut(0..n);
+        views
+            .into_par_iter()
+            .zip(walkers)
+            .zip(rays)
+            .for_each(|((v, wk), r)| {
+                for i in 0..v.len() {
+                    let k = v.start + i;
+                    let (pixel, index) = sample_of(k);
+                    let key = SampleKey::new(seed, pixel, index);
+                    let jitter = key.get2(CAMERA_DIM_PIXEL);
+                    let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
+                    let dir = cam.direction(raster);
+                    v.p[i] = cam.position;
+                    v.p_error[i] = Vec3::ZERO;
+                    v.ng[i] = cam.forward;
+                    v.ns[i] = cam.forward;
+                    v.triangle[i] = CAMERA_VERTEX;
+                    v.beta[i] = Vec3::ONE;
+                    v.pdf_fwd[i] = 1.0;
+                    v.pdf_rev[i] = 0.0;
+                    v.delta[i] = false;
+                    wk.subpath[i] = k as u32;
+                    wk.key[i] = key;
+                    wk.beta[i] = Vec3::ONE;
+                    wk.pdf_dir[i] = cam.pdf_dir(dir);
+                    wk.roulette_scale[i] = 1.0;
+                    wk.alive[i] = true;
+                    r.origin[i] = cam.position;
+                    r.dir[i] = dir;
+                }
+            });
+        s.subpath_len[..n].fill(1);
+        s.subpath_len[cap..cap + n].fill(if has_light { 1 } else { 0 });
+        if !has_light {
+            s.active = n;
+            s.depth = 1;
+            return Flow::new(n, n);
+        }
+
+        // Light subpaths: subpath cap + k, walker slot n + k (slots stay in subpath order).
+        let views = s.vertices[0].chunks_mut(cap..cap + n);
+        let walkers = s.walkers.chunks_mut(n..2 * n);
+        let rays = s.rays.chunks_mut(n..2 * n);
+        views
+            .into_par_iter()
+            .zip(walkers)
+            .zip(rays)
+            .for_each(|((v, wk), r)| {
+                for i in 0..v.len() {
+                    let k = v.start - cap + i;
+                    let (pixel, index) = sample_of(k);
+                    let key = light_key(seed, pixel, index);
+                    let e = sample_cdf(&emitters.cdf, key.get(LIGHT_DIM_PICK));
+                    let b = uniform_triangle(key.get2(LIGHT_DIM_POINT));
+                    let tri = emitters.triangle[e];
+                    let sp = surface_point(tris, tri, b.x, b.y);
+                    let pdf_origin = emitters.pmf[e] / emitters.area[e];
+                    let le = emitters.radiance[e];
+                    let local = cosine_hemisphere(key.get2(LIGHT_DIM_DIRECTION));
+                    let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
+                    let pdf_dir = local.z * FRAC_1_PI;
+                    v.p[i] = sp.p;
+                    v.p_error[i] = sp.p_error;
+                    v.ng[i] = sp.ng;
+                    v.ns[i] = sp.ng;
+                    v.triangle[i] = tri;
+                    v.beta[i] = le / pdf_origin;
+                    v.pdf_fwd[i] = pdf_origin;
+                    v.pdf_rev[i] = 0.0;
+                    v.delta[i] = false;
+                    // Le cos / (pdf_origin pdf_dir), with pdf_dir = cos / pi.
+                    let beta = if pdf_dir > 0.0 {
+                        le * (std::f32::consts::PI / pdf_origin)
+                    } else {
+                        Vec3::ZERO
+                    };
+                    wk.subpath[i] = (cap + k) as u32;
+                    wk.key[i] = key;
+                    wk.beta[i] = beta;
+                    wk.pdf_dir[i] = pdf_dir;
+                    wk.roulette_scale[i] = beta.max_element().max(f32::MIN_POSITIVE);
+                    wk.alive[i] = pdf_dir > 0.0;
+                    r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, dir);
+                    r.dir[i] = if pdf_dir > 0.0 { dir } else { Vec3::ZERO };
+                }
+            });
+        s.active = 2 * n;
+        s.depth = 1;
+        Flow::new(n, 2 * n)
+    }
+}

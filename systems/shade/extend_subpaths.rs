@@ -1,0 +1,213 @@
+//! Records the vertex each subpath's ray found and scatters the subpath on: a BSDF sample
+//! (radiance transport for camera subpaths, importance for light subpaths), the densities the
+//! ratio walk needs (this vertex's forward density, the previous vertex's reverse one), and
+//! Russian roulette. A subpath ends when its ray leaves the scene, at the depth cap, when its
+//! sample carries nothing, or by roulette.
+
+use crate::accel::{offset_ray_origin, surface_point};
+use crate::bsdf::TransportMode;
+use crate::components::{MISS, split_ranges};
+use crate::integrators::bdpt::{
+    BdptState, DIM_BSDF, DIM_ROULETTE, camera_vertex_dim, light_vertex_dim, roulette_applies,
+    survival,
+};
+use crate::path::{Vertex, VertexKind, local_frame, shading_correction, to_area};
+use crate::pipeline::{Flow, System};
+use glam::Vec3;
+use rayon::prelude::*;
+
+pub struct ExtendSubpaths;
+
+impl System<BdptState> for ExtendSubpaths {
+    fn name(&self) -> &'static str {
+        "extend_subpaths"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["hits", "rays.dir", "walkers", "path_vertices"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["path_vertices", "subpath_len", "walkers", "rays"]
+    }
+    fn run(&self, s: &mut BdptState) -> Flow {
+        let d = s.depth;
+        s.ensure_depth(d);
+        let n = s.active;
+        let cap = s.capacity;
+        let end = 2 * cap;
+        let settings = s.settings;
+        let scene = &s.data.scene;
+        let tris = &scene.triangles;
+        // Each chunk of walkers owns the subpath slots from its first walker's subpath on
+        // (walkers stay in increasing subpath order), so the vertex stores split along them.
+        let first_subpath: Vec<usize> = (0..n)
+            .step_by(crate::components::CHUNK)
+            .map(|slot| s.walkers.subpath[slot] as usize)
+            .collect();
+        let (before, from_d) = s.vertices.split_at_mut(d);
+        let prev_views = before[d - 1].split_mut(&first_subpath, end);
+        let views = from_d[0].split_mut(&first_subpath, end);
+        let lens = split_ranges(&mut s.subpath_len, &first_subpath, end);
+        let hits = &s.hits;
+        let walkers = s.walkers.chunks_mut(0..n);
+        let rays = s.rays.chunks_mut(0..n);
+        let alive: usize = walkers
+            .into_par_iter()
+            .zip(rays)
+            .zip(views)
+            .zip(prev_views)
+            .zip(lens)
+            .map(|((((wk, r), v), pv), lens)| {
+                let mut alive = 0;
+                let base = v.start;
+                let hits = hits.view(wk.start..wk.start + wk.len());
+                for i in 0..wk.len() {
+                    if !wk.alive[i] || hits.triangle[i] == MISS {
+                        wk.alive[i] = false;
+                        continue;
+                    }
+                    let sub = wk.subpath[i] as usize;
+                    let j = sub - base;
+                    let light = sub >= cap;
+                    let tri = hits.triangle[i];
+                    let sp = surface_point(tris, tri, hits.b1[i], hits.b2[i]);
+                    let ns = if sp.ns.dot(sp.ng) < 0.0 {
+                        -sp.ns
+                    } else {
+                        sp.ns
+                    };
+                    let prev_kind = match (d - 1, light) {
+                        (0, false) => VertexKind::Camera,
+                        (0, true) => VertexKind::Light,
+                        _ => VertexKind::Surface,
+                    };
+                    let prev = Vertex {
+                        kind: prev_kind,
+                        p: pv.p[j],
+                        p_error: pv.p_error[j],
+                        ng: pv.ng[j],
+                        ns: pv.ns[j],
+                        triangle: pv.triangle[j],
+                        beta: pv.beta[j],
+                        pdf_fwd: pv.pdf_fwd[j],
+                        pdf_rev: pv.pdf_rev[j],
+                        delta: pv.delta[j],
+                    };
+                    let mut here = Vertex {
+                        kind: VertexKind::Surface,
+                        p: sp.p,
+                        p_error: sp.p_error,
+                        ng: sp.ng,
+                        ns,
+                        triangle: tri,
+                        beta: wk.beta[i],
+                        pdf_fwd: 0.0,
+                        pdf_rev: 0.0,
+                        delta: false,
+                    };
+                    here.pdf_fwd = to_area(wk.pdf_dir[i], &prev, &here);
+                    lens[j] = d as u32 + 1;
+                    wk.alive[i] = false;
+                    let next = (d < settings.last_vertex(light))
+                        .then(|| scatter(scene, &mut here, &prev, &wk.key[i], d, light))
+                        .flatten();
+                    v.p[j] = here.p;
+                    v.p_error[j] = here.p_error;
+                    v.ng[j] = here.ng;
+                    v.ns[j] = here.ns;
+                    v.triangle[j] = here.triangle;
+                    v.beta[j] = here.beta;
+                    v.pdf_fwd[j] = here.pdf_fwd;
+                    v.pdf_rev[j] = 0.0;
+                    v.delta[j] = here.delta;
+                    let Some(next) = next else { continue };
+                    pv.pdf_rev[j] = next.pdf_rev_prev;
+                    let mut beta = wk.beta[i] * next.weight;
+                    if roulette_applies(d) {
+                        let q = survival(beta, wk.roulette_scale[i]);
+                        let u = wk.key[i].get(
+                            if light {
+                                light_vertex_dim(d)
+                            } else {
+                                camera_vertex_dim(d)
+                            } + DIM_ROULETTE,
+                        );
+                        if !(u < q) {
+                            continue;
+                        }
+                        beta /= q;
+                    }
+                    wk.beta[i] = beta;
+                    wk.pdf_dir[i] = next.pdf_dir;
+                    wk.alive[i] = true;
+                    r.origin[i] = offset_ray_origin(here.p, here.p_error, here.ng, next.wi);
+                    r.dir[i] = next.wi;
+                    alive += 1;
+                }
+                alive
+            })
+            .sum();
+        Flow::new(n, alive)
+    }
+}
+
+/// A subpath's next step.
+struct Scattered {
+    wi: Vec3,
+    /// BSDF value times cosine over density (with the shading-normal correction for
+    /// importance).
+    weight: Vec3,
+    /// Solid-angle density of `wi` (0 for a delta lobe).
+    pdf_dir: f32,
+    /// Area density at the previous vertex of sampling it from here in the other direction.
+    pdf_rev_prev: f32,
+}
+
+/// Samples the BSDF at `here` (reached from `prev`); marks `here` delta for a delta lobe.
+#[inline]
+fn scatter(
+    scene: &crate::scene::PreparedScene,
+    here: &mut Vertex,
+    prev: &Vertex,
+    key: &crate::sampling::SampleKey,
+    d: usize,
+    light: bool,
+) -> Option<Scattered> {
+    let material = scene.materials[scene.triangles.material[here.triangle as usize] as usize];
+    let wo = (prev.p - here.p).normalize_or_zero();
+    let (frame, ng) = local_frame(&material, here, wo);
+    let wo_local = frame.to_local(wo);
+    let (dim, mode) = if light {
+        (light_vertex_dim(d), TransportMode::Importance)
+    } else {
+        (camera_vertex_dim(d), TransportMode::Radiance)
+    };
+    let bs = material.sample(wo_local, key.get2(dim + DIM_BSDF), mode)?;
+    if bs.pdf <= 0.0 {
+        return None;
+    }
+    let wi = frame.to_world(bs.wi).normalize();
+    // Reflection must leave on wo's geometric side, refraction on the other.
+    let reflected = bs.wi.z * wo_local.z > 0.0;
+    if (wi.dot(ng) * wo.dot(ng) > 0.0) != reflected {
+        return None;
+    }
+    let mut weight = bs.value * (bs.wi.z.abs() / bs.pdf);
+    if light {
+        weight *= shading_correction(here, wo, wi);
+    }
+    if !(weight.max_element() > 0.0) {
+        return None;
+    }
+    let (pdf_dir, pdf_rev_dir) = if bs.delta {
+        here.delta = true;
+        (0.0, 0.0)
+    } else {
+        (bs.pdf, material.pdf(bs.wi, wo_local))
+    };
+    Some(Scattered {
+        wi,
+        weight,
+        pdf_dir,
+        pdf_rev_prev: to_area(pdf_rev_dir, here, prev),
+    })
+}
