@@ -246,24 +246,29 @@ impl crate::systems::trace::shadow::ShadowQueue for BdptState {
 
 /// The BDPT graph (the same for every scene: material code runs only for materials present).
 pub fn graph() -> Graph<BdptState> {
-    Graph::new(
-        "bdpt",
-        vec![
-            Node::system(generate::subpaths::StartSubpaths),
-            Node::Loop {
-                name: "subpath_bounces",
-                queue_len: |s: &BdptState| s.active,
-                body: vec![
-                    Node::system(trace::closest::TraceClosest),
-                    Node::system(shade::extend_subpaths::ExtendSubpaths),
-                    Node::system(shade::compact_subpaths::CompactSubpaths),
-                ],
-            },
-            Node::system(connect::strategies::ConnectStrategies),
-            Node::system(trace::shadow::TraceShadow),
-            Node::system(gather::connections::AccumulateConnections),
-        ],
-    )
+    let mut nodes = subpath_nodes();
+    nodes.extend([
+        Node::system(connect::strategies::ConnectStrategies),
+        Node::system(trace::shadow::TraceShadow),
+        Node::system(gather::connections::AccumulateConnections),
+    ]);
+    Graph::new("bdpt", nodes)
+}
+
+/// The first half of the graph: both subpaths of every sample, walked to their ends.
+fn subpath_nodes() -> Vec<Node<BdptState>> {
+    vec![
+        Node::system(generate::subpaths::StartSubpaths),
+        Node::Loop {
+            name: "subpath_bounces",
+            queue_len: |s: &BdptState| s.active,
+            body: vec![
+                Node::system(trace::closest::TraceClosest),
+                Node::system(shade::extend_subpaths::ExtendSubpaths),
+                Node::system(shade::compact_subpaths::CompactSubpaths),
+            ],
+        },
+    ]
 }
 
 /// Roulette survival probability of a subpath with throughput `beta`, started at `scale`.
@@ -333,4 +338,24 @@ pub fn render_with_images(
         wavefront: plan.capacity(),
     };
     (outcome, images)
+}
+
+/// The subpaths of samples `first..first + len` (global sample ids), camera and light, as the
+/// walk stored them: for studying the path space and for testing the MIS weights.
+pub fn trace_subpaths(
+    data: Arc<SceneData>,
+    settings: BdptSettings,
+    first: u64,
+    len: usize,
+) -> Vec<(Vec<crate::path::Vertex>, Vec<crate::path::Vertex>)> {
+    let walk = Graph::new("bdpt_subpaths", subpath_nodes());
+    let mut state = BdptState::new(data, settings, len);
+    state.wave = Wave { first, len };
+    walk.run(&mut state, &mut Stats::default());
+    let subpath = |k: usize| {
+        (0..state.subpath_len[k] as usize)
+            .map(|d| crate::path::Vertex::from_store(&state.vertices[d].view(k..k + 1), 0, d))
+            .collect::<Vec<_>>()
+    };
+    (0..len).map(|k| (subpath(k), subpath(len + k))).collect()
 }

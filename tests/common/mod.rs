@@ -68,3 +68,41 @@ pub fn block_means(image: &Image, block: usize) -> Vec<[f64; 3]> {
     }
     out
 }
+
+pub fn render_bdpt(
+    scene: stagelight::scene::PreparedScene,
+    spp: u64,
+    settings: stagelight::integrators::bdpt::BdptSettings,
+) -> (RenderOutcome, Vec<(String, Image)>) {
+    let stop = AtomicBool::new(false);
+    let control = Control {
+        stop: &stop,
+        progress: &|_, _| {},
+    };
+    stagelight::integrators::bdpt::render_with_images(
+        Arc::new(SceneData::new(scene)),
+        settings,
+        Budget::SamplesPerPixel(spp),
+        &control,
+    )
+}
+
+/// Mean and standard error of each channel's image mean over independent renders (one per
+/// seed): the spread between renders, so correlated pixels (splats) cannot fool it.
+pub fn mean_over_seeds(render: impl Fn(u64) -> Image, seeds: u64) -> ([f64; 3], [f64; 3]) {
+    let means: Vec<[f64; 3]> = (0..seeds)
+        .map(|seed| {
+            let m = render(seed).channel_means();
+            [m.x, m.y, m.z]
+        })
+        .collect();
+    let n = seeds as f64;
+    let mut mean = [0.0; 3];
+    let mut se = [0.0; 3];
+    for c in 0..3 {
+        mean[c] = means.iter().map(|m| m[c]).sum::<f64>() / n;
+        let var = means.iter().map(|m| (m[c] - mean[c]).powi(2)).sum::<f64>() / (n - 1.0);
+        se[c] = (var / n).sqrt();
+    }
+    (mean, se)
+}
