@@ -11,9 +11,9 @@
 //! of every strategy is found in one walk instead of by evaluating each from scratch.
 
 use crate::bsdf::{Material, TransportMode};
-use crate::components::{CAMERA_VERTEX, PathVerticesView};
+use crate::components::{CAMERA_VERTEX, PathVertices};
 use crate::math::Frame;
-use crate::scene::{NO_EMITTER, PreparedScene};
+use crate::scene::{Frustum, NO_EMITTER, PreparedScene};
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
 
@@ -44,7 +44,7 @@ impl Vertex {
     /// Vertex `i` of a view of the store of depth `depth` (a light subpath's vertex 0 is its
     /// light vertex; a camera subpath's is marked `CAMERA_VERTEX`).
     #[inline]
-    pub fn from_store(store: &PathVerticesView, i: usize, depth: usize) -> Vertex {
+    pub fn from_store(store: &PathVertices, i: usize, depth: usize) -> Vertex {
         let triangle = store.triangle[i];
         let kind = match (depth, triangle) {
             (_, CAMERA_VERTEX) => VertexKind::Camera,
@@ -83,6 +83,7 @@ pub enum MisHeuristic {
 #[derive(Clone, Copy)]
 pub struct PathContext<'a> {
     pub scene: &'a PreparedScene,
+    pub camera: Frustum,
 }
 
 /// `0 -> 1`: a zero density (a delta lobe's neighbour) stands for "no choice here" in the
@@ -117,6 +118,15 @@ pub fn local_frame(material: &Material, v: &Vertex, wo: Vec3) -> (Frame, Vec3) {
         ns = -ns;
     }
     (Frame::from_normal(ns), ng)
+}
+
+impl<'a> PathContext<'a> {
+    pub fn new(scene: &'a PreparedScene) -> PathContext<'a> {
+        PathContext {
+            scene,
+            camera: scene.camera.frustum(),
+        }
+    }
 }
 
 impl PathContext<'_> {
@@ -193,13 +203,11 @@ impl PathContext<'_> {
                 }
             }
             VertexKind::Surface => {
-                let material = self.material(v);
-                let (frame, ng) = local_frame(&material, v, wo);
-                if wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                if wi.dot(v.ng) * wo.dot(v.ng) <= 0.0 {
                     // Only reflection is connectible (the dielectric, which refracts, is not).
                     return Vec3::ZERO;
                 }
-                let f = material.eval(frame.to_local(wo), frame.to_local(wi));
+                let f = self.material(v).eval_world(v.ns, wo, wi);
                 match mode {
                     TransportMode::Radiance => f,
                     TransportMode::Importance => f * shading_correction(v, wo, wi),
@@ -213,15 +221,13 @@ impl PathContext<'_> {
     /// emission's cosine density.
     pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
         match v.kind {
-            VertexKind::Camera => self.scene.camera.pdf_dir(wi),
+            VertexKind::Camera => self.camera.pdf_dir(wi),
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
             VertexKind::Surface => {
-                let material = self.material(v);
-                let (frame, ng) = local_frame(&material, v, wo);
-                if wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                if wi.dot(v.ng) * wo.dot(v.ng) <= 0.0 {
                     return 0.0;
                 }
-                material.pdf(frame.to_local(wo), frame.to_local(wi))
+                self.material(v).pdf_world(v.ns, wo, wi)
             }
         }
     }
@@ -295,11 +301,11 @@ impl PathContext<'_> {
         };
         if t == 1 {
             // Light tracing: the light vertex seen by the camera.
-            let cam = &self.scene.camera;
+            let cam = &self.camera;
             let to_y = y.p - cam.position;
             let dist2 = to_y.length_squared();
             let dir = to_y / dist2.sqrt();
-            let pixel = cam.pixel_of(dir)?;
+            let (pixel, importance) = cam.project(dir)?;
             let wi = -dir;
             let f = self.f(y, y_wo, wi, TransportMode::Importance);
             let cos_y = if y.kind == VertexKind::Light {
@@ -307,7 +313,7 @@ impl PathContext<'_> {
             } else {
                 wi.dot(y.ns).abs()
             };
-            let contribution = y.beta * f * (cos_y * cam.importance(dir) / dist2);
+            let contribution = y.beta * f * (cos_y * importance / dist2);
             return (contribution != Vec3::ZERO).then_some(Connection {
                 contribution,
                 segment: Some((*y, camera[0])),

@@ -136,7 +136,7 @@ fn split(ctx: &PathContext, full: &[Vertex], t: usize) -> (Vec<Vertex>, Vec<Vert
 fn check_weights_sum_to_one(scene_name: &str) {
     let scene = load_small(scene_name, 32);
     let data = Arc::new(SceneData::new(scene));
-    let ctx = PathContext { scene: &data.scene };
+    let ctx = PathContext::new(&data.scene);
     // Small lights are rarely hit by camera subpaths: more samples there.
     let samples = if scene_name == "cornell_box.ron" || scene_name == "furnace.ron" {
         1 << 15

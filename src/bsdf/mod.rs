@@ -82,6 +82,36 @@ impl Material {
         }
     }
 
+    /// `eval` for world-space directions about the shading normal `ns`. The Lambertian lobe
+    /// depends only on the two cosines, so it needs no frame (the common case in
+    /// bidirectional connections, which evaluate many direction pairs per vertex).
+    #[inline]
+    pub fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
+        match *self {
+            Material::Diffuse { reflectance } => {
+                diffuse::eval_cos(reflectance, wo.dot(ns), wi.dot(ns))
+            }
+            Material::Dielectric { .. } => Vec3::ZERO,
+            _ => {
+                let frame = crate::math::Frame::from_normal(ns);
+                self.eval(frame.to_local(wo), frame.to_local(wi))
+            }
+        }
+    }
+
+    /// `pdf` for world-space directions about the shading normal `ns`.
+    #[inline]
+    pub fn pdf_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+        match *self {
+            Material::Diffuse { .. } => diffuse::pdf_cos(wo.dot(ns), wi.dot(ns)),
+            Material::Dielectric { .. } => 0.0,
+            _ => {
+                let frame = crate::math::Frame::from_normal(ns);
+                self.pdf(frame.to_local(wo), frame.to_local(wi))
+            }
+        }
+    }
+
     /// Samples wi given wo; `None` when the sample carries no energy.
     pub fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         match *self {

@@ -15,44 +15,66 @@ impl Camera {
         (self.fov_y_degrees.to_radians() * 0.5).tan()
     }
 
-    #[inline]
-    pub fn aspect(&self) -> f32 {
-        self.width as f32 / self.height as f32
+    /// The camera's projection with its constants worked out once.
+    pub fn frustum(&self) -> Frustum {
+        let tan_half = self.tan_half_fov();
+        let aspect = self.width as f32 / self.height as f32;
+        Frustum {
+            position: self.position,
+            forward: self.forward,
+            right: self.right,
+            up: self.up,
+            tan_half,
+            aspect,
+            width: self.width,
+            height: self.height,
+            area: 4.0 * tan_half * tan_half * aspect,
+        }
     }
+}
 
+/// A pinhole camera's projection: built once per render by `Camera::frustum`, used per ray.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frustum {
+    pub position: Vec3,
+    pub forward: Vec3,
+    pub right: Vec3,
+    pub up: Vec3,
+    pub tan_half: f32,
+    pub aspect: f32,
+    pub width: u32,
+    pub height: u32,
+    /// The area of the image plane at distance 1.
+    pub area: f32,
+}
+
+impl Frustum {
     /// The unit direction through raster position `raster` (pixels, y down).
     #[inline]
     pub fn direction(&self, raster: Vec2) -> Vec3 {
-        let tan_half = self.tan_half_fov();
         let (w, h) = (self.width as f32, self.height as f32);
-        let sx = (2.0 * raster.x / w - 1.0) * tan_half * self.aspect();
-        let sy = (1.0 - 2.0 * raster.y / h) * tan_half;
+        let sx = (2.0 * raster.x / w - 1.0) * self.tan_half * self.aspect;
+        let sy = (1.0 - 2.0 * raster.y / h) * self.tan_half;
         (self.forward + self.right * sx + self.up * sy).normalize()
-    }
-
-    /// The area of the image plane at distance 1.
-    #[inline]
-    pub fn image_plane_area(&self) -> f32 {
-        let tan_half = self.tan_half_fov();
-        4.0 * tan_half * tan_half * self.aspect()
     }
 
     /// The raster position a direction from the camera projects to, or `None` when it points
     /// outside the image (or backwards).
+    #[inline]
     pub fn raster_of(&self, dir: Vec3) -> Option<Vec2> {
         let cos = dir.dot(self.forward);
         if cos <= 0.0 {
             return None;
         }
         let q = dir / cos;
-        let tan_half = self.tan_half_fov();
         let (w, h) = (self.width as f32, self.height as f32);
-        let x = (q.dot(self.right) / (tan_half * self.aspect()) + 1.0) * 0.5 * w;
-        let y = (1.0 - q.dot(self.up) / tan_half) * 0.5 * h;
+        let x = (q.dot(self.right) / (self.tan_half * self.aspect) + 1.0) * 0.5 * w;
+        let y = (1.0 - q.dot(self.up) / self.tan_half) * 0.5 * h;
         ((0.0..w).contains(&x) && (0.0..h).contains(&y)).then_some(Vec2::new(x, y))
     }
 
     /// The pixel index a direction from the camera lands in, if any.
+    #[inline]
     pub fn pixel_of(&self, dir: Vec3) -> Option<usize> {
         let r = self.raster_of(dir)?;
         let (x, y) = (r.x as usize, r.y as usize);
@@ -63,20 +85,29 @@ impl Camera {
     /// Solid-angle density of a camera ray's direction `dir` (unit), with the raster position
     /// uniform over the whole image: `1 / (A cos^3)`, A the image plane's area at distance 1.
     /// Zero outside the image.
+    #[inline]
     pub fn pdf_dir(&self, dir: Vec3) -> f32 {
         if self.raster_of(dir).is_none() {
             return 0.0;
         }
-        let cos = dir.dot(self.forward);
-        1.0 / (self.image_plane_area() * cos * cos * cos)
+        self.pdf_dir_inside(dir)
     }
 
-    /// The camera's importance towards `dir` (unit) for a measurement averaged over the whole
-    /// image, times the cosine at the lens: what a light vertex connected to the camera
-    /// contributes per unit of incident radiance and solid angle, before division by the
-    /// number of light paths per pixel. Equal to `pdf_dir` for a pinhole with a box filter.
-    pub fn importance(&self, dir: Vec3) -> f32 {
-        self.pdf_dir(dir)
+    /// `pdf_dir` for a direction known to be inside the image.
+    #[inline]
+    fn pdf_dir_inside(&self, dir: Vec3) -> f32 {
+        let cos = dir.dot(self.forward);
+        1.0 / (self.area * cos * cos * cos)
+    }
+
+    /// Where a light vertex seen along `dir` (unit, from the camera) lands and the camera's
+    /// importance for it: the pixel, and what the vertex contributes per unit of incident
+    /// radiance and solid angle before division by the light paths per pixel. For a pinhole
+    /// with a box filter the importance equals the direction density `1 / (A cos^3)`.
+    #[inline]
+    pub fn project(&self, dir: Vec3) -> Option<(usize, f32)> {
+        let pixel = self.pixel_of(dir)?;
+        Some((pixel, self.pdf_dir_inside(dir)))
     }
 }
 
@@ -98,7 +129,7 @@ mod tests {
 
     #[test]
     fn raster_round_trips() {
-        let c = camera();
+        let c = camera().frustum();
         for &(x, y) in &[(0.5, 0.5), (10.25, 40.75), (63.9, 0.1), (32.0, 24.0)] {
             let r = c.raster_of(c.direction(Vec2::new(x, y))).unwrap();
             assert!(
@@ -113,9 +144,9 @@ mod tests {
     #[test]
     fn pdf_integrates_to_one_over_the_image() {
         // Sum of pdf * solid angle of each raster cell: dw = cos^3 dA on the plane at 1.
-        let c = camera();
+        let c = camera().frustum();
         let n = 256;
-        let cell = c.image_plane_area() / (n * n) as f32;
+        let cell = c.area / (n * n) as f32;
         let mut total = 0.0f64;
         for i in 0..n {
             for j in 0..n {

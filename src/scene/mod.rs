@@ -2,6 +2,7 @@
 //! entities, and "prepare", which flattens that world once into render data.
 
 mod camera;
+pub use camera::Frustum;
 pub mod format;
 pub mod parse;
 pub mod prepare;

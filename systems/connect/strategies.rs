@@ -68,9 +68,7 @@ impl System<BdptState> for ConnectStrategies {
             s.connections = Connections::new(total);
         }
 
-        let ctx = PathContext {
-            scene: &s.data.scene,
-        };
+        let ctx = PathContext::new(&s.data.scene);
         let vertices = &s.vertices;
         let starts = &s.connection_start;
         let chunk_starts: Vec<usize> = (0..n).step_by(CONNECT_CHUNK).map(|k| starts[k]).collect();
@@ -106,15 +104,13 @@ impl System<BdptState> for ConnectStrategies {
                     camera.clear();
                     light.clear();
                     for (d, store) in vertices.iter().enumerate().take(nc) {
-                        camera.push(Vertex::from_store(&store.view(k..k + 1), 0, d));
+                        camera.push(Vertex::from_store(store, k, d));
                     }
                     for (d, store) in vertices.iter().enumerate().take(nl) {
-                        light.push(Vertex::from_store(&store.view(cap + k..cap + k + 1), 0, d));
+                        light.push(Vertex::from_store(store, cap + k, d));
                     }
-                    let mut slot = starts[k] - sh.start;
-                    for (si, ti) in strategies(&settings, nc, nl) {
-                        let this = slot;
-                        slot += 1;
+                    let slots = starts[k] - sh.start..;
+                    for (this, (si, ti)) in slots.zip(strategies(&settings, nc, nl)) {
                         sh.t_max[this] = 0.0;
                         sh.contribution[this] = Vec3::ZERO;
                         cn.sample[this] = k as u32;

@@ -30,7 +30,7 @@ impl System<BdptState> for StartSubpaths {
         let n = s.wave.len;
         let cap = s.capacity;
         let data = &*s.data;
-        let cam = data.scene.camera;
+        let cam = data.scene.camera.frustum();
         let (first, pixels, seed) = (s.wave.first, s.pixels, s.settings.seed);
         let w = cam.width as u64;
         let emitters = &data.scene.emitters;

@@ -131,7 +131,8 @@ impl System<BdptState> for ExtendSubpaths {
                                 camera_vertex_dim(d)
                             } + DIM_ROULETTE,
                         );
-                        if !(u < q) {
+                        // NaN-safe: a NaN survival probability ends the subpath.
+                        if u >= q || q.is_nan() {
                             continue;
                         }
                         beta /= q;
@@ -195,7 +196,7 @@ fn scatter(
     if light {
         weight *= shading_correction(here, wo, wi);
     }
-    if !(weight.max_element() > 0.0) {
+    if !weight.is_finite() || weight.max_element() <= 0.0 {
         return None;
     }
     let (pdf_dir, pdf_rev_dir) = if bs.delta {
