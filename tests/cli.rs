@@ -132,3 +132,53 @@ fn ctrl_c_saves_the_finished_passes_and_exits_130() {
     let mean = image.channel_means();
     assert!(mean.x > 0.0 && mean.x.is_finite());
 }
+
+#[test]
+fn bdpt_writes_the_image_and_one_image_per_strategy() {
+    let dir = temp_dir("bdpt");
+    let out = dir.join("cb.exr");
+    let strategies = dir.join("strategies");
+    let o = stagelight(&[
+        "render",
+        "scenes/cornell_box.ron",
+        "--integrator",
+        "bdpt",
+        "--spp",
+        "1",
+        "--max-depth",
+        "2",
+        "--mis",
+        "balance",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+        "--strategy-images",
+        strategies.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let report = String::from_utf8_lossy(&o.stdout);
+    assert!(report.contains("with bdpt") && report.contains("connect_strategies"));
+    assert!(out.exists() && out.with_extension("png").exists());
+    // Depth 2: paths of 2 to 4 vertices; every strategy that can carry light has its image.
+    for name in [
+        "s0_t2", "s1_t1", "s0_t3", "s1_t2", "s2_t1", "s1_t3", "s2_t2", "s3_t1",
+    ] {
+        let path = strategies.join(format!("{name}.exr"));
+        assert!(path.exists(), "{} missing", path.display());
+    }
+    assert!(!strategies.join("s0_t5.exr").exists());
+}
+
+#[test]
+fn strategy_images_need_bdpt() {
+    let o = stagelight(&[
+        "render",
+        "scenes/cornell_box.ron",
+        "--spp",
+        "1",
+        "--strategy-images",
+        "/tmp/never-written",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--strategy-images needs --integrator bdpt"));
+}
