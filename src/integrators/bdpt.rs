@@ -217,18 +217,20 @@ impl BdptState {
         }
     }
 
-    /// Bytes of state per sample in flight, excluding the vertex stores and connections,
-    /// whose size follows the subpaths' lengths (see `bytes_per_vertex`).
-    pub fn bytes_per_sample() -> usize {
-        2 * 2 * (Rays::bytes_per_item() + Walkers::bytes_per_item())
-            + 2 * Hits::bytes_per_item()
-            + 2 * std::mem::size_of::<u32>()
+    /// Bytes of wavefront state per sample slot as allocated now: walkers and rays (double
+    /// buffered), hits, the vertex stores of every depth reached so far and the largest
+    /// connection batch so far.
+    pub fn bytes_per_sample(&self) -> usize {
+        let per_subpath = 2 * (Rays::bytes_per_item() + Walkers::bytes_per_item())
+            + Hits::bytes_per_item()
+            + std::mem::size_of::<u32>()
+            + self.vertices.len() * PathVertices::bytes_per_item();
+        let connections = self.shadow.capacity()
+            * (ShadowRays::bytes_per_item() + Connections::bytes_per_item());
+        2 * per_subpath
             + std::mem::size_of::<usize>()
             + std::mem::size_of::<Vec3>()
-    }
-
-    pub fn bytes_per_vertex() -> usize {
-        PathVertices::bytes_per_item()
+            + connections / self.capacity.max(1)
     }
 }
 
@@ -314,6 +316,7 @@ pub fn render_with_images(
     }
     let interrupted = control.stopped() && !plan.budget_spent();
     let passes = plan.passes_done().max(1) as f64;
+    let bytes_per_path = state.bytes_per_sample();
     let images = state
         .strategy_sums
         .iter()
@@ -334,7 +337,7 @@ pub fn render_with_images(
         stats,
         interrupted,
         systems: graph.system_names(),
-        bytes_per_path: BdptState::bytes_per_sample(),
+        bytes_per_path,
         wavefront: plan.capacity(),
     };
     (outcome, images)
