@@ -21,12 +21,15 @@ fn translated(mut scene: PreparedScene, offset: Vec3) -> PreparedScene {
     scene
 }
 
-#[test]
-fn cornell_box_far_from_the_origin_renders_the_same() {
-    let (size, spp, block) = (64, 16, 16);
+/// Renders the Cornell box near the origin and moved 1e5 along each axis with `render`
+/// (scene, seed -> film) and compares block by block.
+fn far_from_the_origin_renders_the_same(
+    render: impl Fn(PreparedScene, u64) -> stagelight::film::Film,
+) {
+    let (size, block) = (64, 16);
     let base = load_small("cornell_box.ron", size);
-    let a1 = render_pt(base.clone(), spp, 1, u32::MAX).film.image();
-    let a2 = render_pt(base.clone(), spp, 2, u32::MAX).film.image();
+    let a1 = render(base.clone(), 1).image();
+    let a2 = render(base.clone(), 2).image();
     let (m1, m2) = (block_means(&a1, block), block_means(&a2, block));
     // Noise of one block mean (relative), from two independent renders of the same scene.
     let rel = |x: f64, y: f64| (x - y) / (0.5 * (x + y)).max(1e-3);
@@ -46,9 +49,9 @@ fn cornell_box_far_from_the_origin_renders_the_same() {
 
     for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
         let far = translated(base.clone(), axis * 1e5);
-        let o = render_pt(far, spp, 2, u32::MAX);
-        assert_eq!(o.film.nonfinite, 0);
-        let t = block_means(&o.film.image(), block);
+        let film = render(far, 2);
+        assert_eq!(film.nonfinite, 0);
+        let t = block_means(&film.image(), block);
         for (i, (b1, bt)) in m1.iter().zip(&t).enumerate() {
             for c in 0..3 {
                 let d = rel(b1[c], bt[c]);
@@ -60,4 +63,17 @@ fn cornell_box_far_from_the_origin_renders_the_same() {
             }
         }
     }
+}
+
+#[test]
+fn cornell_box_far_from_the_origin_renders_the_same() {
+    far_from_the_origin_renders_the_same(|scene, seed| render_pt(scene, 16, seed, u32::MAX).film);
+}
+
+#[test]
+fn cornell_box_far_from_the_origin_renders_the_same_with_bdpt() {
+    far_from_the_origin_renders_the_same(|scene, seed| {
+        let settings = stagelight::integrators::bdpt::BdptSettings::new(seed, u32::MAX);
+        render_bdpt(scene, 8, settings).0.film
+    });
 }

@@ -225,8 +225,8 @@ impl BdptState {
             + Hits::bytes_per_item()
             + std::mem::size_of::<u32>()
             + self.vertices.len() * PathVertices::bytes_per_item();
-        let connections = self.shadow.capacity()
-            * (ShadowRays::bytes_per_item() + Connections::bytes_per_item());
+        let connections =
+            self.shadow.capacity() * (ShadowRays::bytes_per_item() + Connections::bytes_per_item());
         2 * per_subpath
             + std::mem::size_of::<usize>()
             + std::mem::size_of::<Vec3>()
