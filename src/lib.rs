@@ -9,12 +9,14 @@
 pub mod accel;
 pub mod bsdf;
 pub mod cli;
+pub mod compare;
 pub mod components;
 pub mod film;
 pub mod integrators;
 pub mod math;
 pub mod metrics;
 pub mod pipeline;
+pub mod reference;
 pub mod sampling;
 pub mod scene;
 

@@ -20,8 +20,153 @@ impl SceneData {
 
 use crate::film::Film;
 use crate::pipeline::Stats;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// The integrators built into this binary. Adding one takes a variant, its name in `as_str`
+/// and `description`, its entry in `BUILT`, and a match arm in `run`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum IntegratorKind {
+    /// Path tracing with next-event estimation and MIS.
+    Pt,
+}
+
+/// Every integrator name the project knows, built or planned, in the order reports list them.
+pub const KNOWN_INTEGRATORS: [&str; 6] = ["pt", "bdpt", "pm", "ppm", "sppm", "mlt"];
+
+/// A name that is not an integrator of this binary.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum IntegratorNameError {
+    #[error("integrator \"{0}\" is not built yet (built: {built})", built = built_names())]
+    NotBuilt(String),
+    #[error(
+        "unknown integrator \"{0}\" (known: {known}; built: {built})",
+        known = KNOWN_INTEGRATORS.join(", "),
+        built = built_names()
+    )]
+    Unknown(String),
+}
+
+fn built_names() -> String {
+    IntegratorKind::BUILT
+        .iter()
+        .map(|k| k.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+impl IntegratorKind {
+    /// The integrators this binary can run, in the order of `KNOWN_INTEGRATORS`.
+    pub const BUILT: &'static [IntegratorKind] = &[IntegratorKind::Pt];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            IntegratorKind::Pt => "pt",
+        }
+    }
+
+    pub fn description(self) -> &'static str {
+        match self {
+            IntegratorKind::Pt => "path tracing with next-event estimation and MIS",
+        }
+    }
+
+    /// Parses an integrator name (case-insensitive). A planned but unbuilt name is
+    /// `NotBuilt`, anything else unknown is `Unknown`.
+    pub fn from_name(name: &str) -> Result<IntegratorKind, IntegratorNameError> {
+        let lower = name.trim().to_ascii_lowercase();
+        if let Some(&kind) = Self::BUILT.iter().find(|k| k.as_str() == lower) {
+            Ok(kind)
+        } else if KNOWN_INTEGRATORS.contains(&lower.as_str()) {
+            Err(IntegratorNameError::NotBuilt(lower))
+        } else {
+            Err(IntegratorNameError::Unknown(name.to_string()))
+        }
+    }
+}
+
+impl std::str::FromStr for IntegratorKind {
+    type Err = IntegratorNameError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        IntegratorKind::from_name(s)
+    }
+}
+
+impl std::fmt::Display for IntegratorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Settings every integrator understands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderSettings {
+    pub seed: u64,
+    /// Maximum number of scattering events; `u32::MAX` for unlimited.
+    pub max_depth: u32,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            seed: 0,
+            max_depth: u32::MAX,
+        }
+    }
+}
+
+/// A render to continue: the film of the passes already done (0..passes). Samples are a
+/// pure function of (seed, pixel, sample index, dimension) and the film adds them in global
+/// sample order, so continuing gives, bit for bit, the film of one uninterrupted render.
+pub struct Resume {
+    pub film: Film,
+    pub passes: u64,
+}
+
+/// Renders a scene with an integrator from nothing.
+pub fn render(
+    kind: IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &RenderSettings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    run(kind, data, settings, budget, control, None)
+}
+
+/// Continues a render from its finished passes: a sample budget counts the passes already
+/// done (`SamplesPerPixel(n)` ends at pass n), a time budget counts from now. The outcome's
+/// film, passes and samples are totals, resumed passes included.
+pub fn resume(
+    kind: IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &RenderSettings,
+    budget: Budget,
+    control: &Control,
+    from: Resume,
+) -> RenderOutcome {
+    run(kind, data, settings, budget, control, Some(from))
+}
+
+fn run(
+    kind: IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &RenderSettings,
+    budget: Budget,
+    control: &Control,
+    from: Option<Resume>,
+) -> RenderOutcome {
+    match kind {
+        IntegratorKind::Pt => {
+            let pt_settings = pt::PtSettings {
+                seed: settings.seed,
+                max_depth: settings.max_depth,
+            };
+            pt::render_from(data, pt_settings, budget, control, from)
+        }
+    }
+}
 
 /// How long a render runs: samples per pixel, or wall seconds (whole passes).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -75,12 +220,23 @@ pub(crate) struct WavePlan {
     pub wave_len: u64,
     pub total: Option<u64>,
     pub next: u64,
+    /// The first sample id of this render (pass 0, or where a resumed render starts).
+    first: u64,
     start: Instant,
     budget: Budget,
 }
 
 impl WavePlan {
+    /// A plan from pass 0 (every integrator that does not resume).
+    #[allow(dead_code)]
     pub fn new(pixels: u64, budget: Budget, wavefront: usize) -> WavePlan {
+        WavePlan::starting_at(pixels, budget, wavefront, 0)
+    }
+
+    /// A plan whose first wave starts at pass `first_pass` (a resumed render); a sample
+    /// budget still counts from pass 0.
+    pub fn starting_at(pixels: u64, budget: Budget, wavefront: usize, first_pass: u64) -> WavePlan {
+        let next = first_pass * pixels;
         let wave_len = if pixels <= wavefront as u64 {
             (wavefront as u64 / pixels) * pixels
         } else {
@@ -90,12 +246,13 @@ impl WavePlan {
             Budget::SamplesPerPixel(spp) => Some(spp * pixels),
             Budget::Seconds(_) => None,
         };
-        let wave_len = total.map_or(wave_len, |t| wave_len.min(t));
+        let wave_len = total.map_or(wave_len, |t| wave_len.min(t.saturating_sub(next)));
         WavePlan {
             pixels,
             wave_len,
             total,
-            next: 0,
+            next,
+            first: next,
             start: Instant::now(),
             budget,
         }
@@ -114,7 +271,9 @@ impl WavePlan {
             if control.stopped() {
                 return None;
             }
+            // A time budget renders at least one wave, however long the setup took.
             if let Budget::Seconds(s) = self.budget
+                && self.next > self.first
                 && self.start.elapsed().as_secs_f64() >= s
             {
                 return None;
