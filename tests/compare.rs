@@ -387,3 +387,112 @@ fn the_thesis_tables_list_unbuilt_algorithms_as_missing() {
     assert!(md.contains("| Cornell box | PPM, 75 passes |"), "{md}");
     assert!(md.contains("Not built yet"), "{md}");
 }
+
+#[test]
+fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
+    // The preset's real scenes at 256x256 take minutes; the same files at 8x8 take a second
+    // and exercise every step: references, runs, per-scene folders, the study's tables.
+    let dir = temp_dir("thesis");
+    let scenes = dir.join("scenes");
+    std::fs::create_dir_all(&scenes).unwrap();
+    for name in ["cornell_box", "torus_glass", "door_ajar"] {
+        let source = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("scenes/{name}.ron"));
+        let text = std::fs::read_to_string(source).unwrap().replacen(
+            "camera: (",
+            "camera: (\n        width: 8,\n        height: 8,",
+            1,
+        );
+        std::fs::write(scenes.join(format!("{name}.ron")), text).unwrap();
+    }
+    let out = dir.join("thesis");
+    let o = stagelight(&[
+        "compare",
+        "--preset",
+        "thesis",
+        "--scenes-dir",
+        scenes.to_str().unwrap(),
+        "--reference-spp",
+        "256",
+        "--quiet",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for name in ["cornell_box", "torus_glass", "door_ajar"] {
+        for file in [
+            "summary.md",
+            "results.csv",
+            "grid.png",
+            "error_vs_time.png",
+            "reference.exr",
+        ] {
+            assert!(out.join(name).join(file).exists(), "{name}/{file} missing");
+        }
+    }
+    let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    // PT has our seconds and relMSE beside the thesis' 1, 17 and 37 s; BDPT is missing.
+    let pt_row = md
+        .lines()
+        .find(|l| l.starts_with("| Cornell box | PT |"))
+        .expect("a PT row");
+    let cells: Vec<&str> = pt_row.split('|').map(str::trim).collect();
+    assert_eq!(
+        (cells[4], cells[7], cells[10]),
+        ("1", "17", "37"),
+        "{pt_row}"
+    );
+    assert!(
+        !pt_row.contains("missing") && !pt_row.contains("not run"),
+        "{pt_row}"
+    );
+    assert!(cells[5].parse::<f64>().is_ok(), "relMSE cell: {pt_row}");
+    assert!(md.contains("| room | BDPT | missing | 8 |"), "{md}");
+    let mut reader = csv::Reader::from_path(out.join("results.csv")).unwrap();
+    assert_eq!(&reader.headers().unwrap()[0], "scene");
+    assert_eq!(reader.records().count(), 9, "3 scenes x PT at 3 budgets");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn ctrl_c_during_a_comparison_writes_the_finished_runs_and_exits_130() {
+    let dir = temp_dir("sigint");
+    let scene = tiny_cornell(&dir, 8);
+    let reference = dir.join("ref.exr");
+    Image::new(8, 8).write_exr(&reference).unwrap();
+    let out = dir.join("report");
+    let child = Command::new(env!("CARGO_BIN_EXE_stagelight"))
+        .args(["compare", scene.to_str().unwrap(), "--reference"])
+        .arg(&reference)
+        .args([
+            "--budgets",
+            "1,100000000",
+            "--budget-unit",
+            "spp",
+            "--quiet",
+            "-o",
+        ])
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("stagelight starts");
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill runs");
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
+    assert!(summary.contains("**Interrupted:**"), "{summary}");
+    // The run cut short is not reported; the one before it (if it had finished) is.
+    let rows = csv::Reader::from_path(out.join("results.csv"))
+        .unwrap()
+        .records()
+        .count();
+    assert!(rows <= 1, "{rows} rows");
+    assert!(out.join("grid.png").exists() && out.join("error_vs_time.png").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

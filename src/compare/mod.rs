@@ -305,8 +305,9 @@ pub fn error_at_time(points: &[(f64, f64)], t: f64) -> Option<f64> {
     }
 }
 
-/// relMSE levels for the equal-quality table: the powers of ten between the best and worst
-/// errors measured, or the median error when they span less than a decade.
+/// relMSE levels for the equal-quality table: the 1-2-5 steps (1, 2, 5, 10, 20, ... times a
+/// power of ten) between the best and worst errors measured, thinned to the powers of ten when
+/// they would be more than seven, or the median error when none fits.
 pub fn quality_targets(errors: &[f64]) -> Vec<f64> {
     let mut finite: Vec<f64> = errors
         .iter()
@@ -318,12 +319,25 @@ pub fn quality_targets(errors: &[f64]) -> Vec<f64> {
     }
     finite.sort_by(f64::total_cmp);
     let (lo, hi) = (finite[0], finite[finite.len() - 1]);
-    let mut targets: Vec<f64> = (lo.log10().ceil() as i32..=hi.log10().floor() as i32)
-        .map(|k| 10f64.powi(k))
-        .collect();
+    let inside = |steps: &[f64]| -> Vec<f64> {
+        let mut v = Vec::new();
+        for k in lo.log10().floor() as i32..=hi.log10().ceil() as i32 {
+            for &m in steps {
+                // Rounded to the step's own digits, so 0.1 * 2 prints as 0.2.
+                let t: f64 = format!("{m}e{k}").parse().unwrap_or(m * 10f64.powi(k));
+                if lo <= t && t <= hi {
+                    v.push(t);
+                }
+            }
+        }
+        v
+    };
+    let mut targets = inside(&[1.0, 2.0, 5.0]);
+    if targets.len() > 7 {
+        targets = inside(&[1.0]);
+    }
     if targets.is_empty() {
         let median = finite[finite.len() / 2];
-        // Two significant digits read better in a table.
         let scale = 10f64.powi(median.log10().floor() as i32 - 1);
         targets.push((median / scale).round() * scale);
     }
@@ -371,9 +385,19 @@ mod tests {
     }
 
     #[test]
-    fn quality_targets_are_decades_inside_the_range() {
+    fn quality_targets_are_round_levels_inside_the_range() {
+        assert_eq!(
+            quality_targets(&[0.5, 0.003]),
+            vec![0.5, 0.2, 0.1, 0.05, 0.02, 0.01, 0.005]
+        );
+        // Eight 1-2-5 steps are too many: the decades remain.
         assert_eq!(quality_targets(&[0.5, 0.002]), vec![0.1, 0.01]);
-        assert_eq!(quality_targets(&[0.05, 0.02, 0.03]), vec![0.03]);
+        assert_eq!(quality_targets(&[0.028, 0.0049]), vec![0.02, 0.01, 0.005]);
+        assert_eq!(
+            quality_targets(&[3.0, 1e-6]),
+            vec![1.0, 0.1, 0.01, 1e-3, 1e-4, 1e-5, 1e-6]
+        );
+        assert_eq!(quality_targets(&[0.031, 0.032, 0.033]), vec![0.032]);
         assert!(quality_targets(&[]).is_empty());
     }
 }

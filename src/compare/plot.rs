@@ -104,6 +104,8 @@ fn draw_error_plot<DB: DrawingBackend>(
         .y_desc("relMSE")
         .label_style((FONT, 14))
         .axis_desc_style((FONT, 16))
+        .x_labels(12)
+        .y_labels(12)
         .x_label_formatter(&|v| tick(*v))
         .y_label_formatter(&|v| tick(*v))
         .light_line_style(RGBColor(235, 235, 235))

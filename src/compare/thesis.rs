@@ -104,16 +104,45 @@ pub struct SceneResult<'a> {
 /// seconds, algorithms not built yet listed as missing.
 pub fn summary_markdown(scenes: &[SceneResult], threads: usize) -> String {
     let mut s = String::new();
+    let mut sizes: Vec<String> = scenes
+        .iter()
+        .filter_map(|sc| sc.comparison.map(|c| format!("{}x{}", c.width, c.height)))
+        .collect();
+    sizes.dedup();
+    let size = if sizes.is_empty() {
+        "256x256 (the thesis' size)".to_string()
+    } else {
+        sizes.join(", ")
+    };
     let _ = writeln!(s, "# The thesis experiment on this machine\n");
     let _ = writeln!(
         s,
         "The experiment of A. Kouhzadi, \"A Comprehensive Study of the Seminal Monte Carlo-based \
          Image Synthesis Algorithms\" (master's thesis, UCLA, 2016), rerun on stagelight's own \
-         scenes at 256x256 with {threads} threads. The thesis rendered with Mitsuba 0.5 on an \
-         Intel Core i7 at 2.6 GHz with eight logical cores and gave wall seconds only; here each \
-         run also has its relMSE against a converged reference of the same scene. The thesis' \
-         figures are printed as it printed them, inconsistencies included.\n"
+         scenes at {size} with {threads} threads. The thesis rendered 256x256 images with \
+         Mitsuba 0.5 on an Intel Core i7 at 2.6 GHz with eight logical cores and gave wall \
+         seconds only; here each run also has its relMSE against a reference of the same scene \
+         (see each scene's summary for it). The thesis' figures are printed as it printed them, \
+         inconsistencies included.\n"
     );
+    let max_spp = UNBIASED_SPP[UNBIASED_SPP.len() - 1];
+    let thin: Vec<String> = scenes
+        .iter()
+        .filter_map(|sc| {
+            let c = sc.comparison?;
+            let spp = c.reference_spp?;
+            (spp < 10 * max_spp).then(|| format!("{} ({spp} spp)", scene_label(sc.key)))
+        })
+        .collect();
+    if !thin.is_empty() {
+        let _ = writeln!(
+            s,
+            "Note: the references of {} have fewer than ten times the {max_spp} spp of the \
+             longest runs, so the smallest errors are partly the references' own noise (a \
+             larger --reference-spp refines them; the checkpoints let that resume).\n",
+            thin.join(", ")
+        );
+    }
     let mut missing: Vec<String> = Vec::new();
 
     let _ = writeln!(s, "## Unbiased algorithms, by samples per pixel\n");
