@@ -96,7 +96,7 @@ fn draw_error_plot<DB: DrawingBackend>(
         .margin(18)
         .x_label_area_size(50)
         .y_label_area_size(80)
-        .build_cartesian_2d((t0..t1).log_scale(), (e0..e1).log_scale())
+        .build_cartesian_2d(log_axis(t0, t1), log_axis(e0, e1))
         .map_err(e)?;
     chart
         .configure_mesh()
@@ -104,8 +104,6 @@ fn draw_error_plot<DB: DrawingBackend>(
         .y_desc("relMSE")
         .label_style((FONT, 14))
         .axis_desc_style((FONT, 16))
-        .x_labels(12)
-        .y_labels(12)
         .x_label_formatter(&|v| tick(*v))
         .y_label_formatter(&|v| tick(*v))
         .light_line_style(RGBColor(235, 235, 235))
@@ -160,6 +158,36 @@ fn draw_error_plot<DB: DrawingBackend>(
         .draw()
         .map_err(e)?;
     root.present().map_err(e)
+}
+
+/// A log axis over [lo, hi] labelled at its 1-2-5 steps (at its powers of ten when those
+/// would be too many), with light grid lines at every 1..9 step.
+fn log_axis(
+    lo: f64,
+    hi: f64,
+) -> plotters::coord::combinators::WithKeyPoints<plotters::coord::combinators::LogCoord<f64>> {
+    use plotters::coord::combinators::BindKeyPoints;
+    let steps = |multipliers: &[f64]| -> Vec<f64> {
+        let mut v = Vec::new();
+        for k in lo.log10().floor() as i32..=hi.log10().ceil() as i32 {
+            for &m in multipliers {
+                let t: f64 = format!("{m}e{k}").parse().unwrap_or(m * 10f64.powi(k));
+                if lo <= t && t <= hi {
+                    v.push(t);
+                }
+            }
+        }
+        v
+    };
+    let mut bold = steps(&[1.0, 2.0, 5.0]);
+    if bold.len() > 9 {
+        bold = steps(&[1.0]);
+    }
+    let light = steps(&[1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]);
+    (lo..hi)
+        .log_scale()
+        .with_key_points(bold)
+        .with_light_points(light)
 }
 
 /// Axis tick text: 1, 10, 0.1, 1e-3 ...

@@ -129,7 +129,9 @@ pub fn sci(x: f64) -> String {
 
 /// Seconds, with fewer decimals as they grow.
 pub fn secs(t: f64) -> String {
-    if t >= 100.0 {
+    if t < 0.01 {
+        format!("{t:.1e}")
+    } else if t >= 100.0 {
         format!("{t:.0}")
     } else if t >= 10.0 {
         format!("{t:.1}")
