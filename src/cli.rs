@@ -95,7 +95,7 @@ pub const DEFAULT_REFERENCE_SPP: u64 = 4096;
 pub struct ReferenceArgs {
     /// Scene file (RON).
     pub scene: PathBuf,
-    /// An unbiased integrator.
+    /// An unbiased integrator (built: pt; planned: bdpt).
     #[arg(long, default_value = "pt", value_parser = parse_integrator)]
     pub integrator: IntegratorKind,
     /// Total samples per pixel, over all runs (default 4096 unless --time is given).
@@ -107,8 +107,10 @@ pub struct ReferenceArgs {
     /// Seed (default: a reference seed that ordinary renders do not use).
     #[arg(long, default_value_t = DEFAULT_REFERENCE_SEED)]
     pub seed: u64,
+    /// Maximum number of bounces (default: unlimited).
     #[arg(long)]
     pub max_depth: Option<u32>,
+    /// Worker threads (default: all cores).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub threads: Option<u64>,
     /// Output EXR (default reference/SCENE_INTEGRATOR.exr); REF.exr.checkpoint and a PNG
@@ -118,6 +120,7 @@ pub struct ReferenceArgs {
     /// Seconds between checkpoints.
     #[arg(long, default_value = "30", value_parser = parse_seconds)]
     pub checkpoint_every: f64,
+    /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
 }
@@ -133,7 +136,7 @@ pub enum BudgetUnitArg {
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
 pub enum Preset {
-    /// The study of THESIS.md: three scenes, PT/BDPT/MLT at 25, 400 and 841 spp, PM/PPM at
+    /// The 2016 study stagelight grew from (Kouhzadi, UCLA): three scenes, PT/BDPT/MLT at 25, 400 and 841 spp, PM/PPM at
     /// 250k and 500k photons per pass, its times beside ours.
     Thesis,
 }
@@ -147,13 +150,15 @@ pub struct CompareArgs {
     /// resumed from there, at --reference-spp).
     #[arg(long, conflicts_with = "preset")]
     pub reference: Option<PathBuf>,
-    /// Integrators to compare, comma-separated (default: every integrator built).
-    #[arg(long, value_delimiter = ',', value_parser = parse_integrator)]
+    /// Integrators to compare, comma-separated (default: every integrator built; built: pt;
+    /// planned: bdpt, pm, ppm, sppm, mlt).
+    #[arg(long, value_delimiter = ',', value_parser = parse_integrator, conflicts_with = "preset")]
     pub integrators: Vec<IntegratorKind>,
     /// Budgets, comma-separated and strictly increasing, in --budget-unit.
-    #[arg(long, value_delimiter = ',', value_parser = parse_budget, default_value = "1,2,4,8")]
+    #[arg(long, value_delimiter = ',', value_parser = parse_budget, default_value = "1,2,4,8",
+          conflicts_with = "preset")]
     pub budgets: Vec<f64>,
-    #[arg(long, value_enum, default_value_t = BudgetUnitArg::Seconds)]
+    #[arg(long, value_enum, default_value_t = BudgetUnitArg::Seconds, conflicts_with = "preset")]
     pub budget_unit: BudgetUnitArg,
     /// Report folder (default compare/SCENE, or compare/thesis with --preset thesis).
     #[arg(short, long)]
@@ -161,8 +166,10 @@ pub struct CompareArgs {
     /// Seed of the compared renders (the reference has its own).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Maximum number of bounces (default: unlimited).
     #[arg(long)]
     pub max_depth: Option<u32>,
+    /// Worker threads (default: all cores).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub threads: Option<u64>,
     /// Samples per pixel of a reference this command makes.
@@ -175,6 +182,7 @@ pub struct CompareArgs {
     /// Where --preset finds its scenes.
     #[arg(long, default_value = "scenes")]
     pub scenes_dir: PathBuf,
+    /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
 }
