@@ -149,6 +149,8 @@ pub fn resume(
     run(kind, data, settings, budget, control, Some(from))
 }
 
+/// The one dispatch: each integrator's arm renders from `from` when given (the passes it
+/// holds, then on), as `reference` needs to resume; see `pt::render_from`.
 fn run(
     kind: IntegratorKind,
     data: Arc<SceneData>,
