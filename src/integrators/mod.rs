@@ -215,6 +215,10 @@ impl Control<'_> {
     }
 }
 
+/// Paths per wave under a time budget (rounded up to whole passes, at most the wavefront):
+/// enough to keep the cores busy, small enough that the time is checked often.
+pub const TIMED_WAVE_PATHS: u64 = 1 << 16;
+
 /// Plans waves over the global sample ids: whole passes per wave when a pass fits in the
 /// wavefront, else a pass split into wavefront-sized waves. Stops only at pass boundaries.
 pub(crate) struct WavePlan {
@@ -248,7 +252,13 @@ impl WavePlan {
             Budget::SamplesPerPixel(spp) => Some(spp * pixels),
             Budget::Seconds(_) => None,
         };
-        let wave_len = total.map_or(wave_len, |t| wave_len.min(t.saturating_sub(next)));
+        let wave_len = match total {
+            Some(t) => wave_len.min(t.saturating_sub(next)),
+            // The clock is read between waves: a time budget takes waves of about
+            // TIMED_WAVE_PATHS paths (whole passes), so it overshoots by a fraction of the
+            // full wavefront's time at most.
+            None => wave_len.min(TIMED_WAVE_PATHS.div_ceil(pixels) * pixels),
+        };
         WavePlan {
             pixels,
             wave_len,
