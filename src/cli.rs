@@ -1,8 +1,15 @@
-//! The `stagelight` command line: render, diff and bench.
+//! The `stagelight` command line: render, reference, compare, diff and bench.
 
+use crate::compare::{BudgetUnit, CompareJob, Comparison, report, thesis};
 use crate::film::Image;
-use crate::integrators::{Budget, Control, RenderOutcome, SceneData, bdpt, pt};
+use crate::integrators::{
+    Budget, Control, IntegratorKind, RenderOutcome, RenderSettings, SceneData,
+};
 use crate::path::MisHeuristic;
+use crate::reference::{
+    DEFAULT_REFERENCE_SEED, ReferenceBudget, ReferenceJob, checkpoint_path, load_reference,
+    render_reference,
+};
 use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
@@ -25,13 +32,18 @@ pub struct Cli {
 pub enum Command {
     /// Renders a scene to an EXR (float32 linear RGB) with a PNG preview beside it.
     Render(RenderArgs),
+    /// Renders a long reference, checkpointed: run it again to resume or extend it.
+    Reference(ReferenceArgs),
+    /// Renders each integrator at each budget and writes a report folder of speed against
+    /// error: results.csv, error_vs_time.png/.svg, grid.png, summary.md.
+    Compare(CompareArgs),
     /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
     Diff { image: PathBuf, reference: PathBuf },
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
     Bench {
         scene: PathBuf,
-        #[arg(long, value_enum, default_value_t = IntegratorName::Pt)]
-        integrator: IntegratorName,
+        #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+        integrator: IntegratorKind,
         /// Samples per pixel of each timed run.
         #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u64).range(1..))]
         spp: u64,
@@ -44,29 +56,17 @@ pub enum Command {
     },
 }
 
-#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
-pub enum IntegratorName {
-    /// Path tracing with next-event estimation and MIS.
-    Pt,
-    /// Bidirectional path tracing: every strategy (s, t), MIS-weighted.
-    Bdpt,
-}
-
-impl IntegratorName {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            IntegratorName::Pt => "pt",
-            IntegratorName::Bdpt => "bdpt",
-        }
-    }
+/// Parses an integrator name: unknown names and planned-but-unbuilt ones are clear errors.
+fn parse_integrator(s: &str) -> std::result::Result<IntegratorKind, String> {
+    IntegratorKind::from_name(s).map_err(|e| e.to_string())
 }
 
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
     /// Scene file (RON).
     pub scene: PathBuf,
-    #[arg(long, value_enum, default_value_t = IntegratorName::Pt)]
-    pub integrator: IntegratorName,
+    #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+    pub integrator: IntegratorKind,
     /// Samples per pixel (default 64 unless --time is given).
     #[arg(long, conflicts_with = "time", value_parser = clap::value_parser!(u64).range(1..))]
     pub spp: Option<u64>,
@@ -112,39 +112,118 @@ impl MisName {
     }
 }
 
-/// What an integrator is asked for, whichever it is.
-#[derive(Clone, Copy, Debug)]
-pub struct RenderRequest {
-    pub integrator: IntegratorName,
+/// Samples per pixel of a reference when neither --spp nor --time is given.
+pub const DEFAULT_REFERENCE_SPP: u64 = 4096;
+
+#[derive(clap::Args, Debug)]
+pub struct ReferenceArgs {
+    /// Scene file (RON).
+    pub scene: PathBuf,
+    /// An unbiased integrator: pt or bdpt.
+    #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+    pub integrator: IntegratorKind,
+    /// Total samples per pixel, over all runs (default 4096 unless --time is given).
+    #[arg(long, conflicts_with = "time", value_parser = clap::value_parser!(u64).range(1..))]
+    pub spp: Option<u64>,
+    /// Total render seconds, over all runs (whole passes).
+    #[arg(long, value_parser = parse_seconds)]
+    pub time: Option<f64>,
+    /// Seed (default: a reference seed that ordinary renders do not use).
+    #[arg(long, default_value_t = DEFAULT_REFERENCE_SEED)]
     pub seed: u64,
-    pub max_depth: u32,
-    pub mis: MisHeuristic,
-    pub strategy_images: bool,
+    /// Maximum number of bounces (default: unlimited).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub threads: Option<u64>,
+    /// Output EXR (default reference/SCENE_INTEGRATOR.exr); REF.exr.checkpoint and a PNG
+    /// preview go beside it.
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Seconds between checkpoints.
+    #[arg(long, default_value = "30", value_parser = parse_seconds)]
+    pub checkpoint_every: f64,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
-/// Runs the requested integrator; returns its outcome and any auxiliary images it made.
-pub fn run_integrator(
-    request: RenderRequest,
-    data: Arc<SceneData>,
-    budget: Budget,
-    control: &Control,
-) -> (RenderOutcome, Vec<(String, Image)>) {
-    match request.integrator {
-        IntegratorName::Pt => {
-            let settings = pt::PtSettings {
-                seed: request.seed,
-                max_depth: request.max_depth,
-            };
-            (pt::render(data, settings, budget, control), Vec::new())
-        }
-        IntegratorName::Bdpt => {
-            let settings = bdpt::BdptSettings {
-                mis: request.mis,
-                strategy_images: request.strategy_images,
-                ..bdpt::BdptSettings::new(request.seed, request.max_depth)
-            };
-            bdpt::render_with_images(data, settings, budget, control)
-        }
+/// Samples per pixel of the reference that compare makes when none is given.
+pub const DEFAULT_COMPARE_REFERENCE_SPP: u64 = 4096;
+
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum BudgetUnitArg {
+    Seconds,
+    Spp,
+}
+
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum Preset {
+    /// The 2016 study stagelight grew from (Kouhzadi, UCLA): three scenes, PT/BDPT/MLT at 25, 400 and 841 spp, PM/PPM at
+    /// 250k and 500k photons per pass, its times beside ours.
+    Thesis,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct CompareArgs {
+    /// Scene file (RON); not with --preset.
+    #[arg(required_unless_present = "preset", conflicts_with = "preset")]
+    pub scene: Option<PathBuf>,
+    /// Reference EXR of the scene (default: made with `reference` in the output folder, or
+    /// resumed from there, at --reference-spp).
+    #[arg(long, conflicts_with = "preset")]
+    pub reference: Option<PathBuf>,
+    /// Integrators to compare, comma-separated (default: every integrator built; built: pt;
+    /// planned: bdpt, pm, ppm, sppm, mlt).
+    #[arg(long, value_delimiter = ',', value_parser = parse_integrator, conflicts_with = "preset")]
+    pub integrators: Vec<IntegratorKind>,
+    /// Budgets, comma-separated and strictly increasing, in --budget-unit.
+    #[arg(long, value_delimiter = ',', value_parser = parse_budget, default_value = "1,2,4,8",
+          conflicts_with = "preset")]
+    pub budgets: Vec<f64>,
+    #[arg(long, value_enum, default_value_t = BudgetUnitArg::Seconds, conflicts_with = "preset")]
+    pub budget_unit: BudgetUnitArg,
+    /// Report folder (default compare/SCENE, or compare/thesis with --preset thesis).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Seed of the compared renders (the reference has its own).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Maximum number of bounces (default: unlimited).
+    #[arg(long)]
+    pub max_depth: Option<u32>,
+    /// Worker threads (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub threads: Option<u64>,
+    /// Samples per pixel of a reference this command makes.
+    #[arg(long, default_value_t = DEFAULT_COMPARE_REFERENCE_SPP,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub reference_spp: u64,
+    /// Runs a fixed experiment instead of SCENE and --budgets.
+    #[arg(long, value_enum)]
+    pub preset: Option<Preset>,
+    /// Where --preset finds its scenes.
+    #[arg(long, default_value = "scenes")]
+    pub scenes_dir: PathBuf,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// One budget of --budgets (the list as a whole is checked after parsing).
+fn parse_budget(s: &str) -> std::result::Result<f64, String> {
+    if s.trim().is_empty() {
+        return Err("the budget list is empty (or has an empty entry)".into());
+    }
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a number"))?;
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(format!("budget {s} is not a positive number"))
     }
 }
 
@@ -186,6 +265,8 @@ pub fn main() -> i32 {
 fn run(cli: Cli) -> Result<i32> {
     match cli.command {
         Command::Render(args) => render_command(&args),
+        Command::Reference(args) => reference_command(&args),
+        Command::Compare(args) => compare_command(&args),
         Command::Diff { image, reference } => {
             diff_command(&image, &reference)?;
             Ok(0)
@@ -240,13 +321,7 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
     {
         bail!("{}: the output must be an .exr file", output.display());
     }
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // A second Ctrl-C while the image is being written has no further effect.
-        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst))
-            .context("cannot install the Ctrl-C handler")?;
-    }
+    let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(args.threads.map(|t| t as usize))?;
     let threads = pool.current_num_threads();
     let bar = progress_bar(budget, args.quiet);
@@ -260,19 +335,19 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
         stop: &stop,
         progress: &progress,
     };
-    if args.strategy_images.is_some() && args.integrator != IntegratorName::Bdpt {
+    if args.strategy_images.is_some() && args.integrator != IntegratorKind::Bdpt {
         bail!("--strategy-images needs --integrator bdpt");
     }
-    let request = RenderRequest {
-        integrator: args.integrator,
+    let settings = RenderSettings {
         seed: args.seed,
         max_depth: args.max_depth.unwrap_or(u32::MAX),
         mis: args.mis.heuristic(),
         strategy_images: args.strategy_images.is_some(),
     };
     let cpu_start = cpu_seconds();
-    let (outcome, layers) =
-        pool.install(|| run_integrator(request, data.clone(), budget, &control));
+    let outcome = pool.install(|| {
+        crate::integrators::render(args.integrator, data.clone(), &settings, budget, &control)
+    });
     let cpu = cpu_seconds() - cpu_start;
     bar.finish_and_clear();
 
@@ -281,7 +356,7 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
     let png = output.with_extension("png");
     image.write_png(&png)?;
     if let Some(dir) = &args.strategy_images {
-        for (name, layer) in &layers {
+        for (name, layer) in &outcome.layers {
             layer.write_exr(&dir.join(format!("{name}.exr")))?;
         }
     }
@@ -298,6 +373,16 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
         return Ok(EXIT_INTERRUPTED);
     }
     Ok(0)
+}
+
+/// A flag Ctrl-C sets: renders stop after the passes in flight. A second Ctrl-C while files
+/// are being written has no further effect.
+fn stop_on_ctrl_c() -> Result<Arc<AtomicBool>> {
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
+        .context("cannot install the Ctrl-C handler")?;
+    Ok(stop)
 }
 
 fn progress_bar(budget: Budget, quiet: bool) -> indicatif::ProgressBar {
@@ -370,7 +455,7 @@ fn print_out(text: &str) {
 /// The end-of-render report.
 pub fn render_report(
     scene: &Path,
-    integrator: IntegratorName,
+    integrator: IntegratorKind,
     threads: usize,
     o: &RenderOutcome,
     cpu: f64,
@@ -461,7 +546,7 @@ fn diff_command(image: &Path, reference: &Path) -> Result<()> {
 
 fn bench_command(
     scene: &Path,
-    integrator: IntegratorName,
+    integrator: IntegratorKind,
     spp: u64,
     runs: u32,
     threads: Option<usize>,
@@ -476,21 +561,18 @@ fn bench_command(
     let run_once = |seed: u64| {
         let cpu0 = cpu_seconds();
         let t = Instant::now();
-        let request = RenderRequest {
-            integrator,
+        let settings = RenderSettings {
             seed,
-            max_depth: u32::MAX,
-            mis: MisHeuristic::Power,
-            strategy_images: false,
+            ..RenderSettings::default()
         };
         let o = pool.install(|| {
-            run_integrator(
-                request,
+            crate::integrators::render(
+                integrator,
                 data.clone(),
+                &settings,
                 Budget::SamplesPerPixel(spp),
                 &control,
             )
-            .0
         });
         let wall = t.elapsed().as_secs_f64();
         (o, wall, cpu_seconds() - cpu0)
@@ -563,5 +645,445 @@ fn bench_command(
         let _ = writeln!(t, "| {name} | {share:.1}% | {runs} | {taken} | {emitted} |");
     }
     print_out(&t);
+    Ok(())
+}
+
+fn scene_stem(scene: &Path) -> String {
+    scene
+        .file_stem()
+        .map_or("scene".into(), |s| s.to_string_lossy().into_owned())
+}
+
+/// A bar over `len` units whose position the caller sets; hidden when quiet.
+fn unit_bar(len: u64, template: &str, quiet: bool) -> indicatif::ProgressBar {
+    if quiet {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(len.max(1));
+    let style = indicatif::ProgressStyle::with_template(template)
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+    bar.set_style(style);
+    bar
+}
+
+/// Makes or continues a reference, with a progress bar in its budget's unit; prints what it
+/// did. Returns the outcome (interrupted or not).
+fn make_reference(
+    job: &ReferenceJob,
+    stop: &AtomicBool,
+    pool: &rayon::ThreadPool,
+    quiet: bool,
+) -> Result<crate::reference::ReferenceOutcome> {
+    let (len, unit) = match job.budget {
+        ReferenceBudget::SamplesPerPixel(spp) => (spp, "spp"),
+        ReferenceBudget::Seconds(s) => (s.ceil() as u64, "s"),
+    };
+    let bar = unit_bar(
+        len,
+        &format!("reference {{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit} (eta {{eta}})"),
+        quiet,
+    );
+    let progress = |done: f64, _target: f64| bar.set_position(done as u64);
+    let outcome = pool.install(|| render_reference(job, stop, &progress))?;
+    bar.finish_and_clear();
+    Ok(outcome)
+}
+
+fn describe_reference(job: &ReferenceJob, o: &crate::reference::ReferenceOutcome) -> String {
+    let file = job.output.display();
+    let what = format!(
+        "{} at {} spp ({:.1} s of rendering), seed {}, {}",
+        job.integrator,
+        o.passes,
+        o.seconds,
+        job.settings.seed,
+        job.scene_path.display()
+    );
+    if o.already_complete {
+        format!("{file}: already complete with {what}; nothing rendered")
+    } else if o.passes_before > 0 {
+        format!("{file}: resumed from {} spp to {what}", o.passes_before)
+    } else {
+        format!("{file}: made with {what}")
+    }
+}
+
+fn reference_command(args: &ReferenceArgs) -> Result<i32> {
+    let data = load_scene(&args.scene)?;
+    let output = args.output.clone().unwrap_or_else(|| {
+        PathBuf::from("reference").join(format!(
+            "{}_{}.exr",
+            scene_stem(&args.scene),
+            args.integrator
+        ))
+    });
+    if output
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("{}: the output must be an .exr file", output.display());
+    }
+    let budget = match (args.spp, args.time) {
+        (_, Some(t)) => ReferenceBudget::Seconds(t),
+        (Some(spp), None) => ReferenceBudget::SamplesPerPixel(spp),
+        (None, None) => ReferenceBudget::SamplesPerPixel(DEFAULT_REFERENCE_SPP),
+    };
+    let stop = stop_on_ctrl_c()?;
+    let pool = thread_pool(args.threads.map(|t| t as usize))?;
+    let job = ReferenceJob {
+        scene_path: &args.scene,
+        data,
+        integrator: args.integrator,
+        settings: RenderSettings {
+            seed: args.seed,
+            max_depth: args.max_depth.unwrap_or(u32::MAX),
+            ..RenderSettings::default()
+        },
+        budget,
+        output: &output,
+        checkpoint_every: std::time::Duration::from_secs_f64(args.checkpoint_every),
+    };
+    let outcome = make_reference(&job, &stop, &pool, args.quiet)?;
+    let mut report = describe_reference(&job, &outcome) + "\n";
+    report += &format!(
+        "  {} threads, {:.1} s this run, {} NaN/Inf samples; checkpoint {}\n",
+        pool.current_num_threads(),
+        outcome.seconds_this_run,
+        outcome.nonfinite,
+        checkpoint_path(&output).display()
+    );
+    if outcome.interrupted {
+        report += &format!(
+            "interrupted: {} holds the {} finished passes; run the same command again to \
+             continue\n",
+            output.display(),
+            outcome.passes
+        );
+    }
+    print_out(&report);
+    Ok(if outcome.interrupted {
+        EXIT_INTERRUPTED
+    } else {
+        0
+    })
+}
+
+/// The checked settings of a comparison.
+struct ComparePlan {
+    integrators: Vec<IntegratorKind>,
+    unit: BudgetUnit,
+    budgets: Vec<f64>,
+    settings: RenderSettings,
+}
+
+fn compare_plan(args: &CompareArgs) -> Result<ComparePlan> {
+    let unit = match args.budget_unit {
+        BudgetUnitArg::Seconds => BudgetUnit::Seconds,
+        BudgetUnitArg::Spp => BudgetUnit::Spp,
+    };
+    crate::compare::validate_budgets(&args.budgets, unit)
+        .map_err(|e| anyhow::anyhow!("--budgets: {e}"))?;
+    let mut integrators: Vec<IntegratorKind> = Vec::new();
+    for &k in &args.integrators {
+        if integrators.contains(&k) {
+            bail!("--integrators: {k} is listed twice");
+        }
+        integrators.push(k);
+    }
+    if integrators.is_empty() {
+        integrators = IntegratorKind::BUILT.to_vec();
+    }
+    Ok(ComparePlan {
+        integrators,
+        unit,
+        budgets: args.budgets.clone(),
+        settings: RenderSettings {
+            seed: args.seed,
+            max_depth: args.max_depth.unwrap_or(u32::MAX),
+            ..RenderSettings::default()
+        },
+    })
+}
+
+fn compare_command(args: &CompareArgs) -> Result<i32> {
+    if args.preset == Some(Preset::Thesis) {
+        return thesis_command(args);
+    }
+    let plan = compare_plan(args)?;
+    let scene = args
+        .scene
+        .clone()
+        .context("a scene file is needed (or --preset thesis)")?;
+    let out_dir = args
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("compare").join(scene_stem(&scene)));
+    let stop = stop_on_ctrl_c()?;
+    let pool = thread_pool(args.threads.map(|t| t as usize))?;
+    let data = load_scene(&scene)?;
+    let (comparison, interrupted) = match compare_scene(
+        &scene,
+        data,
+        args.reference.as_deref(),
+        &out_dir,
+        &plan,
+        args.reference_spp,
+        &stop,
+        &pool,
+        args.quiet,
+    )? {
+        SceneRun::Done(c) => {
+            let interrupted = c.interrupted;
+            (*c, interrupted)
+        }
+        SceneRun::ReferenceInterrupted(note) => {
+            print_out(&format!("{note}\n"));
+            return Ok(EXIT_INTERRUPTED);
+        }
+    };
+    report::write_report(&comparison, &out_dir)?;
+    let mut text = format!(
+        "{} runs of {} on {}; reference {} ({})\nwrote {}/{{{}, {}, {}, {}, {}}}\n",
+        comparison.results.len(),
+        comparison
+            .integrators
+            .iter()
+            .map(|k| k.as_str())
+            .collect::<Vec<_>>()
+            .join(", "),
+        scene.display(),
+        comparison.reference_path.display(),
+        comparison.reference_note,
+        out_dir.display(),
+        report::RESULTS_CSV,
+        report::PLOT_PNG,
+        report::PLOT_SVG,
+        report::GRID_PNG,
+        report::SUMMARY_MD
+    );
+    if interrupted {
+        text += "interrupted: the report holds the runs finished before the stop\n";
+    }
+    print_out(&text);
+    Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
+}
+
+enum SceneRun {
+    Done(Box<Comparison>),
+    /// The reference was being made when a stop came: its checkpoint holds the passes done.
+    ReferenceInterrupted(String),
+}
+
+/// The reference of a scene (given, or made or resumed in `out_dir`), then every run.
+#[allow(clippy::too_many_arguments)]
+fn compare_scene(
+    scene: &Path,
+    data: Arc<SceneData>,
+    given_reference: Option<&Path>,
+    out_dir: &Path,
+    plan: &ComparePlan,
+    reference_spp: u64,
+    stop: &AtomicBool,
+    pool: &rayon::ThreadPool,
+    quiet: bool,
+) -> Result<SceneRun> {
+    let cam = data.scene.camera;
+    let (width, height) = (cam.width as usize, cam.height as usize);
+    let (reference_path, reference_note) = match given_reference {
+        Some(path) => (path.to_path_buf(), "given with --reference".to_string()),
+        None => {
+            let path = out_dir.join("reference.exr");
+            let job = ReferenceJob {
+                scene_path: scene,
+                data: data.clone(),
+                integrator: IntegratorKind::Pt,
+                settings: RenderSettings {
+                    seed: DEFAULT_REFERENCE_SEED,
+                    max_depth: plan.settings.max_depth,
+                    ..RenderSettings::default()
+                },
+                budget: ReferenceBudget::SamplesPerPixel(reference_spp),
+                output: &path,
+                checkpoint_every: std::time::Duration::from_secs(30),
+            };
+            if !quiet {
+                eprintln!(
+                    "no --reference given: using {} (pt, {reference_spp} spp; made or resumed \
+                     now)",
+                    path.display()
+                );
+            }
+            let outcome = make_reference(&job, stop, pool, quiet)?;
+            let note = describe_reference(&job, &outcome);
+            if outcome.interrupted {
+                return Ok(SceneRun::ReferenceInterrupted(format!(
+                    "interrupted while making the reference: {note}; run the same command \
+                     again to continue"
+                )));
+            }
+            if !quiet {
+                eprintln!("{note}");
+            }
+            let how = if outcome.already_complete {
+                "made by an earlier compare run, with pt"
+            } else {
+                "made by this compare run, with pt"
+            };
+            (path, how.to_string())
+        }
+    };
+    let loaded = load_reference(&reference_path, width, height)?;
+    if let (Some(seed), Some(integrator)) = (loaded.seed, loaded.integrator.as_deref())
+        && seed == plan.settings.seed
+        && plan.integrators.iter().any(|k| k.as_str() == integrator)
+    {
+        eprintln!(
+            "warning: {} was made by {integrator} with seed {seed}, the seed of the compared \
+             renders: their errors are correlated with it; use another --seed",
+            reference_path.display()
+        );
+    }
+    let note = match loaded.spp {
+        Some(spp) => format!("{reference_note}, {spp} spp"),
+        None => reference_note,
+    };
+    let job = CompareJob {
+        data,
+        reference: &loaded.image,
+        integrators: &plan.integrators,
+        unit: plan.unit,
+        budgets: &plan.budgets,
+        settings: plan.settings,
+    };
+    // The bar counts milliseconds of time budgets, or passes of sample budgets.
+    let scale = match plan.unit {
+        BudgetUnit::Seconds => 1000.0,
+        BudgetUnit::Spp => 1.0,
+    };
+    let bar = unit_bar(
+        (job.total_units() * scale).ceil() as u64,
+        "compare {elapsed_precise} [{bar:40}] {percent:>3}% {msg} (eta {eta})",
+        quiet,
+    );
+    let progress = |done: f64, label: &str| {
+        bar.set_position((done * scale) as u64);
+        bar.set_message(label.to_string());
+    };
+    let (results, interrupted) = pool
+        .install(|| crate::compare::run_comparison(&job, stop, &progress))
+        .map_err(|e| anyhow::anyhow!("{}: {e}", reference_path.display()))?;
+    bar.finish_and_clear();
+    Ok(SceneRun::Done(Box::new(Comparison {
+        scene_name: scene_stem(scene),
+        scene_path: scene.to_path_buf(),
+        width,
+        height,
+        threads: pool.current_num_threads(),
+        reference: loaded.image,
+        reference_path,
+        reference_note: note,
+        reference_spp: loaded.spp,
+        integrators: plan.integrators.clone(),
+        unit: plan.unit,
+        budgets: plan.budgets.clone(),
+        results,
+        interrupted,
+    })))
+}
+
+/// `compare --preset thesis`: the three scenes of the study, its budgets, its tables.
+fn thesis_command(args: &CompareArgs) -> Result<i32> {
+    let out_dir = args
+        .output
+        .clone()
+        .unwrap_or_else(|| PathBuf::from("compare").join("thesis"));
+    let integrators = thesis::unbiased_built();
+    let plan = ComparePlan {
+        integrators,
+        unit: BudgetUnit::Spp,
+        budgets: thesis::UNBIASED_SPP.iter().map(|&s| s as f64).collect(),
+        settings: RenderSettings {
+            seed: args.seed,
+            max_depth: args.max_depth.unwrap_or(u32::MAX),
+            ..RenderSettings::default()
+        },
+    };
+    let stop = stop_on_ctrl_c()?;
+    let pool = thread_pool(args.threads.map(|t| t as usize))?;
+    let mut comparisons: Vec<(&'static str, Comparison)> = Vec::new();
+    let mut interrupted = false;
+    for (key, _label) in thesis::SCENES {
+        let scene = args.scenes_dir.join(format!("{key}.ron"));
+        let data = load_scene(&scene)?;
+        let scene_dir = out_dir.join(key);
+        if !args.quiet {
+            eprintln!("{key}: {}", scene.display());
+        }
+        match compare_scene(
+            &scene,
+            data,
+            None,
+            &scene_dir,
+            &plan,
+            args.reference_spp,
+            &stop,
+            &pool,
+            args.quiet,
+        )? {
+            SceneRun::Done(c) => {
+                report::write_report(&c, &scene_dir)?;
+                interrupted |= c.interrupted;
+                comparisons.push((key, *c));
+            }
+            SceneRun::ReferenceInterrupted(note) => {
+                eprintln!("{note}");
+                interrupted = true;
+            }
+        }
+        if interrupted {
+            break;
+        }
+    }
+    let scenes: Vec<thesis::SceneResult> = thesis::SCENES
+        .iter()
+        .map(|(key, _)| thesis::SceneResult {
+            key,
+            comparison: comparisons.iter().find(|(k, _)| k == key).map(|(_, c)| c),
+        })
+        .collect();
+    std::fs::create_dir_all(&out_dir).with_context(|| out_dir.display().to_string())?;
+    let summary = out_dir.join(report::SUMMARY_MD);
+    std::fs::write(
+        &summary,
+        thesis::summary_markdown(&scenes, pool.current_num_threads()),
+    )
+    .with_context(|| summary.display().to_string())?;
+    let csv = out_dir.join(report::RESULTS_CSV);
+    let all: Vec<(&str, &Comparison)> = comparisons.iter().map(|(k, c)| (*k, c)).collect();
+    write_thesis_csv(&all, &csv)?;
+    let mut text = format!(
+        "thesis preset: {} of 3 scenes; wrote {} and {}\n",
+        comparisons.len(),
+        summary.display(),
+        csv.display()
+    );
+    if interrupted {
+        text += "interrupted: the report holds the runs finished before the stop\n";
+    }
+    print_out(&text);
+    Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
+}
+
+/// One CSV of every scene's runs, with a scene column first.
+fn write_thesis_csv(all: &[(&str, &Comparison)], path: &Path) -> Result<()> {
+    let mut rows = Vec::new();
+    let mut scenes = Vec::new();
+    for (key, c) in all {
+        for r in &c.results {
+            rows.push(r.clone());
+            scenes.push(*key);
+        }
+    }
+    report::write_csv_with_scenes(&rows, BudgetUnit::Spp, path, &scenes)?;
     Ok(())
 }

@@ -9,6 +9,7 @@
 pub mod accel;
 pub mod bsdf;
 pub mod cli;
+pub mod compare;
 pub mod components;
 pub mod film;
 pub mod integrators;
@@ -16,6 +17,7 @@ pub mod math;
 pub mod metrics;
 pub mod path;
 pub mod pipeline;
+pub mod reference;
 pub mod sampling;
 pub mod scene;
 

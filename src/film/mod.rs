@@ -56,6 +56,51 @@ impl Film {
         self.splat[pixel] += value.as_dvec3();
     }
 
+    /// Rebuilds a film from its per-pixel sums, sample counts and splat sums (e.g. a
+    /// checkpoint; `splat` may be empty for a film without splats); None when their lengths
+    /// do not match the size.
+    pub fn from_parts(
+        width: usize,
+        height: usize,
+        sum: Vec<DVec3>,
+        samples: Vec<u64>,
+        splat: Vec<DVec3>,
+        nonfinite: u64,
+    ) -> Option<Film> {
+        let pixels = width.checked_mul(height)?;
+        let splat = if splat.iter().all(|v| *v == DVec3::ZERO) {
+            Vec::new()
+        } else {
+            splat
+        };
+        (sum.len() == pixels
+            && samples.len() == pixels
+            && (splat.is_empty() || splat.len() == pixels))
+            .then_some(Film {
+                width,
+                height,
+                sum,
+                samples,
+                splat,
+                nonfinite,
+            })
+    }
+
+    /// Per-pixel splat sums (zero for every pixel of a film without splats).
+    pub fn splat_sum(&self, pixel: usize) -> DVec3 {
+        self.splat.get(pixel).copied().unwrap_or(DVec3::ZERO)
+    }
+
+    /// Per-pixel sums of the finite samples, row 0 first.
+    pub fn sums(&self) -> &[DVec3] {
+        &self.sum
+    }
+
+    /// Per-pixel sample counts (rejected non-finite samples included).
+    pub fn sample_counts(&self) -> &[u64] {
+        &self.samples
+    }
+
     pub fn total_samples(&self) -> u64 {
         self.samples.iter().sum()
     }
@@ -127,8 +172,31 @@ impl Image {
 
     /// Writes float32 linear RGB, unscaled.
     pub fn write_exr(&self, path: &Path) -> Result<(), ImageError> {
+        self.write_exr_with_attributes(path, &[])
+    }
+
+    /// Writes float32 linear RGB, unscaled, with text attributes in the header (e.g. a
+    /// reference's sample count and seed). Non-ASCII characters are written as '?'.
+    pub fn write_exr_with_attributes(
+        &self,
+        path: &Path,
+        attributes: &[(&str, String)],
+    ) -> Result<(), ImageError> {
         create_parent(path)?;
         use exr::prelude::*;
+        let mut layer_attributes = LayerAttributes::default();
+        for (name, value) in attributes {
+            let ascii = |s: &str| -> Text {
+                let cleaned: String = s
+                    .chars()
+                    .map(|c| if c.is_ascii() { c } else { '?' })
+                    .collect();
+                Text::new_or_none(cleaned.as_str()).unwrap_or_default()
+            };
+            layer_attributes
+                .other
+                .insert(ascii(name), AttributeValue::Text(ascii(value)));
+        }
         let channels = SpecificChannels::rgb(|position: Vec2<usize>| {
             let p = self.pixels[position.y() * self.width + position.x()];
             (p.x, p.y, p.z)
@@ -137,7 +205,7 @@ impl Image {
         // pixels, never on which compression thread finished first.
         let layer = Layer::new(
             (self.width, self.height),
-            LayerAttributes::default(),
+            layer_attributes,
             Encoding::SMALL_LOSSLESS,
             channels,
         );
@@ -159,6 +227,28 @@ impl Image {
         )
         .map_err(|e| image_error(path, format!("cannot read EXR: {e}")))?;
         Ok(image.layer_data.channel_data.pixels)
+    }
+
+    /// The text attributes in the header of an EXR file's first layer, by name.
+    pub fn read_exr_attributes(
+        path: &Path,
+    ) -> Result<std::collections::BTreeMap<String, String>, ImageError> {
+        let meta = exr::meta::MetaData::read_from_file(path, false)
+            .map_err(|e| image_error(path, format!("cannot read EXR: {e}")))?;
+        let mut attributes = std::collections::BTreeMap::new();
+        if let Some(header) = meta.headers.first() {
+            for (name, value) in header
+                .shared_attributes
+                .other
+                .iter()
+                .chain(&header.own_attributes.other)
+            {
+                if let exr::meta::attribute::AttributeValue::Text(text) = value {
+                    attributes.insert(name.to_string(), text.to_string());
+                }
+            }
+        }
+        Ok(attributes)
     }
 
     /// Writes an 8-bit sRGB preview (values clamped to [0, 1]).

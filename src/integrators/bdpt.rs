@@ -23,7 +23,7 @@
 use crate::components::{Connections, Hits, PathVertices, Rays, ShadowRays, Walkers};
 use crate::film::{Film, Image};
 use crate::integrators::pt::{ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL, Wave};
-use crate::integrators::{Budget, Control, RenderOutcome, SceneData, WavePlan};
+use crate::integrators::{Budget, Control, RenderOutcome, Resume, SceneData, WavePlan};
 use crate::path::MisHeuristic;
 use crate::pipeline::{Graph, Node, Stats};
 use crate::sampling::SampleKey;
@@ -285,29 +285,41 @@ pub fn roulette_applies(d: usize) -> bool {
     d >= ROULETTE_DEPTH as usize
 }
 
-/// Renders with BDPT until the budget is spent or a stop is asked for.
+/// Renders with BDPT until the budget is spent or a stop is asked for; with
+/// `settings.strategy_images`, the outcome's layers hold each strategy's image (`s{s}_t{t}`).
 pub fn render(
     data: Arc<SceneData>,
     settings: BdptSettings,
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    render_with_images(data, settings, budget, control).0
+    render_from(data, settings, budget, control, None)
 }
 
-/// As `render`, also returning each strategy's image (named `s{s}_t{t}`) when
-/// `settings.strategy_images` is set.
-pub fn render_with_images(
+/// As `render`, continuing from the finished passes of `from` when given (see
+/// `integrators::resume`; strategy images cover the new passes only).
+pub fn render_from(
     data: Arc<SceneData>,
     settings: BdptSettings,
     budget: Budget,
     control: &Control,
-) -> (RenderOutcome, Vec<(String, Image)>) {
+    from: Option<Resume>,
+) -> RenderOutcome {
     let cam = data.scene.camera;
     let pixels = cam.width as u64 * cam.height as u64;
     let graph = graph();
-    let mut plan = WavePlan::new(pixels, budget, WAVEFRONT);
+    let first_pass = from.as_ref().map_or(0, |r| r.passes);
+    let mut plan = WavePlan::starting_at(pixels, budget, WAVEFRONT, first_pass);
     let mut state = BdptState::new(data, settings, plan.capacity());
+    if let Some(from) = from {
+        assert!(
+            from.film.width == cam.width as usize
+                && from.film.height == cam.height as usize
+                && from.film.total_samples() == from.passes * pixels,
+            "a resumed film must hold whole passes of this camera's image"
+        );
+        state.film = from.film;
+    }
     let mut stats = Stats::default();
     while let Some((first, len)) = plan.next_wave(control) {
         state.wave = Wave { first, len };
@@ -315,21 +327,21 @@ pub fn render_with_images(
         (control.progress)(plan.passes_done(), plan.total_passes());
     }
     let interrupted = control.stopped() && !plan.budget_spent();
-    let passes = plan.passes_done().max(1) as f64;
+    let new_passes = (plan.passes_done() - first_pass).max(1) as f64;
     let bytes_per_path = state.bytes_per_sample();
-    let images = state
+    let layers = state
         .strategy_sums
         .iter()
         .map(|(&(s, t), sums)| {
             let image = Image {
                 width: cam.width as usize,
                 height: cam.height as usize,
-                pixels: sums.iter().map(|v| (*v / passes).as_vec3()).collect(),
+                pixels: sums.iter().map(|v| (*v / new_passes).as_vec3()).collect(),
             };
             (format!("s{s}_t{t}"), image)
         })
         .collect();
-    let outcome = RenderOutcome {
+    RenderOutcome {
         samples: plan.next,
         passes: plan.passes_done(),
         wall: plan.elapsed(),
@@ -339,8 +351,8 @@ pub fn render_with_images(
         systems: graph.system_names(),
         bytes_per_path,
         wavefront: plan.capacity(),
-    };
-    (outcome, images)
+        layers,
+    }
 }
 
 /// The subpaths of samples `first..first + len` (global sample ids), camera and light, as the

@@ -21,8 +21,173 @@ impl SceneData {
 
 use crate::film::Film;
 use crate::pipeline::Stats;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+
+/// The integrators built into this binary. Adding one takes a variant, its name in `as_str`
+/// and `description`, its entry in `BUILT`, and a match arm in `run`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum IntegratorKind {
+    /// Path tracing with next-event estimation and MIS.
+    Pt,
+    /// Bidirectional path tracing: every strategy (s, t), MIS-weighted.
+    Bdpt,
+}
+
+/// Every integrator name the project knows, built or planned, in the order reports list them.
+pub const KNOWN_INTEGRATORS: [&str; 6] = ["pt", "bdpt", "pm", "ppm", "sppm", "mlt"];
+
+/// A name that is not an integrator of this binary.
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum IntegratorNameError {
+    #[error("integrator \"{0}\" is not built yet (built: {built})", built = built_names())]
+    NotBuilt(String),
+    #[error(
+        "unknown integrator \"{0}\" (known: {known}; built: {built})",
+        known = KNOWN_INTEGRATORS.join(", "),
+        built = built_names()
+    )]
+    Unknown(String),
+}
+
+fn built_names() -> String {
+    IntegratorKind::BUILT
+        .iter()
+        .map(|k| k.as_str())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+impl IntegratorKind {
+    /// The integrators this binary can run, in the order of `KNOWN_INTEGRATORS`.
+    pub const BUILT: &'static [IntegratorKind] = &[IntegratorKind::Pt, IntegratorKind::Bdpt];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            IntegratorKind::Pt => "pt",
+            IntegratorKind::Bdpt => "bdpt",
+        }
+    }
+
+    pub fn description(self) -> &'static str {
+        match self {
+            IntegratorKind::Pt => "path tracing with next-event estimation and MIS",
+            IntegratorKind::Bdpt => "bidirectional path tracing, every strategy MIS-weighted",
+        }
+    }
+
+    /// Parses an integrator name (case-insensitive). A planned but unbuilt name is
+    /// `NotBuilt`, anything else unknown is `Unknown`.
+    pub fn from_name(name: &str) -> Result<IntegratorKind, IntegratorNameError> {
+        let lower = name.trim().to_ascii_lowercase();
+        if let Some(&kind) = Self::BUILT.iter().find(|k| k.as_str() == lower) {
+            Ok(kind)
+        } else if KNOWN_INTEGRATORS.contains(&lower.as_str()) {
+            Err(IntegratorNameError::NotBuilt(lower))
+        } else {
+            Err(IntegratorNameError::Unknown(name.to_string()))
+        }
+    }
+}
+
+impl std::str::FromStr for IntegratorKind {
+    type Err = IntegratorNameError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        IntegratorKind::from_name(s)
+    }
+}
+
+impl std::fmt::Display for IntegratorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// Settings of a render; each integrator reads those that concern it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RenderSettings {
+    pub seed: u64,
+    /// Maximum number of scattering events; `u32::MAX` for unlimited.
+    pub max_depth: u32,
+    /// How bidirectional strategies are weighted (bdpt).
+    pub mis: crate::path::MisHeuristic,
+    /// Keep each strategy's weighted contribution as its own image (bdpt).
+    pub strategy_images: bool,
+}
+
+impl Default for RenderSettings {
+    fn default() -> Self {
+        RenderSettings {
+            seed: 0,
+            max_depth: u32::MAX,
+            mis: crate::path::MisHeuristic::Power,
+            strategy_images: false,
+        }
+    }
+}
+
+/// A render to continue: the film of the passes already done (0..passes). Samples are a
+/// pure function of (seed, pixel, sample index, dimension) and the film adds them in global
+/// sample order, so continuing gives, bit for bit, the film of one uninterrupted render.
+pub struct Resume {
+    pub film: Film,
+    pub passes: u64,
+}
+
+/// Renders a scene with an integrator from nothing.
+pub fn render(
+    kind: IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &RenderSettings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    run(kind, data, settings, budget, control, None)
+}
+
+/// Continues a render from its finished passes: a sample budget counts the passes already
+/// done (`SamplesPerPixel(n)` ends at pass n), a time budget counts from now. The outcome's
+/// film, passes and samples are totals, resumed passes included.
+pub fn resume(
+    kind: IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &RenderSettings,
+    budget: Budget,
+    control: &Control,
+    from: Resume,
+) -> RenderOutcome {
+    run(kind, data, settings, budget, control, Some(from))
+}
+
+/// The one dispatch: each integrator's arm renders from `from` when given (the passes it
+/// holds, then on), as `reference` needs to resume; see `pt::render_from`.
+fn run(
+    kind: IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &RenderSettings,
+    budget: Budget,
+    control: &Control,
+    from: Option<Resume>,
+) -> RenderOutcome {
+    match kind {
+        IntegratorKind::Pt => {
+            let pt_settings = pt::PtSettings {
+                seed: settings.seed,
+                max_depth: settings.max_depth,
+            };
+            pt::render_from(data, pt_settings, budget, control, from)
+        }
+        IntegratorKind::Bdpt => {
+            let bdpt_settings = bdpt::BdptSettings {
+                mis: settings.mis,
+                strategy_images: settings.strategy_images,
+                ..bdpt::BdptSettings::new(settings.seed, settings.max_depth)
+            };
+            bdpt::render_from(data, bdpt_settings, budget, control, from)
+        }
+    }
+}
 
 /// How long a render runs: samples per pixel, or wall seconds (whole passes).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -44,6 +209,8 @@ pub struct RenderOutcome {
     pub systems: Vec<&'static str>,
     pub bytes_per_path: usize,
     pub wavefront: usize,
+    /// Further images the integrator made, by name (BDPT's per-strategy images).
+    pub layers: Vec<(String, crate::film::Image)>,
 }
 
 impl RenderOutcome {
@@ -69,6 +236,10 @@ impl Control<'_> {
     }
 }
 
+/// Paths per wave under a time budget (rounded up to whole passes, at most the wavefront):
+/// enough to keep the cores busy, small enough that the time is checked often.
+pub const TIMED_WAVE_PATHS: u64 = 1 << 16;
+
 /// Plans waves over the global sample ids: whole passes per wave when a pass fits in the
 /// wavefront, else a pass split into wavefront-sized waves. Stops only at pass boundaries.
 pub(crate) struct WavePlan {
@@ -76,12 +247,23 @@ pub(crate) struct WavePlan {
     pub wave_len: u64,
     pub total: Option<u64>,
     pub next: u64,
+    /// The first sample id of this render (pass 0, or where a resumed render starts).
+    first: u64,
     start: Instant,
     budget: Budget,
 }
 
 impl WavePlan {
+    /// A plan from pass 0 (every integrator that does not resume).
+    #[allow(dead_code)]
     pub fn new(pixels: u64, budget: Budget, wavefront: usize) -> WavePlan {
+        WavePlan::starting_at(pixels, budget, wavefront, 0)
+    }
+
+    /// A plan whose first wave starts at pass `first_pass` (a resumed render); a sample
+    /// budget still counts from pass 0.
+    pub fn starting_at(pixels: u64, budget: Budget, wavefront: usize, first_pass: u64) -> WavePlan {
+        let next = first_pass * pixels;
         let wave_len = if pixels <= wavefront as u64 {
             (wavefront as u64 / pixels) * pixels
         } else {
@@ -91,12 +273,19 @@ impl WavePlan {
             Budget::SamplesPerPixel(spp) => Some(spp * pixels),
             Budget::Seconds(_) => None,
         };
-        let wave_len = total.map_or(wave_len, |t| wave_len.min(t));
+        let wave_len = match total {
+            Some(t) => wave_len.min(t.saturating_sub(next)),
+            // The clock is read between waves: a time budget takes waves of about
+            // TIMED_WAVE_PATHS paths (whole passes), so it overshoots by a fraction of the
+            // full wavefront's time at most.
+            None => wave_len.min(TIMED_WAVE_PATHS.div_ceil(pixels) * pixels),
+        };
         WavePlan {
             pixels,
             wave_len,
             total,
-            next: 0,
+            next,
+            first: next,
             start: Instant::now(),
             budget,
         }
@@ -115,7 +304,9 @@ impl WavePlan {
             if control.stopped() {
                 return None;
             }
+            // A time budget renders at least one wave, however long the setup took.
             if let Budget::Seconds(s) = self.budget
+                && self.next > self.first
                 && self.start.elapsed().as_secs_f64() >= s
             {
                 return None;

@@ -273,12 +273,34 @@ pub fn render(
     budget: crate::integrators::Budget,
     control: &crate::integrators::Control,
 ) -> crate::integrators::RenderOutcome {
+    render_from(data, settings, budget, control, None)
+}
+
+/// As `render`, but continuing from the finished passes of `from` when given (see
+/// `integrators::resume`).
+pub fn render_from(
+    data: Arc<SceneData>,
+    settings: PtSettings,
+    budget: crate::integrators::Budget,
+    control: &crate::integrators::Control,
+    from: Option<crate::integrators::Resume>,
+) -> crate::integrators::RenderOutcome {
     use crate::integrators::{RenderOutcome, WavePlan};
     let cam = data.scene.camera;
     let pixels = cam.width as u64 * cam.height as u64;
     let graph = graph(&data);
-    let mut plan = WavePlan::new(pixels, budget, WAVEFRONT);
+    let first_pass = from.as_ref().map_or(0, |r| r.passes);
+    let mut plan = WavePlan::starting_at(pixels, budget, WAVEFRONT, first_pass);
     let mut state = PtState::new(data, settings, plan.capacity());
+    if let Some(from) = from {
+        assert!(
+            from.film.width == cam.width as usize
+                && from.film.height == cam.height as usize
+                && from.film.total_samples() == from.passes * pixels,
+            "a resumed film must hold whole passes of this camera's image"
+        );
+        state.film = from.film;
+    }
     let mut stats = crate::pipeline::Stats::default();
     let mut interrupted = false;
     while let Some((first, len)) = plan.next_wave(control) {
@@ -300,5 +322,6 @@ pub fn render(
         systems: graph.system_names(),
         bytes_per_path: PtState::bytes_per_path(),
         wavefront: plan.capacity(),
+        layers: Vec::new(),
     }
 }

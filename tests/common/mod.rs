@@ -79,12 +79,14 @@ pub fn render_bdpt(
         stop: &stop,
         progress: &|_, _| {},
     };
-    stagelight::integrators::bdpt::render_with_images(
+    let mut outcome = stagelight::integrators::bdpt::render(
         Arc::new(SceneData::new(scene)),
         settings,
         Budget::SamplesPerPixel(spp),
         &control,
-    )
+    );
+    let layers = std::mem::take(&mut outcome.layers);
+    (outcome, layers)
 }
 
 /// Mean and standard error of each channel's image mean over independent renders (one per

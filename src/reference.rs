@@ -1,0 +1,570 @@
+//! References: long renders that stop and resume without losing or changing a sample.
+//!
+//! A reference `REF.exr` is rendered in chunks of whole passes. After every chunk, the film's
+//! f64 sums and sample counts go to a checkpoint beside it, `REF.exr.checkpoint`, together
+//! with what produced them (integrator, seed, depth cap, a fingerprint of the prepared scene);
+//! then the EXR (float32, with its sample count and seed as header attributes) and a PNG
+//! preview are written. Both files are written to a temporary name and renamed, so an
+//! interruption at any moment leaves the previous complete pair.
+//!
+//! Running the same reference again continues from the checkpoint's passes. Samples are a pure
+//! function of (seed, pixel, sample index, dimension) and the film adds them in global sample
+//! order, so the result equals an uninterrupted render bit for bit. A checkpoint made with a
+//! different integrator, seed, depth cap or scene is refused rather than mixed in.
+//!
+//! The checkpoint file: the line `stagelight checkpoint 2`, one line of RON (the header
+//! below), then per pixel, row 0 first, the three f64 sums, the u64 sample count and the three
+//! f64 splat sums (light tracing's, zero for PT) (little-endian), then an FNV-1a 64 checksum
+//! of those bytes (u64, little-endian).
+
+use crate::film::{Film, Image};
+use crate::integrators::{
+    Budget, Control, IntegratorKind, RenderSettings, Resume, SceneData, resume,
+};
+use glam::DVec3;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+const MAGIC: &str = "stagelight checkpoint 2\n";
+
+/// Bytes per pixel in a checkpoint: the sum (3 x f64), the sample count (u64) and the splat
+/// sum (3 x f64, light tracing's contributions), little-endian.
+const PIXEL_BYTES: usize = 56;
+
+/// The EXR header attribute of a reference: one text attribute holding
+/// `spp=N; seed=S; integrator=NAME; maxDepth=D; scene=PATH` (one attribute, because the EXR
+/// writer stores custom attributes in hash order: one keeps the file's bytes reproducible).
+pub const ATTRIBUTE: &str = "stagelight";
+
+/// The fields of a reference's `stagelight` attribute, by name (empty for other EXRs).
+pub fn reference_attributes(
+    path: &Path,
+) -> Result<std::collections::BTreeMap<String, String>, ReferenceError> {
+    let attributes = Image::read_exr_attributes(path).map_err(|e| error(path, e.message))?;
+    Ok(attributes
+        .get(ATTRIBUTE)
+        .map(|text| {
+            // The scene comes last: its path may hold anything but a newline.
+            text.splitn(5, "; ")
+                .filter_map(|field| field.split_once('='))
+                .map(|(k, v)| (k.to_string(), v.to_string()))
+                .collect()
+        })
+        .unwrap_or_default())
+}
+
+/// The seed references use unless told otherwise: far from the small seeds of ordinary
+/// renders, so a render compared against a reference never shares its random numbers.
+pub const DEFAULT_REFERENCE_SEED: u64 = 0x5eed_0000_0000_0001;
+
+/// What a checkpoint records besides the film.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct CheckpointHeader {
+    pub integrator: String,
+    pub seed: u64,
+    pub max_depth: u32,
+    /// The scene file, as given when the reference was started (for messages only).
+    pub scene: String,
+    /// `scene_fingerprint` of the prepared scene, as 16 hex digits.
+    pub scene_fingerprint: String,
+    pub width: usize,
+    pub height: usize,
+    /// Finished passes (samples per pixel) in the film.
+    pub passes: u64,
+    /// Wall seconds spent rendering them, over all runs.
+    pub seconds: f64,
+    /// Non-finite samples rejected so far.
+    pub nonfinite: u64,
+}
+
+/// A checkpoint: its header and the film of its passes.
+pub struct Checkpoint {
+    pub header: CheckpointHeader,
+    pub film: Film,
+}
+
+/// A reference could not be made, resumed or read.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {message}", .path.display())]
+pub struct ReferenceError {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+fn error(path: &Path, message: impl std::fmt::Display) -> ReferenceError {
+    ReferenceError {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
+}
+
+/// The checkpoint beside a reference EXR: `REF.exr.checkpoint`.
+pub fn checkpoint_path(reference: &Path) -> PathBuf {
+    let mut name = reference.as_os_str().to_owned();
+    name.push(".checkpoint");
+    PathBuf::from(name)
+}
+
+/// FNV-1a, 64 bits: a small stable hash (std's hasher may change between releases).
+#[derive(Clone, Copy)]
+struct Fnv1a(u64);
+
+impl Fnv1a {
+    fn new() -> Fnv1a {
+        Fnv1a(0xcbf2_9ce4_8422_2325)
+    }
+    fn update(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= b as u64;
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+}
+
+impl std::fmt::Write for Fnv1a {
+    fn write_str(&mut self, s: &str) -> std::fmt::Result {
+        self.update(s.as_bytes());
+        Ok(())
+    }
+}
+
+/// A fingerprint of what a render depends on in a prepared scene: camera, triangles,
+/// materials and emitters (their Debug text, which prints floats exactly). A scene edited
+/// after a reference was started, mesh files included, gets a different fingerprint.
+pub fn scene_fingerprint(data: &SceneData) -> u64 {
+    use std::fmt::Write;
+    let s = &data.scene;
+    let mut hash = Fnv1a::new();
+    let _ = write!(
+        hash,
+        "{:?}{:?}{:?}{:?}",
+        s.camera, s.triangles, s.materials, s.emitters
+    );
+    hash.0
+}
+
+impl Checkpoint {
+    /// Writes the checkpoint to a temporary file and renames it over `path`.
+    pub fn write(&self, path: &Path) -> Result<(), ReferenceError> {
+        let header = ron::to_string(&self.header).map_err(|e| error(path, e))?;
+        let pixels = self.film.width * self.film.height;
+        let mut bytes =
+            Vec::with_capacity(MAGIC.len() + header.len() + 1 + pixels * PIXEL_BYTES + 8);
+        bytes.extend_from_slice(MAGIC.as_bytes());
+        bytes.extend_from_slice(header.as_bytes());
+        bytes.push(b'\n');
+        let payload_start = bytes.len();
+        for (i, (sum, &count)) in self
+            .film
+            .sums()
+            .iter()
+            .zip(self.film.sample_counts())
+            .enumerate()
+        {
+            for v in [sum.x, sum.y, sum.z] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+            bytes.extend_from_slice(&count.to_le_bytes());
+            let splat = self.film.splat_sum(i);
+            for v in [splat.x, splat.y, splat.z] {
+                bytes.extend_from_slice(&v.to_le_bytes());
+            }
+        }
+        let mut hash = Fnv1a::new();
+        hash.update(&bytes[payload_start..]);
+        bytes.extend_from_slice(&hash.0.to_le_bytes());
+        write_atomically(path, |tmp| {
+            std::fs::write(tmp, &bytes).map_err(|e| error(tmp, e))
+        })
+    }
+
+    /// Reads a checkpoint; a damaged or foreign file is an error naming what is wrong.
+    pub fn read(path: &Path) -> Result<Checkpoint, ReferenceError> {
+        let bytes = std::fs::read(path).map_err(|e| error(path, e))?;
+        let damaged = |what: &str| {
+            error(
+                path,
+                format!("damaged checkpoint ({what}); delete it to start the reference over"),
+            )
+        };
+        let rest = bytes
+            .strip_prefix(MAGIC.as_bytes())
+            .ok_or_else(|| error(path, "not a stagelight checkpoint"))?;
+        let newline = rest
+            .iter()
+            .position(|&b| b == b'\n')
+            .ok_or_else(|| damaged("no header line"))?;
+        let header_text =
+            std::str::from_utf8(&rest[..newline]).map_err(|_| damaged("header is not text"))?;
+        let header: CheckpointHeader =
+            ron::from_str(header_text).map_err(|e| damaged(&format!("header: {e}")))?;
+        let payload = &rest[newline + 1..];
+        let pixels = header
+            .width
+            .checked_mul(header.height)
+            .ok_or_else(|| damaged("image size"))?;
+        if payload.len() != pixels * PIXEL_BYTES + 8 {
+            return Err(damaged(&format!(
+                "{} bytes of pixel data where {}x{} pixels need {}",
+                payload.len(),
+                header.width,
+                header.height,
+                pixels * PIXEL_BYTES + 8
+            )));
+        }
+        let (data, checksum) = payload.split_at(pixels * PIXEL_BYTES);
+        let mut hash = Fnv1a::new();
+        hash.update(data);
+        if hash.0.to_le_bytes() != checksum {
+            return Err(damaged("checksum mismatch"));
+        }
+        let word = |chunk: &[u8], i: usize| -> [u8; 8] {
+            chunk[i * 8..i * 8 + 8].try_into().expect("8 bytes")
+        };
+        let mut sum = Vec::with_capacity(pixels);
+        let mut samples = Vec::with_capacity(pixels);
+        let mut splat = Vec::with_capacity(pixels);
+        for chunk in data.chunks_exact(PIXEL_BYTES) {
+            let f = |i| f64::from_le_bytes(word(chunk, i));
+            sum.push(DVec3::new(f(0), f(1), f(2)));
+            samples.push(u64::from_le_bytes(word(chunk, 3)));
+            splat.push(DVec3::new(f(4), f(5), f(6)));
+        }
+        let total: u64 = samples.iter().sum();
+        if samples.iter().any(|&n| n != header.passes) {
+            return Err(damaged(&format!(
+                "{total} samples where {} passes of {pixels} pixels were recorded",
+                header.passes
+            )));
+        }
+        let film = Film::from_parts(
+            header.width,
+            header.height,
+            sum,
+            samples,
+            splat,
+            header.nonfinite,
+        )
+        .ok_or_else(|| damaged("image size"))?;
+        Ok(Checkpoint { header, film })
+    }
+}
+
+/// Runs `write` on a temporary path beside `path`, then renames it over `path`, so readers
+/// see the old file or the new one, never half of one.
+fn write_atomically(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), ReferenceError>,
+) -> Result<(), ReferenceError> {
+    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir).map_err(|e| error(path, e))?;
+    }
+    let mut tmp = path.as_os_str().to_owned();
+    tmp.push(".partial");
+    let tmp = PathBuf::from(tmp);
+    write(&tmp)?;
+    std::fs::rename(&tmp, path).map_err(|e| error(path, e))
+}
+
+/// How long a reference renders, in total over all its runs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ReferenceBudget {
+    SamplesPerPixel(u64),
+    Seconds(f64),
+}
+
+/// A reference to make or continue.
+pub struct ReferenceJob<'a> {
+    /// The scene file (for messages and the EXR's attributes).
+    pub scene_path: &'a Path,
+    pub data: Arc<SceneData>,
+    pub integrator: IntegratorKind,
+    pub settings: RenderSettings,
+    pub budget: ReferenceBudget,
+    /// The EXR to write; the checkpoint and a PNG preview go beside it.
+    pub output: &'a Path,
+    /// Wall time between checkpoints (whole passes; at least one pass per checkpoint).
+    pub checkpoint_every: Duration,
+}
+
+/// What a reference run did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferenceOutcome {
+    /// Passes found in the checkpoint at the start (0 for a new reference).
+    pub passes_before: u64,
+    /// Passes in the reference now.
+    pub passes: u64,
+    /// Render seconds over all runs.
+    pub seconds: f64,
+    /// Render seconds of this run.
+    pub seconds_this_run: f64,
+    pub nonfinite: u64,
+    pub interrupted: bool,
+    /// True when the checkpoint already met the budget and nothing was rendered.
+    pub already_complete: bool,
+    pub width: usize,
+    pub height: usize,
+}
+
+/// Makes a reference, or continues one from its checkpoint, until its budget is met or `stop`
+/// is set; the files on disk always hold the finished passes. `progress(done, target)` follows
+/// the budget's unit (passes or render seconds, over all runs).
+pub fn render_reference(
+    job: &ReferenceJob,
+    stop: &AtomicBool,
+    progress: &(dyn Fn(f64, f64) + Sync),
+) -> Result<ReferenceOutcome, ReferenceError> {
+    let checkpoint_file = checkpoint_path(job.output);
+    let cam = job.data.scene.camera;
+    let (width, height) = (cam.width as usize, cam.height as usize);
+    let fingerprint = format!("{:016x}", scene_fingerprint(&job.data));
+    let mut header = CheckpointHeader {
+        integrator: job.integrator.as_str().to_string(),
+        seed: job.settings.seed,
+        max_depth: job.settings.max_depth,
+        scene: job.scene_path.display().to_string(),
+        scene_fingerprint: fingerprint,
+        width,
+        height,
+        passes: 0,
+        seconds: 0.0,
+        nonfinite: 0,
+    };
+    let mut film = if checkpoint_file.exists() {
+        let checkpoint = Checkpoint::read(&checkpoint_file)?;
+        check_compatible(&checkpoint.header, &header, &checkpoint_file)?;
+        header = checkpoint.header;
+        checkpoint.film
+    } else {
+        if job.output.exists() {
+            return Err(error(
+                job.output,
+                format!(
+                    "exists without its checkpoint ({}), so it cannot be resumed: delete it or \
+                     choose another output",
+                    checkpoint_file.display()
+                ),
+            ));
+        }
+        Film::new(width, height)
+    };
+    let passes_before = header.passes;
+    let done = |h: &CheckpointHeader| match job.budget {
+        ReferenceBudget::SamplesPerPixel(spp) => h.passes >= spp,
+        ReferenceBudget::Seconds(s) => h.seconds >= s,
+    };
+    let already_complete = done(&header);
+    // The checkpoint alone may exist when the previous run stopped between its two renames.
+    if already_complete && !job.output.exists() {
+        write_images(job, &header, &film)?;
+    }
+
+    let mut seconds_this_run = 0.0;
+    let mut interrupted = false;
+    let mut seconds_per_pass: Option<f64> = None;
+    let every = job.checkpoint_every.as_secs_f64();
+    while !done(&header) {
+        if stop.load(Ordering::SeqCst) {
+            interrupted = true;
+            break;
+        }
+        // One pass first to learn the pass time, then about `every` seconds of passes (a
+        // time budget too is cut into whole passes, so every chunk makes progress).
+        let passes_in =
+            |seconds: f64| seconds_per_pass.map_or(1, |t| (seconds / t.max(1e-9)).round() as u64);
+        let chunk = match job.budget {
+            ReferenceBudget::SamplesPerPixel(spp) => passes_in(every).clamp(1, spp - header.passes),
+            ReferenceBudget::Seconds(s) => passes_in((s - header.seconds).min(every)).max(1),
+        };
+        let from = Resume {
+            film,
+            passes: header.passes,
+        };
+        let (chunk_start, seconds_before) = (Instant::now(), header.seconds);
+        let on_wave = |passes: u64, _: Option<u64>| match job.budget {
+            ReferenceBudget::SamplesPerPixel(spp) => progress(passes as f64, spp as f64),
+            ReferenceBudget::Seconds(s) => {
+                progress(seconds_before + chunk_start.elapsed().as_secs_f64(), s)
+            }
+        };
+        let control = Control {
+            stop,
+            progress: &on_wave,
+        };
+        let outcome = resume(
+            job.integrator,
+            job.data.clone(),
+            &job.settings,
+            Budget::SamplesPerPixel(header.passes + chunk),
+            &control,
+            from,
+        );
+        let wall = outcome.wall.as_secs_f64();
+        let new_passes = outcome.passes - header.passes;
+        if new_passes > 0 {
+            seconds_per_pass = Some(wall / new_passes as f64);
+        }
+        film = outcome.film;
+        header.passes = outcome.passes;
+        header.seconds += wall;
+        header.nonfinite = film.nonfinite;
+        seconds_this_run += wall;
+        if new_passes > 0 {
+            Checkpoint {
+                header: header.clone(),
+                film: film.clone(),
+            }
+            .write(&checkpoint_file)?;
+            write_images(job, &header, &film)?;
+        }
+        if outcome.interrupted {
+            interrupted = true;
+            break;
+        }
+    }
+    Ok(ReferenceOutcome {
+        passes_before,
+        passes: header.passes,
+        seconds: header.seconds,
+        seconds_this_run,
+        nonfinite: header.nonfinite,
+        interrupted,
+        already_complete,
+        width,
+        height,
+    })
+}
+
+/// A checkpoint continues only the render that made it.
+fn check_compatible(
+    found: &CheckpointHeader,
+    wanted: &CheckpointHeader,
+    path: &Path,
+) -> Result<(), ReferenceError> {
+    let depth = |d: u32| {
+        if d == u32::MAX {
+            "unlimited".to_string()
+        } else {
+            d.to_string()
+        }
+    };
+    let mismatch = if found.integrator != wanted.integrator {
+        Some(format!(
+            "integrator {}, not {} (use --integrator {})",
+            found.integrator, wanted.integrator, found.integrator
+        ))
+    } else if found.seed != wanted.seed {
+        Some(format!(
+            "seed {}, not {} (use --seed {})",
+            found.seed, wanted.seed, found.seed
+        ))
+    } else if found.max_depth != wanted.max_depth {
+        Some(format!(
+            "maximum depth {}, not {}",
+            depth(found.max_depth),
+            depth(wanted.max_depth)
+        ))
+    } else if (found.width, found.height) != (wanted.width, wanted.height) {
+        Some(format!(
+            "an image of {}x{}, not {}x{}",
+            found.width, found.height, wanted.width, wanted.height
+        ))
+    } else if found.scene_fingerprint != wanted.scene_fingerprint {
+        Some(format!(
+            "a different scene ({} as it was then; now {})",
+            found.scene, wanted.scene
+        ))
+    } else {
+        None
+    };
+    match mismatch {
+        Some(what) => Err(error(
+            path,
+            format!(
+                "this checkpoint was made with {what}; it cannot continue this render \
+                 (delete it and its EXR to start over, or choose another output)"
+            ),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// The EXR with its provenance attributes, and an sRGB PNG preview beside it.
+fn write_images(
+    job: &ReferenceJob,
+    header: &CheckpointHeader,
+    film: &Film,
+) -> Result<(), ReferenceError> {
+    let image = film.image();
+    let depth = if header.max_depth == u32::MAX {
+        "unlimited".to_string()
+    } else {
+        header.max_depth.to_string()
+    };
+    let attributes = [(
+        ATTRIBUTE,
+        format!(
+            "spp={}; seed={}; integrator={}; maxDepth={depth}; scene={}",
+            header.passes,
+            header.seed,
+            header.integrator,
+            header.scene.replace('\n', " ")
+        ),
+    )];
+    write_atomically(job.output, |tmp| {
+        image
+            .write_exr_with_attributes(tmp, &attributes)
+            .map_err(|e| error(job.output, e.message))
+    })?;
+    let png = job.output.with_extension("png");
+    write_atomically(&png, |tmp| {
+        image.write_png(tmp).map_err(|e| error(&png, e.message))
+    })
+}
+
+/// A reference image with what its header says about it.
+pub struct LoadedReference {
+    pub image: Image,
+    /// Samples per pixel and seed from the header, when it was made by `reference`.
+    pub spp: Option<u64>,
+    pub seed: Option<u64>,
+    pub integrator: Option<String>,
+}
+
+/// Reads a reference EXR and checks it: every value finite, the size `width` x `height`.
+pub fn load_reference(
+    path: &Path,
+    width: usize,
+    height: usize,
+) -> Result<LoadedReference, ReferenceError> {
+    let image = Image::read_exr(path).map_err(|e| error(path, e.message))?;
+    if let Some(i) = image.pixels.iter().position(|p| !p.is_finite()) {
+        return Err(error(
+            path,
+            format!(
+                "the reference has a NaN or infinite value at pixel ({}, {})",
+                i % image.width,
+                i / image.width
+            ),
+        ));
+    }
+    if (image.width, image.height) != (width, height) {
+        return Err(error(
+            path,
+            format!(
+                "the reference is {}x{} but the scene renders {}x{}",
+                image.width, image.height, width, height
+            ),
+        ));
+    }
+    let attributes = reference_attributes(path)?;
+    Ok(LoadedReference {
+        image,
+        spp: attributes.get("spp").and_then(|s| s.parse().ok()),
+        seed: attributes.get("seed").and_then(|s| s.parse().ok()),
+        integrator: attributes.get("integrator").cloned(),
+    })
+}
