@@ -13,7 +13,7 @@ use super::LeafTriangles;
 use super::TriangleHit;
 use super::stack::TraversalStack;
 use super::triangle::{TraversalRay, TrianglePacket};
-use glam::{BVec3A, Vec3, Vec3A};
+use glam::{Vec3, Vec3A};
 use obvhs::cwbvh::CwBvh;
 
 /// A child reference: a node index, or (with `LEAF` set) a packet index times four plus the
@@ -278,12 +278,8 @@ impl BoxRay {
         let neg = ray.neg;
         // Entering through min - pad (positive direction): (min - pad) - o = min - (o + pad);
         // through max + pad (negative direction): max - (o - pad). Lane by lane, the same
-        // scalar operations.
-        let signed_pad = Vec3A::select(
-            BVec3A::from_array([neg & 1 != 0, neg & 2 != 0, neg & 4 != 0]),
-            Vec3A::splat(-pad),
-            Vec3A::splat(pad),
-        );
+        // scalar operations; the sign of `inv_dir` is that of the direction.
+        let signed_pad = Vec3A::splat(pad).copysign(ray.inv_dir);
         BoxRay {
             near: [0, 1, 2].map(|axis| ((neg >> axis) & 1) as usize),
             o_near: (o + signed_pad).to_array(),
