@@ -10,6 +10,7 @@ pub mod accel;
 pub mod bsdf;
 pub mod cli;
 pub mod components;
+pub mod cpu;
 pub mod film;
 pub mod integrators;
 pub mod math;

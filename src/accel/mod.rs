@@ -344,7 +344,11 @@ pub fn spawn_ray_to(
     let (p_from, p_to) = (Vec3A::from(p_from), Vec3A::from(p_to));
     let origin = offset_origin(p_from, err_from.into(), n_from.into(), p_to - p_from);
     let target = offset_origin(p_to, err_to.into(), n_to.into(), origin - p_to);
-    (origin.into(), (target - origin).into(), 1.0 - SHADOW_EPSILON)
+    (
+        origin.into(),
+        (target - origin).into(),
+        1.0 - SHADOW_EPSILON,
+    )
 }
 
 #[cfg(test)]
