@@ -238,6 +238,28 @@ impl Accel {
         self.traverse::<ANY, false>(origin, dir, t_max)
     }
 
+    /// `closest_hit` (`ANY = false`) or `any_hit` for code that is itself compiled for AVX2
+    /// and FMA (see `crate::cpu`), inlined there.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA, and the caller must be compiled for them.
+    #[inline(always)]
+    pub(crate) unsafe fn trace_in_avx2<const ANY: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        #[cfg(target_arch = "x86_64")]
+        {
+            self.traverse::<ANY, true>(origin, dir, t_max)
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            self.traverse::<ANY, false>(origin, dir, t_max)
+        }
+    }
+
     #[inline(always)]
     fn dispatch<const ANY: bool>(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
         if self.avx2 {
