@@ -93,11 +93,10 @@ fn has_avx2() -> bool {
     }
 }
 
-/// Whether `origin` and `dir` are finite and `dir` is not zero, in a few vector operations:
-/// `x - x` is zero exactly when `x` is finite (NaN for infinities and NaN).
+/// Whether `origin` and `dir` are finite and `dir` is not zero, in a few vector operations.
 #[inline(always)]
 fn finite_nonzero(origin: Vec3A, dir: Vec3A) -> bool {
-    ((origin - origin) + (dir - dir)).cmpeq(Vec3A::ZERO).all() && dir.cmpne(Vec3A::ZERO).any()
+    origin.is_finite() && dir.is_finite() && dir.cmpne(Vec3A::ZERO).any()
 }
 
 /// Whether the triangle has exactly zero area (or a non-finite vertex). The differences of
