@@ -4,7 +4,8 @@
 //!
 //! Each node stores its children's boxes as exact f32 planes (the min and max of the
 //! children's triangle vertices, recomputed here), eight per plane, so that one node is
-//! tested against a ray with a few SSE2 instructions. The box test is made conservative by
+//! tested against a ray with a few SSE2 instructions (or fewer AVX2 ones, where the CPU has
+//! them: see `crate::cpu`). The box test is made conservative by
 //! one padding per ray (see `BoxRay`), not per node. Children are visited nearest first, and
 //! the entry distance of each pending child is kept on the stack, so a closest-hit ray skips
 //! the children beyond its nearest hit so far.

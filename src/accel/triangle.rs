@@ -194,6 +194,7 @@ fn finish(
 }
 
 /// The range test of `finish`: whether the scaled distance lies in (0, t_max) (det non-zero).
+#[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn in_range_scalar(det: f32, t_scaled: f32, t_max: f32) -> bool {
     if det < 0.0 {
