@@ -11,6 +11,7 @@ pub mod bsdf;
 pub mod cli;
 pub mod compare;
 pub mod components;
+pub mod cpu;
 pub mod film;
 pub mod integrators;
 pub mod math;

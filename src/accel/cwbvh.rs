@@ -4,7 +4,8 @@
 //!
 //! Each node stores its children's boxes as exact f32 planes (the min and max of the
 //! children's triangle vertices, recomputed here), eight per plane, so that one node is
-//! tested against a ray with a few SSE2 instructions. The box test is made conservative by
+//! tested against a ray with a few SSE2 instructions (or fewer AVX2 ones, where the CPU has
+//! them: see `crate::cpu`). The box test is made conservative by
 //! one padding per ray (see `BoxRay`), not per node. Children are visited nearest first, and
 //! the entry distance of each pending child is kept on the stack, so a closest-hit ray skips
 //! the children beyond its nearest hit so far.
@@ -13,7 +14,7 @@ use super::LeafTriangles;
 use super::TriangleHit;
 use super::stack::TraversalStack;
 use super::triangle::{TraversalRay, TrianglePacket};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 use obvhs::cwbvh::CwBvh;
 
 /// A child reference: a node index, or (with `LEAF` set) a packet index times four plus the
@@ -65,8 +66,11 @@ impl CwBvhAccel {
     }
 
     /// Closest hit (`ANY = false`) or the first hit found (`ANY = true`) with t in (0, t_max).
+    /// `AVX2` selects the eight-lane box test; it must only be set inside a function compiled
+    /// with the `avx2` target feature (see `Accel::traverse_avx2`), which only runs where the
+    /// CPU has it.
     #[inline(always)]
-    pub(crate) fn traverse<const ANY: bool>(
+    pub(crate) fn traverse<const ANY: bool, const AVX2: bool>(
         &self,
         tris: &LeafTriangles,
         ray: &TraversalRay,
@@ -84,7 +88,13 @@ impl CwBvhAccel {
         loop {
             if current & LEAF == 0 {
                 let node = &self.nodes[current as usize];
-                let (mut mask, t_near) = box_hits8(node, &box_ray, t_max);
+                let (mut mask, t_near) = if AVX2 {
+                    // SAFETY: `AVX2` is only set in code compiled for, and run on, CPUs with
+                    // AVX2 (see the doc comment above).
+                    unsafe { box_hits8_avx2(node, &box_ray, t_max) }
+                } else {
+                    box_hits8(node, &box_ray, t_max)
+                };
                 mask &= node.valid;
                 if mask != 0 && mask & (mask - 1) == 0 {
                     current = node.child[mask.trailing_zeros() as usize];
@@ -102,24 +112,39 @@ impl CwBvhAccel {
                     continue;
                 }
                 if mask != 0 {
-                    // Sort the hit children farthest first (insertion sort of at most
-                    // eight keys), push all but the nearest, and go on with the nearest.
-                    let mut keys = [0u64; 8];
-                    let mut n = 0;
+                    // At least two children: visit them nearest first (by entry distance, then
+                    // child reference). Two (the common case) need one comparison; more are
+                    // sorted farthest first (insertion sort of at most eight keys), all but
+                    // the nearest pushed.
+                    let key = |c: u32| {
+                        (u64::from(t_near[c as usize].to_bits()) << 32)
+                            | u64::from(node.child[c as usize])
+                    };
+                    let k0 = key(mask.trailing_zeros());
+                    mask &= mask - 1;
+                    let k1 = key(mask.trailing_zeros());
+                    mask &= mask - 1;
+                    let (near, far) = if k0 < k1 { (k0, k1) } else { (k1, k0) };
+                    if mask == 0 {
+                        stack.push(far);
+                        current = near as u32;
+                        continue;
+                    }
+                    let mut keys = [far, near, 0, 0, 0, 0, 0, 0];
+                    let mut n = 2;
                     while mask != 0 {
-                        let c = mask.trailing_zeros() as usize;
+                        let k = key(mask.trailing_zeros());
                         mask &= mask - 1;
-                        let key = (u64::from(t_near[c].to_bits()) << 32) | u64::from(node.child[c]);
                         let mut j = n;
-                        while j > 0 && keys[j - 1] < key {
+                        while j > 0 && keys[j - 1] < k {
                             keys[j] = keys[j - 1];
                             j -= 1;
                         }
-                        keys[j] = key;
+                        keys[j] = k;
                         n += 1;
                     }
-                    for &key in &keys[..n - 1] {
-                        stack.push(key);
+                    for &k in &keys[..n - 1] {
+                        stack.push(k);
                     }
                     current = keys[n - 1] as u32;
                     continue;
@@ -251,21 +276,17 @@ impl BoxRay {
     fn new(ray: &TraversalRay, scale: f32) -> BoxRay {
         let o = ray.origin;
         let pad = (o.abs().max_element() + scale) * (1.0 / (1u32 << 18) as f32);
-        let mut b = BoxRay {
-            near: [0; 3],
-            o_near: [0.0; 3],
-            o_far: [0.0; 3],
+        let neg = ray.neg;
+        // Entering through min - pad (positive direction): (min - pad) - o = min - (o + pad);
+        // through max + pad (negative direction): max - (o - pad). Lane by lane, the same
+        // scalar operations; the sign of `inv_dir` is that of the direction.
+        let signed_pad = Vec3A::splat(pad).copysign(ray.inv_dir);
+        BoxRay {
+            near: [0, 1, 2].map(|axis| ((neg >> axis) & 1) as usize),
+            o_near: (o + signed_pad).to_array(),
+            o_far: (o - signed_pad).to_array(),
             inv: ray.inv_dir.to_array(),
-        };
-        for axis in 0..3 {
-            // Entering through min - pad (positive direction): (min - pad) - o =
-            // min - (o + pad); through max + pad (negative direction): max - (o - pad).
-            let (n, pn) = if ray.neg[axis] { (1, -pad) } else { (0, pad) };
-            b.near[axis] = n;
-            b.o_near[axis] = o[axis] + pn;
-            b.o_far[axis] = o[axis] - pn;
         }
-        b
     }
 }
 
@@ -310,6 +331,47 @@ fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
         _mm_storeu_ps(t.as_mut_ptr().add(4), t0.1);
         (lo | (hi << 4), t)
     }
+}
+
+/// `box_hits8` with eight lanes per instruction (AVX2): the same arithmetic, lane for lane,
+/// so the same results.
+///
+/// # Safety
+/// The CPU must support AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn box_hits8_avx2(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
+    use std::arch::x86_64::*;
+    let mut t0 = _mm256_setzero_ps();
+    let mut t1 = _mm256_set1_ps(t_max);
+    for axis in 0..3 {
+        let n = ray.near[axis] & 1;
+        // SAFETY: unaligned loads of eight f32 from `[f32; 8]` arrays of `node`.
+        let (near, far) = unsafe {
+            (
+                _mm256_loadu_ps(node.planes[axis][n].as_ptr()),
+                _mm256_loadu_ps(node.planes[axis][1 - n].as_ptr()),
+            )
+        };
+        let inv = _mm256_set1_ps(ray.inv[axis]);
+        let tn = _mm256_mul_ps(_mm256_sub_ps(near, _mm256_set1_ps(ray.o_near[axis])), inv);
+        let tf = _mm256_mul_ps(_mm256_sub_ps(far, _mm256_set1_ps(ray.o_far[axis])), inv);
+        // As in `box_hits8`: a NaN slab distance constrains nothing.
+        t0 = _mm256_max_ps(tn, t0);
+        t1 = _mm256_min_ps(tf, t1);
+    }
+    let hits = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+    let mut t = [0.0f32; 8];
+    // SAFETY: an unaligned store of eight f32 into a local `[f32; 8]`.
+    unsafe { _mm256_storeu_ps(t.as_mut_ptr(), t0) };
+    (hits, t)
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[inline(always)]
+unsafe fn box_hits8_avx2(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
+    box_hits8(node, ray, t_max)
 }
 
 /// Which children's padded boxes the ray enters (portable version).

@@ -56,6 +56,9 @@ pub struct Accel {
     /// `None` when no triangle has a non-zero area: nothing is ever hit.
     tree: Option<CwBvhAccel>,
     tris: LeafTriangles,
+    /// Whether the CPU has AVX2 (checked once, here, rather than per ray): traversal then runs
+    /// as code compiled for it.
+    avx2: bool,
 }
 
 /// The triangles in leaf order, four slots per leaf (unused slots are zero triangles, never
@@ -76,6 +79,12 @@ pub(crate) struct TriangleHit {
     slot: u32,
     b1: f32,
     b2: f32,
+}
+
+/// Whether `origin` and `dir` are finite and `dir` is not zero, in a few vector operations.
+#[inline(always)]
+fn finite_nonzero(origin: Vec3A, dir: Vec3A) -> bool {
+    origin.is_finite() && dir.is_finite() && dir.cmpne(Vec3A::ZERO).any()
 }
 
 /// Whether the triangle has exactly zero area (or a non-finite vertex). The differences of
@@ -104,6 +113,7 @@ impl Accel {
                     ids: Vec::new(),
                     len: 0,
                 },
+                avx2: false,
             };
         }
         let aabbs: Vec<Aabb> = kept
@@ -149,6 +159,7 @@ impl Accel {
                 ids,
                 len: kept.len(),
             },
+            avx2: crate::cpu::has_avx2_fma(),
         }
     }
 
@@ -162,16 +173,22 @@ impl Accel {
     }
 
     #[inline(always)]
-    fn traverse<const ANY: bool>(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+    fn traverse<const ANY: bool, const AVX2: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
         // Also rejects NaN and a zero direction, which hit nothing.
-        if !(t_max > 0.0 && origin.is_finite() && dir.is_finite() && dir != Vec3::ZERO) {
+        if !(t_max > 0.0 && finite_nonzero(origin, dir)) {
             return None;
         }
         let ray = TraversalRay::new(origin, dir);
         let hit = self
             .tree
             .as_ref()?
-            .traverse::<ANY>(&self.tris, &ray, t_max)?;
+            .traverse::<ANY, AVX2>(&self.tris, &ray, t_max)?;
         Some(Hit {
             t: hit.t,
             triangle: self.tris.ids[hit.slot as usize],
@@ -180,14 +197,69 @@ impl Accel {
         })
     }
 
+    /// The traversal compiled for AVX2 (and FMA, which the compiler never uses to contract
+    /// separate multiplies and adds, so results are the same bits): eight-lane box tests, and
+    /// three-operand VEX forms everywhere, which spare most register copies (measured on the
+    /// Cornell box: the recompilation alone takes 7% of the instructions of traversal, the
+    /// eight-lane box test with the four-lane finish of the triangle test about as much again).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA (`self.avx2`).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    unsafe fn traverse_avx2<const ANY: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        self.traverse::<ANY, true>(origin, dir, t_max)
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    unsafe fn traverse_avx2<const ANY: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        self.traverse::<ANY, false>(origin, dir, t_max)
+    }
+
+    /// `closest_hit` (`ANY = false`) or `any_hit` for code that is itself compiled for AVX2
+    /// and FMA (see `crate::cpu`), inlined there.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA, and the caller must be compiled for them.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) unsafe fn trace_in_avx2<const ANY: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+    ) -> Option<Hit> {
+        self.traverse::<ANY, true>(origin, dir, t_max)
+    }
+
+    #[inline(always)]
+    fn dispatch<const ANY: bool>(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+        if self.avx2 {
+            // SAFETY: `avx2` is only set when the CPU was found to support AVX2 and FMA.
+            unsafe { self.traverse_avx2::<ANY>(origin, dir, t_max) }
+        } else {
+            self.traverse::<ANY, false>(origin, dir, t_max)
+        }
+    }
+
     /// The nearest hit with t in (0, t_max) along `origin + t dir` (`dir` need not be unit).
     pub fn closest_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
-        self.traverse::<false>(origin, dir, t_max)
+        self.dispatch::<false>(origin, dir, t_max)
     }
 
     /// Whether anything is hit with t in (0, t_max) along `origin + t dir`.
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
-        self.traverse::<true>(origin, dir, t_max).is_some()
+        self.dispatch::<true>(origin, dir, t_max).is_some()
     }
 }
 
@@ -199,7 +271,8 @@ pub fn intersect_triangle(
     triangle: &[Vec3; 3],
     t_max: f32,
 ) -> Option<(f32, f32, f32)> {
-    if !(t_max > 0.0 && origin.is_finite() && dir.is_finite() && dir != Vec3::ZERO) {
+    let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
+    if !(t_max > 0.0 && finite_nonzero(origin, dir)) {
         return None;
     }
     let [p0, p1, p2] = *triangle;
@@ -234,7 +307,15 @@ pub fn surface_point(tris: &TriangleColumns, triangle: u32, b1: f32, b2: f32) ->
 
 /// Moves `p` off the surface along the geometric normal, on the side of `w`, just far enough
 /// that a ray leaving towards `w` cannot re-hit the surface it starts on.
+#[inline]
 pub fn offset_ray_origin(p: Vec3, p_error: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
+    offset_origin(p.into(), p_error.into(), ng.into(), w.into()).into()
+}
+
+/// `offset_ray_origin` on four-lane vectors: lane by lane the same operations (the dot
+/// products add in the same order), so the same bits.
+#[inline(always)]
+fn offset_origin(p: Vec3A, p_error: Vec3A, ng: Vec3A, w: Vec3A) -> Vec3A {
     let d = ng.abs().dot(p_error);
     let mut offset = d * ng;
     if w.dot(ng) < 0.0 {
@@ -244,9 +325,9 @@ pub fn offset_ray_origin(p: Vec3, p_error: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
     // The addition rounded to nearest, possibly back towards p: move each component on by
     // |po| * 2^-23, which is at least one ulp of po (and never less than the smallest normal
     // float), in the direction of the offset. Branch-free, so it vectorises.
-    let bump = (po.abs() * f32::EPSILON).max(Vec3::splat(f32::MIN_POSITIVE));
-    let away = Vec3::select(offset.cmpgt(Vec3::ZERO), bump, Vec3::ZERO)
-        - Vec3::select(offset.cmplt(Vec3::ZERO), bump, Vec3::ZERO);
+    let bump = (po.abs() * f32::EPSILON).max(Vec3A::splat(f32::MIN_POSITIVE));
+    let away = Vec3A::select(offset.cmpgt(Vec3A::ZERO), bump, Vec3A::ZERO)
+        - Vec3A::select(offset.cmplt(Vec3A::ZERO), bump, Vec3A::ZERO);
     po + away
 }
 
@@ -264,7 +345,60 @@ pub fn spawn_ray_to(
     err_to: Vec3,
     n_to: Vec3,
 ) -> (Vec3, Vec3, f32) {
-    let origin = offset_ray_origin(p_from, err_from, n_from, p_to - p_from);
-    let target = offset_ray_origin(p_to, err_to, n_to, origin - p_to);
-    (origin, target - origin, 1.0 - SHADOW_EPSILON)
+    let (p_from, p_to) = (Vec3A::from(p_from), Vec3A::from(p_to));
+    let origin = offset_origin(p_from, err_from.into(), n_from.into(), p_to - p_from);
+    let target = offset_origin(p_to, err_to.into(), n_to.into(), origin - p_to);
+    (
+        origin.into(),
+        (target - origin).into(),
+        1.0 - SHADOW_EPSILON,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampling::{SampleKey, uniform_sphere};
+    use crate::scene::NO_EMITTER;
+    use glam::Vec2;
+
+    /// The traversal this CPU runs (AVX2 where present) and the baseline SSE2 one give the
+    /// same hits, bit for bit, closest and any, on a soup of overlapping triangles.
+    #[test]
+    fn avx2_and_baseline_traversals_agree() {
+        let r = |i: u64, d: u32| SampleKey::new(11, i, 0).get(d);
+        let n = 300;
+        let centre = |i: u64| Vec3::new(r(i, 0), r(i, 1), r(i, 2)) * 10.0;
+        let vertex = |i: u64, d: u32| {
+            centre(i) + uniform_sphere(Vec2::new(r(i, d), r(i, d + 1))) * (2.0 * r(i, d + 2))
+        };
+        let tris = TriangleColumns {
+            p0: (0..n).map(|i| vertex(i, 3)).collect(),
+            p1: (0..n).map(|i| vertex(i, 6)).collect(),
+            p2: (0..n).map(|i| vertex(i, 9)).collect(),
+            normal: vec![Vec3::Z; n as usize],
+            material: vec![0; n as usize],
+            emitter: vec![NO_EMITTER; n as usize],
+            smooth: vec![FLAT; n as usize],
+            vertex_normals: Vec::new(),
+        };
+        let accel = Accel::build(&tris);
+        for i in 0..20_000u64 {
+            let o = Vec3::new(r(i, 20), r(i, 21), r(i, 22)) * 12.0 - 1.0;
+            let d = uniform_sphere(Vec2::new(r(i, 23), r(i, 24)));
+            let t_max = if i % 2 == 0 {
+                f32::INFINITY
+            } else {
+                15.0 * r(i, 25)
+            };
+            assert_eq!(
+                accel.dispatch::<false>(o, d, t_max),
+                accel.traverse::<false, false>(o, d, t_max)
+            );
+            assert_eq!(
+                accel.dispatch::<true>(o, d, t_max).is_some(),
+                accel.traverse::<true, false>(o, d, t_max).is_some()
+            );
+        }
+    }
 }

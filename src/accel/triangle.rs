@@ -22,11 +22,12 @@ pub const fn gamma(n: i32) -> f32 {
 /// permutation and shear of the watertight triangle test.
 #[derive(Clone, Copy, Debug)]
 pub struct TraversalRay {
-    pub origin: Vec3,
+    pub origin: Vec3A,
     /// `1 / dir` per axis (IEEE: +-infinity for a zero component).
-    pub inv_dir: Vec3,
-    /// Whether each direction component has its sign bit set (matches the sign of `inv_dir`).
-    pub neg: [bool; 3],
+    pub inv_dir: Vec3A,
+    /// Bit `axis` set where the direction component has its sign bit set (matches the sign of
+    /// `inv_dir`).
+    pub neg: u32,
     /// The axes that become x, y and z: z is the axis along which the direction is largest in
     /// magnitude, and the vertices are rotated (a cyclic permutation, so handedness is kept).
     k: [usize; 3],
@@ -49,8 +50,8 @@ pub fn columns(v: &[Vec3; 3]) -> TriangleColumns {
 
 impl TraversalRay {
     /// Prepares a ray. `dir` must be finite and non-zero.
-    #[inline]
-    pub fn new(origin: Vec3, dir: Vec3) -> TraversalRay {
+    #[inline(always)]
+    pub fn new(origin: Vec3A, dir: Vec3A) -> TraversalRay {
         let a = dir.abs();
         let kz = if a.x > a.y {
             if a.x > a.z { 0 } else { 2 }
@@ -59,26 +60,23 @@ impl TraversalRay {
         } else {
             2
         };
-        let k = match kz {
-            0 => [1, 2, 0],
-            1 => [2, 0, 1],
-            _ => [0, 1, 2],
+        // The direction and origin with their axes in the order k (lane by lane, so every
+        // value below is the same scalar operation on the same inputs as per axis).
+        let (k, d, o) = match kz {
+            0 => ([1, 2, 0], dir.yzx(), origin.yzx()),
+            1 => ([2, 0, 1], dir.zxy(), origin.zxy()),
+            _ => ([0, 1, 2], dir, origin),
         };
-        let d = dir.to_array();
-        let sz = 1.0 / d[kz];
+        let sz = 1.0 / d.z;
         TraversalRay {
             origin,
-            inv_dir: Vec3::ONE / dir,
-            neg: [
-                dir.x.is_sign_negative(),
-                dir.y.is_sign_negative(),
-                dir.z.is_sign_negative(),
-            ],
+            inv_dir: Vec3A::ONE / dir,
+            neg: dir.is_negative_bitmask(),
             k,
-            sx: -d[k[0]] * sz,
-            sy: -d[k[1]] * sz,
+            sx: -d.x * sz,
+            sy: -d.y * sz,
             sz,
-            o_k: k.map(|axis| Vec3A::splat(origin[axis])),
+            o_k: [Vec3A::splat(o.x), Vec3A::splat(o.y), Vec3A::splat(o.z)],
         }
     }
 
@@ -195,6 +193,17 @@ fn finish(
     }
 }
 
+/// The range test of `finish`: whether the scaled distance lies in (0, t_max) (det non-zero).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn in_range_scalar(det: f32, t_scaled: f32, t_max: f32) -> bool {
+    if det < 0.0 {
+        !(t_scaled >= 0.0 || t_scaled < t_max * det)
+    } else {
+        !(t_scaled <= 0.0 || t_scaled > t_max * det)
+    }
+}
+
 /// Four triangles laid out for the four-lane test: `v[vertex][axis][lane]`. Unused lanes hold
 /// zeros and are masked out by the leaf's triangle count.
 #[derive(Clone, Copy, Debug, Default)]
@@ -287,33 +296,78 @@ impl TraversalRay {
                 if lanes | exact == 0 {
                     return None;
                 }
-                let mut hit = None;
+                // `finish` on all four lanes at once, operation for operation (so bit for bit:
+                // the maxima see no NaN in a lane that passed the range test, since a NaN
+                // coordinate makes det or t_scaled NaN). Only the lanes that pass are then
+                // taken in order, with the range test redone against the narrowed t_max.
+                let abs_mask = _mm_set1_ps(f32::from_bits(0x7fff_ffff));
+                let abs = |v: __m128| _mm_and_ps(v, abs_mask);
+                let max3 = |a: __m128, b: __m128, c: __m128| {
+                    _mm_max_ps(_mm_max_ps(abs(a), abs(b)), abs(c))
+                };
+                let inv_det = _mm_div_ps(_mm_set1_ps(1.0), det);
+                let t = _mm_mul_ps(t_scaled, inv_det);
+                let max_z = max3(az, bz, cz);
+                let max_x = max3(x0, x1, x2);
+                let max_y = max3(y0, y1, y2);
+                let g = |n: i32| _mm_set1_ps(gamma(n));
+                let delta_z = _mm_mul_ps(g(3), max_z);
+                let delta_x = _mm_mul_ps(g(5), _mm_add_ps(max_x, max_z));
+                let delta_y = _mm_mul_ps(g(5), _mm_add_ps(max_y, max_z));
+                let delta_e = _mm_mul_ps(
+                    _mm_set1_ps(2.0),
+                    _mm_add_ps(
+                        _mm_add_ps(
+                            _mm_mul_ps(_mm_mul_ps(g(2), max_x), max_y),
+                            _mm_mul_ps(delta_y, max_x),
+                        ),
+                        _mm_mul_ps(delta_x, max_y),
+                    ),
+                );
+                let max_e = max3(e0, e1, e2);
+                let delta_t = _mm_mul_ps(
+                    _mm_mul_ps(
+                        _mm_set1_ps(3.0),
+                        _mm_add_ps(
+                            _mm_add_ps(
+                                _mm_mul_ps(_mm_mul_ps(g(3), max_e), max_z),
+                                _mm_mul_ps(delta_e, max_z),
+                            ),
+                            _mm_mul_ps(delta_z, max_e),
+                        ),
+                    ),
+                    abs(inv_det),
+                );
+                let ok = _mm_and_ps(
+                    _mm_cmpgt_ps(t, delta_t),
+                    _mm_cmplt_ps(t, _mm_set1_ps(*t_max)),
+                );
+                lanes &= _mm_movemask_ps(ok) as u32;
+                if lanes | exact == 0 {
+                    return None;
+                }
                 let store = |v: __m128| {
                     let mut a = [0.0f32; 4];
                     _mm_storeu_ps(a.as_mut_ptr(), v);
                     a
                 };
-                let (x0, x1, x2) = (store(x0), store(x1), store(x2));
-                let (y0, y1, y2) = (store(y0), store(y1), store(y2));
-                let (az, bz, cz) = (store(az), store(bz), store(cz));
-                let (e0, e1, e2) = (store(e0), store(e1), store(e2));
+                let (t, inv_det) = (store(t), store(inv_det));
                 let (det, t_scaled) = (store(det), store(t_scaled));
+                let (e1, e2) = (store(e1), store(e2));
+                let mut hit = None;
                 let mut left = lanes | exact;
                 while left != 0 {
                     let i = left.trailing_zeros() as usize;
                     left &= left - 1;
                     let h = if exact & (1 << i) != 0 {
                         self.intersect(&cols[i], *t_max)
+                    } else if hit.is_none()
+                        || (in_range_scalar(det[i], t_scaled[i], *t_max) && t[i] < *t_max)
+                    {
+                        // Until a hit narrows t_max, the tests above were against this t_max.
+                        Some((t[i], e1[i] * inv_det[i], e2[i] * inv_det[i]))
                     } else {
-                        finish(
-                            [x0[i], x1[i], x2[i]],
-                            [y0[i], y1[i], y2[i]],
-                            [az[i], bz[i], cz[i]],
-                            [e0[i], e1[i], e2[i]],
-                            det[i],
-                            t_scaled[i],
-                            *t_max,
-                        )
+                        None
                     };
                     if let Some(h) = h {
                         *t_max = h.0;

@@ -1,7 +1,7 @@
 //! Finds the closest hit of every live ray.
 
-use crate::accel::Accel;
-use crate::components::{Hits, MISS, Rays};
+use crate::accel::{Accel, Hit};
+use crate::components::{Hits, HitsChunk, MISS, Rays};
 use crate::pipeline::{Flow, System};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -30,28 +30,54 @@ impl<S: ClosestHitQueue + Send> System<S> for TraceClosest {
             .chunks_mut(0..len)
             .into_par_iter()
             .map(|h| {
-                let (mut traced, mut found) = (0, 0);
-                let rays = rays.view(h.start..h.start + h.len());
-                for i in 0..h.len() {
-                    if rays.dir[i] == Vec3::ZERO {
-                        h.triangle[i] = MISS;
-                        continue;
-                    }
-                    traced += 1;
-                    match accel.closest_hit(rays.origin[i], rays.dir[i], f32::INFINITY) {
-                        Some(hit) => {
-                            h.t[i] = hit.t;
-                            h.triangle[i] = hit.triangle;
-                            h.b1[i] = hit.b1;
-                            h.b2[i] = hit.b2;
-                            found += 1;
-                        }
-                        None => h.triangle[i] = MISS,
-                    }
+                #[cfg(target_arch = "x86_64")]
+                if crate::cpu::has_avx2_fma() {
+                    // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                    return unsafe { trace_chunk_avx2(accel, rays, h) };
                 }
-                (traced, found)
+                trace_chunk(rays, h, |o, d| accel.closest_hit(o, d, f32::INFINITY))
             })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         Flow::new(traced, found)
     }
+}
+
+/// `trace_chunk` compiled for AVX2 and FMA, with the traversal inlined (see `crate::cpu`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn trace_chunk_avx2(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) {
+    trace_chunk(rays, h, |o, d| {
+        // SAFETY: this function is compiled for AVX2 and FMA and only called where the CPU
+        // has them.
+        unsafe { accel.trace_in_avx2::<false>(o, d, f32::INFINITY) }
+    })
+}
+
+/// Closest hits of the rays of one chunk with `closest_hit`; returns (rays traced, hits).
+#[inline(always)]
+fn trace_chunk(
+    rays: &Rays,
+    h: HitsChunk,
+    closest_hit: impl Fn(Vec3, Vec3) -> Option<Hit>,
+) -> (usize, usize) {
+    let (mut traced, mut found) = (0, 0);
+    let rays = rays.view(h.start..h.start + h.len());
+    for i in 0..h.len() {
+        if rays.dir[i] == Vec3::ZERO {
+            h.triangle[i] = MISS;
+            continue;
+        }
+        traced += 1;
+        match closest_hit(rays.origin[i], rays.dir[i]) {
+            Some(hit) => {
+                h.t[i] = hit.t;
+                h.triangle[i] = hit.triangle;
+                h.b1[i] = hit.b1;
+                h.b2[i] = hit.b2;
+                found += 1;
+            }
+            None => h.triangle[i] = MISS,
+        }
+    }
+    (traced, found)
 }

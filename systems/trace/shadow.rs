@@ -1,8 +1,9 @@
 //! Tests every shadow ray for occlusion (any hit before its end).
 
 use crate::accel::Accel;
-use crate::components::ShadowRays;
+use crate::components::{ShadowRays, ShadowRaysChunk};
 use crate::pipeline::{Flow, System};
+use glam::Vec3;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -29,20 +30,43 @@ impl<S: ShadowQueue + Send> System<S> for TraceShadow {
             .chunks_mut(range)
             .into_par_iter()
             .map(|c| {
-                let (mut taken, mut clear) = (0, 0);
-                for i in 0..c.len() {
-                    if c.t_max[i] <= 0.0 {
-                        c.unoccluded[i] = false;
-                        continue;
-                    }
-                    taken += 1;
-                    let open = !accel.any_hit(c.origin[i], c.dir[i], c.t_max[i]);
-                    c.unoccluded[i] = open;
-                    clear += open as usize;
+                #[cfg(target_arch = "x86_64")]
+                if crate::cpu::has_avx2_fma() {
+                    // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                    return unsafe { trace_chunk_avx2(accel, c) };
                 }
-                (taken, clear)
+                trace_chunk(c, |o, d, t_max| accel.any_hit(o, d, t_max))
             })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
         Flow::new(taken, unoccluded)
     }
+}
+
+/// `trace_chunk` compiled for AVX2 and FMA, with the traversal inlined (see `crate::cpu`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn trace_chunk_avx2(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
+    trace_chunk(c, |o, d, t_max| {
+        // SAFETY: this function is compiled for AVX2 and FMA and only called where the CPU
+        // has them.
+        unsafe { accel.trace_in_avx2::<true>(o, d, t_max) }.is_some()
+    })
+}
+
+/// Occlusion of the shadow rays of one chunk with `any_hit`; returns (rays taken, rays
+/// unoccluded).
+#[inline(always)]
+fn trace_chunk(c: ShadowRaysChunk, any_hit: impl Fn(Vec3, Vec3, f32) -> bool) -> (usize, usize) {
+    let (mut taken, mut clear) = (0, 0);
+    for i in 0..c.len() {
+        if c.t_max[i] <= 0.0 {
+            c.unoccluded[i] = false;
+            continue;
+        }
+        taken += 1;
+        let open = !any_hit(c.origin[i], c.dir[i], c.t_max[i]);
+        c.unoccluded[i] = open;
+        clear += open as usize;
+    }
+    (taken, clear)
 }

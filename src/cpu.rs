@@ -1,0 +1,20 @@
+//! Code compiled for AVX2 and FMA, chosen at run time where the CPU has them.
+//!
+//! The hot loops (traversal, light sampling, scattering) run as copies compiled for AVX2: the
+//! three-operand VEX forms spare most register copies, and traversal tests eight child boxes
+//! per instruction. The compiler never contracts a separate multiply and add into a fused one,
+//! so both copies compute the same bits; the FMA feature only comes with the AVX2 target
+//! level. The baseline (SSE2) copy runs everywhere else.
+
+/// Whether the CPU has AVX2 and FMA (the standard library caches the answer).
+#[inline]
+pub fn has_avx2_fma() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
