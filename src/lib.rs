@@ -15,6 +15,7 @@ pub mod integrators;
 pub mod math;
 pub mod metrics;
 pub mod path;
+pub mod photons;
 pub mod pipeline;
 pub mod sampling;
 pub mod scene;
