@@ -138,3 +138,65 @@ fn stored_photons_do_not_depend_on_threads() {
     assert_eq!(one, run(2));
     assert_eq!(one, run(3));
 }
+
+fn random_points(n: usize, seed: u64) -> Vec<Vec3> {
+    let key = |i: usize| stagelight::sampling::SampleKey::new(seed, i as u64, 0);
+    (0..n)
+        .map(|i| {
+            let k = key(i);
+            // Clustered on a few planes, like photons on walls, plus some spread.
+            let plane = (k.get(3) * 4.0) as u32;
+            let v = Vec3::new(k.get(0), k.get(1), k.get(2)) * 10.0;
+            match plane {
+                0 => Vec3::new(v.x, 0.0, v.z),
+                1 => Vec3::new(0.0, v.y, v.z),
+                _ => v,
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn hash_grid_finds_exactly_the_points_within_the_radius() {
+    let points = random_points(20_000, 1);
+    let radius = 0.3;
+    let grid = stagelight::photons::HashGrid::build(&points, radius);
+    for (j, q) in random_points(300, 2).iter().enumerate() {
+        let r = if j % 2 == 0 { radius } else { radius * 0.5 };
+        let mut found = Vec::new();
+        grid.for_each_within(&points, *q, r, |i| found.push(i));
+        found.sort_unstable();
+        let expected: Vec<u32> = (0..points.len() as u32)
+            .filter(|&i| points[i as usize].distance_squared(*q) <= r * r)
+            .collect();
+        assert_eq!(found, expected, "query {j}");
+    }
+}
+
+#[test]
+fn kd_tree_finds_the_k_nearest() {
+    let points = random_points(20_000, 3);
+    let tree = stagelight::photons::KdTree::build(&points);
+    let mut near = stagelight::photons::Nearest::new(1, 1.0);
+    for (j, q) in random_points(300, 4).iter().enumerate() {
+        let (k, max_r) = if j % 3 == 0 {
+            (50, 0.2)
+        } else {
+            (50, f32::INFINITY)
+        };
+        tree.nearest(*q, k, max_r, &mut near);
+        let mut got: Vec<f32> = near.found.iter().map(|f| f.0).collect();
+        got.sort_by(f32::total_cmp);
+        let mut all: Vec<f32> = points
+            .iter()
+            .map(|p| p.distance_squared(*q))
+            .filter(|&d2| d2 <= max_r * max_r)
+            .collect();
+        all.sort_by(f32::total_cmp);
+        all.truncate(k);
+        assert_eq!(got, all, "query {j}");
+        for &(d2, i) in &near.found {
+            assert_eq!(points[i as usize].distance_squared(*q), d2);
+        }
+    }
+}

@@ -11,6 +11,12 @@
 //! albedo, for a Lambertian surface) keeps its power constant in expectation. Photons of a
 //! pass are stored in photon order, whatever the thread count.
 
+pub mod hash_grid;
+pub mod kd_tree;
+
+pub use hash_grid::HashGrid;
+pub use kd_tree::{KdTree, Nearest};
+
 use crate::components::{Hits, PhotonFlags, PhotonWalkers, Photons, Rays};
 use crate::integrators::SceneData;
 use crate::sampling::SampleKey;
