@@ -59,9 +59,7 @@ fn emitted_photons_carry_the_emitters_power() {
     ] {
         let mut p = pass(name, u32::MAX);
         let n = 50_000;
-        p.tracing.begin_pass(0);
-        p.tracing.first = 0;
-        p.tracing.len = n;
+        p.tracing.begin_pass(0, n as u64);
         emit_only.run(&mut p, &mut Stats::default());
         let got = mean_se(
             p.tracing.walkers.power[..n].iter().map(|v| v.as_dvec3()),

@@ -66,6 +66,9 @@ pub struct PhotonTracing {
     pub max_depth: u32,
     /// Pass number (the sample index of every photon's random numbers).
     pub pass: u64,
+    /// Photons this pass emits in all, and the index of the next one to emit.
+    pub photons_per_pass: u64,
+    pub next: u64,
     /// Index of the wave's first photon within the pass, and the wave's length.
     pub first: u64,
     pub len: usize,
@@ -101,11 +104,18 @@ impl PhotonTracing {
         }
     }
 
-    /// Starts a pass: no photons stored or emitted yet.
-    pub fn begin_pass(&mut self, pass: u64) {
+    /// Starts a pass of `photons` photons: none stored or emitted yet.
+    pub fn begin_pass(&mut self, pass: u64, photons: u64) {
         self.pass = pass;
+        self.photons_per_pass = photons;
+        self.next = 0;
         self.stored = 0;
         self.emitted = 0;
+    }
+
+    /// Photons of the pass not emitted yet.
+    pub fn remaining(&self) -> u64 {
+        self.photons_per_pass - self.next
     }
 
     /// Appends photons to the pass's columns (growing them when a pass stores more than any
@@ -159,30 +169,35 @@ impl crate::systems::trace::closest::ClosestHitQueue for PhotonPass {
     }
 }
 
-/// The photon graph:
+/// The photon graph, one pass (a pass is cut into waves of at most `WAVEFRONT` photons):
 ///
 /// ```text
-/// emit_photons
-/// loop photon_bounces (while photons are live):
-///     trace_closest -> scatter_photons -> compact_photons
+/// loop photon_waves (while the pass has photons left):
+///     emit_photons
+///     loop photon_bounces (while photons are live):
+///         trace_closest -> scatter_photons -> compact_photons
 /// ```
 pub fn graph() -> crate::pipeline::Graph<PhotonPass> {
     use crate::pipeline::{Graph, Node};
     use crate::systems::{generate, shade, trace};
     Graph::new(
         "photons",
-        vec![
-            Node::system(generate::photons::EmitPhotons),
-            Node::Loop {
-                name: "photon_bounces",
-                queue_len: |s: &PhotonPass| s.tracing.active,
-                body: vec![
-                    Node::system(trace::closest::TraceClosest),
-                    Node::system(shade::scatter_photons::ScatterPhotons),
-                    Node::system(shade::compact_photons::CompactPhotons),
-                ],
-            },
-        ],
+        vec![Node::Loop {
+            name: "photon_waves",
+            queue_len: |s: &PhotonPass| s.tracing.remaining() as usize,
+            body: vec![
+                Node::system(generate::photons::EmitPhotons),
+                Node::Loop {
+                    name: "photon_bounces",
+                    queue_len: |s: &PhotonPass| s.tracing.active,
+                    body: vec![
+                        Node::system(trace::closest::TraceClosest),
+                        Node::system(shade::scatter_photons::ScatterPhotons),
+                        Node::system(shade::compact_photons::CompactPhotons),
+                    ],
+                },
+            ],
+        }],
     )
 }
 
@@ -203,14 +218,7 @@ impl PhotonPass {
         photons: u64,
         stats: &mut crate::pipeline::Stats,
     ) {
-        self.tracing.begin_pass(pass);
-        let mut first = 0;
-        while first < photons {
-            let len = (photons - first).min(WAVEFRONT as u64);
-            self.tracing.first = first;
-            self.tracing.len = len as usize;
-            graph.run(self, stats);
-            first += len;
-        }
+        self.tracing.begin_pass(pass, photons);
+        graph.run(self, stats);
     }
 }

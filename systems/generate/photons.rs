@@ -1,4 +1,4 @@
-//! Emits a wave of photons: an emitter picked by power, a point uniform on it, a direction
+//! Emits the next wave of the pass's photons: an emitter picked by power, a point uniform on it, a direction
 //! cosine-distributed about its emitting side, and the power `Le pi / pdf(point)`.
 
 use crate::accel::{offset_ray_origin, surface_point};
@@ -24,10 +24,15 @@ impl<S: PhotonQueue + Send> System<S> for EmitPhotons {
     }
     fn run(&self, state: &mut S) -> Flow {
         let (data, t) = state.photon_queue();
-        let n = t.len;
+        let n = t.remaining().min(t.walkers.capacity() as u64) as usize;
+        t.first = t.next;
+        t.len = n;
+        t.next += n as u64;
         let emitters = &data.scene.emitters;
         let tris = &data.scene.triangles;
         if emitters.triangle.is_empty() {
+            // Nothing emits: the pass is over.
+            t.next = t.photons_per_pass;
             t.active = 0;
             return Flow::new(0, 0);
         }
