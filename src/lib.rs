@@ -17,6 +17,7 @@ pub mod integrators;
 pub mod math;
 pub mod metrics;
 pub mod path;
+pub mod photons;
 pub mod pipeline;
 pub mod reference;
 pub mod sampling;

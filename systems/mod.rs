@@ -4,6 +4,7 @@
 /// Making new work: camera rays (and later light paths and photons).
 pub mod generate {
     pub mod camera_rays;
+    pub mod photons;
     pub mod subpaths;
 }
 
@@ -15,6 +16,7 @@ pub mod trace {
 
 /// What happens at a surface: emission found, queues by material, scattering, roulette.
 pub mod shade {
+    pub mod compact_photons;
     pub mod compact_subpaths;
     pub mod conductor;
     pub mod dielectric;
@@ -23,6 +25,7 @@ pub mod shade {
     pub mod extend_subpaths;
     pub mod interpolate_surfaces;
     pub mod russian_roulette;
+    pub mod scatter_photons;
     pub mod sort_by_material;
     mod surface;
     pub use surface::Surface;

@@ -6,12 +6,17 @@
 //! which rayon processes in parallel without any shared mutable state.
 
 mod paths;
+mod photons;
 mod rays;
 mod shadow;
 mod surfaces;
 mod vertices;
 
 pub use paths::{PathFlags, Paths, PathsChunk, PathsView};
+pub use photons::{
+    PhotonFlags, PhotonWalkers, PhotonWalkersChunk, PhotonWalkersView, Photons, PhotonsChunk,
+    PhotonsView,
+};
 pub use rays::{Hits, HitsChunk, HitsView, MISS, Rays, RaysChunk, RaysView};
 pub use shadow::{ShadowRays, ShadowRaysChunk, ShadowRaysView};
 pub use surfaces::{Surfaces, SurfacesChunk, SurfacesView};

@@ -36,6 +36,9 @@ pub trait System<S>: Send + Sync {
 /// A node of an integrator's graph.
 pub enum Node<S> {
     System(Box<dyn System<S>>),
+    /// A graph over a part of the state (e.g. the photon tracing inside a photon mapper),
+    /// run in place, its systems timed and counted with the rest.
+    Nested(Box<dyn NestedGraph<S>>),
     /// Repeats `body` while `queue_len(state)` is non-zero (checked before each iteration).
     Loop {
         name: &'static str,
@@ -47,6 +50,34 @@ pub enum Node<S> {
 impl<S> Node<S> {
     pub fn system(system: impl System<S> + 'static) -> Node<S> {
         Node::System(Box::new(system))
+    }
+
+    /// `graph` run on the part of the state `part` picks.
+    pub fn nested<T: 'static>(graph: Graph<T>, part: fn(&mut S) -> &mut T) -> Node<S>
+    where
+        S: 'static,
+    {
+        Node::Nested(Box::new(Nested { graph, part }))
+    }
+}
+
+/// A graph over part of a state `S`, as one node of a graph over `S`.
+pub trait NestedGraph<S>: Send + Sync {
+    fn run(&self, state: &mut S, stats: &mut Stats);
+    fn system_names(&self) -> Vec<&'static str>;
+}
+
+struct Nested<S, T> {
+    graph: Graph<T>,
+    part: fn(&mut S) -> &mut T,
+}
+
+impl<S, T> NestedGraph<S> for Nested<S, T> {
+    fn run(&self, state: &mut S, stats: &mut Stats) {
+        self.graph.run((self.part)(state), stats);
+    }
+    fn system_names(&self) -> Vec<&'static str> {
+        self.graph.system_names()
     }
 }
 
@@ -118,6 +149,7 @@ impl<S> Graph<S> {
                 match n {
                     Node::System(s) => out.push(s.name()),
                     Node::Loop { body, .. } => walk(body, out),
+                    Node::Nested(g) => out.extend(g.system_names()),
                 }
             }
         }
@@ -135,6 +167,8 @@ impl<S> Graph<S> {
                 match n {
                     Node::System(s) => f(s.as_ref()),
                     Node::Loop { body, .. } => collect(body, f),
+                    // A nested graph is checked on its own state.
+                    Node::Nested(_) => {}
                 }
             }
         }
@@ -176,6 +210,7 @@ fn run_nodes<S>(nodes: &[Node<S>], state: &mut S, stats: &mut Stats) {
                 entry.taken += flow.taken as u64;
                 entry.emitted += flow.emitted as u64;
             }
+            Node::Nested(graph) => graph.run(state, stats),
             Node::Loop {
                 name,
                 queue_len,

@@ -1,0 +1,224 @@
+//! Photon tracing, shared by the photon-mapping integrators (PM, PPM, SPPM): the wavefront
+//! state of photons in flight and the photons they store. The systems that emit, scatter and
+//! compact photons (`systems/generate/photons.rs`, `systems/shade/scatter_photons.rs`,
+//! `systems/shade/compact_photons.rs`) run on any integrator state that hands this state out
+//! through `PhotonQueue`.
+//!
+//! Photons leave emitters picked by power from points uniform on them, in cosine-distributed
+//! directions, each carrying `Le pi / pdf(point)` (so the mean power of a photon is the
+//! emitters' total power). At every non-specular surface a photon is stored; it scatters on by
+//! sampling the BSDF (importance transport), and Russian roulette by the sampled weight (the
+//! albedo, for a Lambertian surface) keeps its power constant in expectation. Photons of a
+//! pass are stored in photon order, whatever the thread count.
+
+pub mod hash_grid;
+pub mod kd_tree;
+
+pub use hash_grid::HashGrid;
+pub use kd_tree::{KdTree, Nearest};
+
+use crate::components::{Hits, PhotonFlags, PhotonWalkers, Photons, Rays};
+use crate::integrators::SceneData;
+use crate::sampling::SampleKey;
+use glam::Vec3;
+
+/// Random-number dimensions of a photon: emitter pick (1), point (2), direction (2), then per
+/// bounce a BSDF sample (2) and roulette (1).
+pub const DIM_PICK: u32 = 0;
+pub const DIM_POINT: u32 = 1;
+pub const DIM_DIRECTION: u32 = 3;
+pub const DIMS_PER_BOUNCE: u32 = 3;
+pub const DIM_BSDF: u32 = 0;
+pub const DIM_ROULETTE: u32 = 2;
+
+/// First dimension of bounce `depth` (0 for the first surface met).
+#[inline]
+pub fn bounce_dim(depth: u32) -> u32 {
+    5 + depth * DIMS_PER_BOUNCE
+}
+
+/// The random numbers of photon `index` of pass `pass`: a stream apart from camera samples.
+#[inline]
+pub fn photon_key(seed: u64, pass: u64, index: u64) -> SampleKey {
+    SampleKey::new(seed, index | 3 << 62, pass)
+}
+
+/// Highest survival probability of photon roulette: even a photon in a lossless glass cube
+/// ends after about twenty bounces on average.
+pub const ROULETTE_MAX_SURVIVAL: f32 = 0.95;
+
+/// A photon as `scatter_photons` stores it, before it joins the pass's columns.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StoredPhoton {
+    pub p: Vec3,
+    pub wi: Vec3,
+    pub power: Vec3,
+    pub ng: Vec3,
+    pub depth: u32,
+    pub flags: PhotonFlags,
+}
+
+/// Photons in flight and the photons stored so far in this pass.
+#[derive(Default)]
+pub struct PhotonTracing {
+    pub seed: u64,
+    /// Highest number of scattering events before a photon is stored and ends.
+    pub max_depth: u32,
+    /// Pass number (the sample index of every photon's random numbers).
+    pub pass: u64,
+    /// Photons this pass emits in all, and the index of the next one to emit.
+    pub photons_per_pass: u64,
+    pub next: u64,
+    /// Index of the wave's first photon within the pass, and the wave's length.
+    pub first: u64,
+    pub len: usize,
+    pub rays: Rays,
+    pub hits: Hits,
+    pub walkers: PhotonWalkers,
+    /// Live photons occupy slots `0..active`.
+    pub active: usize,
+    /// Photons stored this pass: slots `0..stored`.
+    pub photons: Photons,
+    pub stored: usize,
+    /// Photons emitted this pass.
+    pub emitted: u64,
+    /// Per chunk of walkers, the photons it stored this bounce (merged in chunk order).
+    pub chunk_photons: Vec<Vec<StoredPhoton>>,
+    pub scratch_walkers: PhotonWalkers,
+    pub scratch_rays: Rays,
+    pub order: Vec<u32>,
+}
+
+impl PhotonTracing {
+    pub fn new(seed: u64, max_depth: u32, wavefront: usize) -> PhotonTracing {
+        PhotonTracing {
+            seed,
+            max_depth,
+            rays: Rays::new(wavefront),
+            hits: Hits::new(wavefront),
+            walkers: PhotonWalkers::new(wavefront),
+            scratch_walkers: PhotonWalkers::new(wavefront),
+            scratch_rays: Rays::new(wavefront),
+            order: Vec::with_capacity(wavefront),
+            ..Default::default()
+        }
+    }
+
+    /// Starts a pass of `photons` photons: none stored or emitted yet.
+    pub fn begin_pass(&mut self, pass: u64, photons: u64) {
+        self.pass = pass;
+        self.photons_per_pass = photons;
+        self.next = 0;
+        self.stored = 0;
+        self.emitted = 0;
+    }
+
+    /// Photons of the pass not emitted yet.
+    pub fn remaining(&self) -> u64 {
+        self.photons_per_pass - self.next
+    }
+
+    /// Appends photons to the pass's columns (growing them when a pass stores more than any
+    /// before it).
+    pub fn append(&mut self, photons: &[StoredPhoton]) {
+        let needed = self.stored + photons.len();
+        if self.photons.capacity() < needed {
+            let mut grown = Photons::new(needed.max(2 * self.photons.capacity()));
+            let order: Vec<u32> = (0..self.stored as u32).collect();
+            grown.gather_from(&self.photons, &order);
+            self.photons = grown;
+        }
+        let p = &mut self.photons;
+        for (k, ph) in photons.iter().enumerate() {
+            let i = self.stored + k;
+            p.p[i] = ph.p;
+            p.wi[i] = ph.wi;
+            p.power[i] = ph.power;
+            p.ng[i] = ph.ng;
+            p.depth[i] = ph.depth;
+            p.flags[i] = ph.flags;
+        }
+        self.stored = needed;
+    }
+}
+
+/// An integrator state that traces photons.
+pub trait PhotonQueue {
+    fn photon_queue(&mut self) -> (&SceneData, &mut PhotonTracing);
+}
+
+/// Photons in flight per wave.
+pub const WAVEFRONT: usize = 1 << 16;
+
+/// A scene and its photon tracing: the state the photon graph runs on.
+pub struct PhotonPass {
+    pub data: std::sync::Arc<SceneData>,
+    pub tracing: PhotonTracing,
+}
+
+impl PhotonQueue for PhotonPass {
+    fn photon_queue(&mut self) -> (&SceneData, &mut PhotonTracing) {
+        (&self.data, &mut self.tracing)
+    }
+}
+
+impl crate::systems::trace::closest::ClosestHitQueue for PhotonPass {
+    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
+        let t = &mut self.tracing;
+        (&self.data.accel, &t.rays, &mut t.hits, t.active)
+    }
+}
+
+/// The photon graph, one pass (a pass is cut into waves of at most `WAVEFRONT` photons):
+///
+/// ```text
+/// loop photon_waves (while the pass has photons left):
+///     emit_photons
+///     loop photon_bounces (while photons are live):
+///         trace_closest -> scatter_photons -> compact_photons
+/// ```
+pub fn graph() -> crate::pipeline::Graph<PhotonPass> {
+    use crate::pipeline::{Graph, Node};
+    use crate::systems::{generate, shade, trace};
+    Graph::new(
+        "photons",
+        vec![Node::Loop {
+            name: "photon_waves",
+            queue_len: |s: &PhotonPass| s.tracing.remaining() as usize,
+            body: vec![
+                Node::system(generate::photons::EmitPhotons),
+                Node::Loop {
+                    name: "photon_bounces",
+                    queue_len: |s: &PhotonPass| s.tracing.active,
+                    body: vec![
+                        Node::system(trace::closest::TraceClosest),
+                        Node::system(shade::scatter_photons::ScatterPhotons),
+                        Node::system(shade::compact_photons::CompactPhotons),
+                    ],
+                },
+            ],
+        }],
+    )
+}
+
+impl PhotonPass {
+    pub fn new(data: std::sync::Arc<SceneData>, seed: u64, max_depth: u32) -> PhotonPass {
+        PhotonPass {
+            data,
+            tracing: PhotonTracing::new(seed, max_depth, WAVEFRONT),
+        }
+    }
+
+    /// Traces pass `pass` of `photons` photons in waves; afterwards `tracing.photons` holds
+    /// the photons stored (slots `0..tracing.stored`), in photon order.
+    pub fn trace(
+        &mut self,
+        graph: &crate::pipeline::Graph<PhotonPass>,
+        pass: u64,
+        photons: u64,
+        stats: &mut crate::pipeline::Stats,
+    ) {
+        self.tracing.begin_pass(pass, photons);
+        graph.run(self, stats);
+    }
+}

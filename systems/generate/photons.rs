@@ -1,0 +1,70 @@
+//! Emits the next wave of the pass's photons: an emitter picked by power, a point uniform on it, a direction
+//! cosine-distributed about its emitting side, and the power `Le pi / pdf(point)`.
+
+use crate::accel::{offset_ray_origin, surface_point};
+use crate::math::Frame;
+use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonQueue, photon_key};
+use crate::pipeline::{Flow, System};
+use crate::sampling::{cosine_hemisphere, sample_cdf, uniform_triangle};
+use glam::Vec3;
+use rayon::prelude::*;
+use std::f32::consts::PI;
+
+pub struct EmitPhotons;
+
+impl<S: PhotonQueue + Send> System<S> for EmitPhotons {
+    fn name(&self) -> &'static str {
+        "emit_photons"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["emitters", "photon_wave"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["photon_walkers", "rays"]
+    }
+    fn run(&self, state: &mut S) -> Flow {
+        let (data, t) = state.photon_queue();
+        let n = t.remaining().min(t.walkers.capacity() as u64) as usize;
+        t.first = t.next;
+        t.len = n;
+        t.next += n as u64;
+        let emitters = &data.scene.emitters;
+        let tris = &data.scene.triangles;
+        if emitters.triangle.is_empty() {
+            // Nothing emits: the pass is over.
+            t.next = t.photons_per_pass;
+            t.active = 0;
+            return Flow::new(0, 0);
+        }
+        let (seed, pass, first) = (t.seed, t.pass, t.first);
+        let rays = t.rays.chunks_mut(0..n);
+        t.walkers
+            .chunks_mut(0..n)
+            .into_par_iter()
+            .zip(rays)
+            .for_each(|(w, r)| {
+                for i in 0..w.len() {
+                    let key = photon_key(seed, pass, first + (w.start + i) as u64);
+                    let e = sample_cdf(&emitters.cdf, key.get(DIM_PICK));
+                    let b = uniform_triangle(key.get2(DIM_POINT));
+                    let sp = surface_point(tris, emitters.triangle[e], b.x, b.y);
+                    let local = cosine_hemisphere(key.get2(DIM_DIRECTION));
+                    let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
+                    let pdf_point = emitters.pmf[e] / emitters.area[e];
+                    // Le cos / (pdf_point cos / pi); a direction in the tangent plane
+                    // carries nothing and is not traced.
+                    let alive = local.z > 0.0;
+                    w.key[i] = key;
+                    w.power[i] = emitters.radiance[e] * (PI / pdf_point);
+                    w.depth[i] = 0;
+                    w.specular_chain[i] = true;
+                    w.alive[i] = alive;
+                    r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, dir);
+                    r.dir[i] = if alive { dir } else { Vec3::ZERO };
+                }
+            });
+        t.active = n;
+        t.emitted += n as u64;
+        Flow::new(n, n)
+    }
+}

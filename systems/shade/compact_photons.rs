@@ -1,0 +1,35 @@
+//! Drops the photons that ended, keeping the rest in slot order.
+
+use crate::components::gather_column;
+use crate::photons::PhotonQueue;
+use crate::pipeline::{Flow, System};
+
+pub struct CompactPhotons;
+
+impl<S: PhotonQueue + Send> System<S> for CompactPhotons {
+    fn name(&self) -> &'static str {
+        "compact_photons"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["photon_walkers.alive"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["photon_walkers", "rays"]
+    }
+    fn run(&self, state: &mut S) -> Flow {
+        use std::mem::swap;
+        let (_, t) = state.photon_queue();
+        let n = t.active;
+        let mut order = std::mem::take(&mut t.order);
+        order.clear();
+        order.extend((0..n as u32).filter(|&i| t.walkers.alive[i as usize]));
+        t.scratch_walkers.gather_from(&t.walkers, &order);
+        gather_column(&mut t.scratch_rays.origin, &t.rays.origin, &order);
+        gather_column(&mut t.scratch_rays.dir, &t.rays.dir, &order);
+        swap(&mut t.walkers, &mut t.scratch_walkers);
+        swap(&mut t.rays, &mut t.scratch_rays);
+        t.active = order.len();
+        t.order = order;
+        Flow::new(n, t.active)
+    }
+}

@@ -1,0 +1,146 @@
+//! Where each photon landed: stores it if the surface is not specular, then scatters it on by
+//! sampling the BSDF (importance transport), with Russian roulette by the sampled weight so
+//! that its power stays constant in expectation. Stored photons join the pass in photon order.
+
+use crate::accel::{offset_ray_origin, surface_point};
+use crate::bsdf::{Material, TransportMode};
+use crate::components::{CHUNK, MISS, PhotonFlags};
+use crate::path::{Vertex, VertexKind, local_frame, shading_correction};
+use crate::photons::{
+    DIM_BSDF, DIM_ROULETTE, PhotonQueue, ROULETTE_MAX_SURVIVAL, StoredPhoton, bounce_dim,
+};
+use crate::pipeline::{Flow, System};
+use rayon::prelude::*;
+
+pub struct ScatterPhotons;
+
+impl<S: PhotonQueue + Send> System<S> for ScatterPhotons {
+    fn name(&self) -> &'static str {
+        "scatter_photons"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["hits", "rays.dir", "photon_walkers"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["photons", "photon_walkers", "rays"]
+    }
+    fn run(&self, state: &mut S) -> Flow {
+        let (data, t) = state.photon_queue();
+        let n = t.active;
+        let scene = &data.scene;
+        let max_depth = t.max_depth;
+        let chunks = n.div_ceil(CHUNK);
+        t.chunk_photons.resize_with(chunks, Vec::new);
+        let hits = &t.hits;
+        let rays = t.rays.chunks_mut(0..n);
+        let alive: usize = t
+            .walkers
+            .chunks_mut(0..n)
+            .into_par_iter()
+            .zip(rays)
+            .zip(&mut t.chunk_photons[..chunks])
+            .map(|((w, r), out)| {
+                out.clear();
+                let mut alive = 0;
+                let hits = hits.view(w.start..w.start + w.len());
+                for i in 0..w.len() {
+                    if !w.alive[i] || hits.triangle[i] == MISS {
+                        w.alive[i] = false;
+                        continue;
+                    }
+                    w.alive[i] = false;
+                    let tri = hits.triangle[i];
+                    let sp = surface_point(&scene.triangles, tri, hits.b1[i], hits.b2[i]);
+                    let ns = if sp.ns.dot(sp.ng) < 0.0 {
+                        -sp.ns
+                    } else {
+                        sp.ns
+                    };
+                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
+                    let wo = -r.dir[i].normalize();
+                    let depth = w.depth[i];
+                    if !matches!(material, Material::Dielectric { .. }) {
+                        let mut flags = 0;
+                        if depth == 0 {
+                            flags |= PhotonFlags::DIRECT;
+                        } else if w.specular_chain[i] {
+                            flags |= PhotonFlags::CAUSTIC;
+                        }
+                        out.push(StoredPhoton {
+                            p: sp.p,
+                            wi: wo,
+                            power: w.power[i],
+                            ng: sp.ng,
+                            depth,
+                            flags: PhotonFlags(flags),
+                        });
+                    }
+                    if depth >= max_depth {
+                        continue;
+                    }
+                    let here = Vertex {
+                        kind: VertexKind::Surface,
+                        p: sp.p,
+                        p_error: sp.p_error,
+                        ng: sp.ng,
+                        ns,
+                        triangle: tri,
+                        beta: w.power[i],
+                        pdf_fwd: 0.0,
+                        pdf_rev: 0.0,
+                        delta: false,
+                    };
+                    let (frame, ng) = local_frame(&material, &here, wo);
+                    let wo_local = frame.to_local(wo);
+                    let key = w.key[i];
+                    let dim = bounce_dim(depth);
+                    let Some(bs) = material.sample(
+                        wo_local,
+                        key.get2(dim + DIM_BSDF),
+                        TransportMode::Importance,
+                    ) else {
+                        continue;
+                    };
+                    if bs.pdf <= 0.0 {
+                        continue;
+                    }
+                    let wi = frame.to_world(bs.wi).normalize();
+                    let reflected = bs.wi.z * wo_local.z > 0.0;
+                    if (wi.dot(ng) * wo.dot(ng) > 0.0) != reflected {
+                        continue;
+                    }
+                    let weight =
+                        bs.value * (bs.wi.z.abs() / bs.pdf) * shading_correction(&here, wo, wi);
+                    if !weight.is_finite() {
+                        continue;
+                    }
+                    // Roulette by the weight: survivors carry power / q x weight, which keeps
+                    // a Lambertian photon's power unchanged (weight = albedo = q per channel
+                    // when grey).
+                    let q = weight.max_element().min(ROULETTE_MAX_SURVIVAL);
+                    if q.is_nan() || q <= 0.0 || key.get(dim + DIM_ROULETTE) >= q {
+                        continue;
+                    }
+                    w.power[i] *= weight / q;
+                    w.depth[i] = depth + 1;
+                    w.specular_chain[i] &= bs.delta;
+                    w.alive[i] = true;
+                    r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, wi);
+                    r.dir[i] = wi;
+                    alive += 1;
+                }
+                alive
+            })
+            .sum();
+        let stored_before = t.stored;
+        let mut chunk_photons = std::mem::take(&mut t.chunk_photons);
+        for out in &chunk_photons[..chunks] {
+            t.append(out);
+        }
+        for out in &mut chunk_photons {
+            out.clear();
+        }
+        t.chunk_photons = chunk_photons;
+        Flow::new(n, alive + (t.stored - stored_before))
+    }
+}
