@@ -5,7 +5,7 @@ use crate::components::PathFlags;
 use crate::integrators::pt::{DIM_PIXEL, PtState};
 use crate::pipeline::{Flow, System};
 use crate::sampling::SampleKey;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 pub struct GenerateCameraRays;
@@ -22,10 +22,8 @@ impl System<PtState> for GenerateCameraRays {
     }
     fn run(&self, s: &mut PtState) -> Flow {
         let n = s.wave.len;
-        let cam = s.data.scene.camera;
-        let (w, h) = (cam.width as u64, cam.height as u64);
-        let tan_half = (cam.fov_y_degrees.to_radians() * 0.5).tan();
-        let aspect = w as f32 / h as f32;
+        let cam = s.data.scene.camera.frustum();
+        let w = cam.width as u64;
         let (first, pixels, seed) = (s.wave.first, s.pixels, s.settings.seed);
         s.sample_radiance[..n].fill(Vec3::ZERO);
         let rays = s.rays.chunks_mut(0..n);
@@ -37,11 +35,9 @@ impl System<PtState> for GenerateCameraRays {
                 let pixel = g % pixels;
                 let key = SampleKey::new(seed, pixel, g / pixels);
                 let jitter = key.get2(DIM_PIXEL);
-                let (x, y) = ((pixel % w) as f32, (pixel / w) as f32);
-                let sx = (2.0 * (x + jitter.x) / w as f32 - 1.0) * tan_half * aspect;
-                let sy = (1.0 - 2.0 * (y + jitter.y) / h as f32) * tan_half;
+                let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
                 r.origin[i] = cam.position;
-                r.dir[i] = (cam.forward + cam.right * sx + cam.up * sy).normalize();
+                r.dir[i] = cam.direction(raster);
                 p.sample[i] = slot as u32;
                 p.key[i] = key;
                 p.throughput[i] = Vec3::ONE;
