@@ -11,7 +11,7 @@
 //! of every strategy is found in one walk instead of by evaluating each from scratch.
 
 use crate::bsdf::{Material, TransportMode};
-use crate::components::{CAMERA_VERTEX, PathVertices};
+use crate::components::{CAMERA_VERTEX, PathVerticesView};
 use crate::math::Frame;
 use crate::scene::{Frustum, NO_EMITTER, PreparedScene};
 use glam::Vec3;
@@ -44,7 +44,7 @@ impl Vertex {
     /// Vertex `i` of a view of the store of depth `depth` (a light subpath's vertex 0 is its
     /// light vertex; a camera subpath's is marked `CAMERA_VERTEX`).
     #[inline]
-    pub fn from_store(store: &PathVertices, i: usize, depth: usize) -> Vertex {
+    pub fn from_store(store: &PathVerticesView, i: usize, depth: usize) -> Vertex {
         let triangle = store.triangle[i];
         let kind = match (depth, triangle) {
             (_, CAMERA_VERTEX) => VertexKind::Camera,

@@ -99,6 +99,11 @@ macro_rules! soa {
             pub fn is_empty(&self) -> bool {
                 self.len() == 0
             }
+            /// A read-only view of the chunk (indexed from 0, like the chunk).
+            #[inline]
+            pub fn view(&self) -> $view<'_> {
+                $view { $($field: &*self.$field,)+ }
+            }
         }
 
         impl $name {

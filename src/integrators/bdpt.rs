@@ -369,7 +369,7 @@ pub fn trace_subpaths(
     walk.run(&mut state, &mut Stats::default());
     let subpath = |k: usize| {
         (0..state.subpath_len[k] as usize)
-            .map(|d| crate::path::Vertex::from_store(&state.vertices[d], k, d))
+            .map(|d| crate::path::Vertex::from_store(&state.vertices[d].view(k..k + 1), 0, d))
             .collect::<Vec<_>>()
     };
     (0..len).map(|k| (subpath(k), subpath(len + k))).collect()

@@ -69,7 +69,7 @@ impl System<BdptState> for ConnectStrategies {
         }
 
         let ctx = PathContext::new(&s.data.scene);
-        let vertices = &s.vertices;
+        let vertices: Vec<_> = s.vertices.iter().map(|v| v.view(0..v.capacity())).collect();
         let starts = &s.connection_start;
         let chunk_starts: Vec<usize> = (0..n).step_by(CONNECT_CHUNK).map(|k| starts[k]).collect();
         let shadow = s.shadow.split_mut(&chunk_starts, total);

@@ -75,23 +75,7 @@ impl System<BdptState> for ExtendSubpaths {
                     } else {
                         sp.ns
                     };
-                    let prev_kind = match (d - 1, light) {
-                        (0, false) => VertexKind::Camera,
-                        (0, true) => VertexKind::Light,
-                        _ => VertexKind::Surface,
-                    };
-                    let prev = Vertex {
-                        kind: prev_kind,
-                        p: pv.p[j],
-                        p_error: pv.p_error[j],
-                        ng: pv.ng[j],
-                        ns: pv.ns[j],
-                        triangle: pv.triangle[j],
-                        beta: pv.beta[j],
-                        pdf_fwd: pv.pdf_fwd[j],
-                        pdf_rev: pv.pdf_rev[j],
-                        delta: pv.delta[j],
-                    };
+                    let prev = Vertex::from_store(&pv.view(), j, d - 1);
                     let mut here = Vertex {
                         kind: VertexKind::Surface,
                         p: sp.p,
