@@ -41,6 +41,13 @@ pub fn gather_column<T: Copy + Send + Sync>(dst: &mut [T], src: &[T], order: &[u
         });
 }
 
+/// Fills `order` with the slots whose `alive` flag is set, in slot order: the gather order of a
+/// stable compaction.
+pub fn live_slots(alive: &[bool], order: &mut Vec<u32>) {
+    order.clear();
+    order.extend((0..alive.len() as u32).filter(|&i| alive[i as usize]));
+}
+
 /// Splits `slice[..end]` into consecutive pieces: piece k is `starts[k]..starts[k + 1]` (the
 /// last one ends at `end`). Panics if `starts` decreases or passes `end`.
 pub fn split_ranges<'a, T>(slice: &'a mut [T], starts: &[usize], end: usize) -> Vec<&'a mut [T]> {

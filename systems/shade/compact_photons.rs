@@ -1,6 +1,6 @@
 //! Drops the photons that ended, keeping the rest in slot order.
 
-use crate::components::gather_column;
+use crate::components::{gather_column, live_slots};
 use crate::photons::PhotonQueue;
 use crate::pipeline::{Flow, System};
 
@@ -21,8 +21,7 @@ impl<S: PhotonQueue + Send> System<S> for CompactPhotons {
         let (_, t) = state.photon_queue();
         let n = t.active;
         let mut order = std::mem::take(&mut t.order);
-        order.clear();
-        order.extend((0..n as u32).filter(|&i| t.walkers.alive[i as usize]));
+        live_slots(&t.walkers.alive[..n], &mut order);
         t.scratch_walkers.gather_from(&t.walkers, &order);
         gather_column(&mut t.scratch_rays.origin, &t.rays.origin, &order);
         gather_column(&mut t.scratch_rays.dir, &t.rays.dir, &order);

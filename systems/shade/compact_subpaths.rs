@@ -2,7 +2,7 @@
 //! increasing subpath order, which lets later bounces split the vertex stores by chunk), and
 //! moves on to the next depth.
 
-use crate::components::gather_column;
+use crate::components::{gather_column, live_slots};
 use crate::integrators::bdpt::BdptState;
 use crate::pipeline::{Flow, System};
 
@@ -22,14 +22,7 @@ impl System<BdptState> for CompactSubpaths {
         use std::mem::swap;
         let n = s.active;
         let mut order = std::mem::take(&mut s.scratch.order);
-        order.clear();
-        order.extend(
-            s.walkers.alive[..n]
-                .iter()
-                .enumerate()
-                .filter(|&(_, &a)| a)
-                .map(|(i, _)| i as u32),
-        );
+        live_slots(&s.walkers.alive[..n], &mut order);
         let scratch = &mut s.scratch;
         scratch.walkers.gather_from(&s.walkers, &order);
         gather_column(&mut scratch.rays.origin, &s.rays.origin, &order);
