@@ -95,6 +95,36 @@ pub struct PreparedScene {
     pub warnings: Vec<String>,
 }
 
+/// A point on an emitter, picked by power and then uniformly by area (light sampling, light
+/// subpaths and photons all start this way).
+#[derive(Clone, Copy, Debug)]
+pub struct EmitterPoint {
+    /// Index into `PreparedScene::emitters`.
+    pub emitter: usize,
+    pub triangle: u32,
+    pub point: crate::accel::SurfacePoint,
+    /// Area density of the point: the emitter's pick probability over its area.
+    pub pdf_area: f32,
+}
+
+impl PreparedScene {
+    /// The emitter point for `u_pick` (which emitter) and `u_point` (where on it). The scene
+    /// must have an emitter.
+    #[inline]
+    pub fn sample_emitter(&self, u_pick: f32, u_point: glam::Vec2) -> EmitterPoint {
+        let emitters = &self.emitters;
+        let e = crate::sampling::sample_cdf(&emitters.cdf, u_pick);
+        let b = crate::sampling::uniform_triangle(u_point);
+        let triangle = emitters.triangle[e];
+        EmitterPoint {
+            emitter: e,
+            triangle,
+            point: crate::accel::surface_point(&self.triangles, triangle, b.x, b.y),
+            pdf_area: emitters.pmf[e] / emitters.area[e],
+        }
+    }
+}
+
 /// A scene error that names the file, the line and column where known, and what is wrong.
 #[derive(Debug, thiserror::Error)]
 #[error("{}{}: {message}", .file.display(), location(*.line, *.column))]

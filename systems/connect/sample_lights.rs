@@ -2,12 +2,12 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
-use crate::accel::{spawn_ray_to, surface_point};
+use crate::accel::spawn_ray_to;
 use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
 use crate::pipeline::{Flow, System};
-use crate::sampling::{power_heuristic, sample_cdf, uniform_triangle};
+use crate::sampling::power_heuristic;
 use crate::systems::shade::Surface;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -78,7 +78,7 @@ fn sample_chunk(
     c: ShadowRaysChunk,
 ) -> usize {
     let emitters = &data.scene.emitters;
-    let tris = &data.scene.triangles;
+
     let mut cast = 0;
     let range = c.start..c.start + c.len();
     let hits = hits.view(range.clone());
@@ -90,9 +90,11 @@ fn sample_chunk(
         let surf = Surface::at(data, &surfaces, hits.triangle[i], i, rays.dir[i]);
         let key = paths.key[i];
         let dim = bounce_dim(paths.depth[i]);
-        let e = sample_cdf(&emitters.cdf, key.get(dim + DIM_LIGHT_PICK));
-        let b = uniform_triangle(key.get2(dim + DIM_LIGHT_POINT));
-        let light = surface_point(tris, emitters.triangle[e], b.x, b.y);
+        let sampled = data.scene.sample_emitter(
+            key.get(dim + DIM_LIGHT_PICK),
+            key.get2(dim + DIM_LIGHT_POINT),
+        );
+        let (e, light) = (sampled.emitter, sampled.point);
         let to_light = light.p - surf.p;
         let dist2 = to_light.length_squared();
         let wi = to_light / dist2.sqrt();
@@ -105,7 +107,7 @@ fn sample_chunk(
         if f == Vec3::ZERO {
             continue;
         }
-        let light_pdf = emitters.pmf[e] / emitters.area[e] * dist2 / cos_light;
+        let light_pdf = sampled.pdf_area * dist2 / cos_light;
         let weight = power_heuristic(light_pdf, surf.material.pdf(surf.wo_local, wi_local));
         let (origin, dir, t_max) = spawn_ray_to(
             surf.p,

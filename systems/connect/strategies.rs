@@ -7,7 +7,7 @@
 //! estimation); t = 1 projects a light vertex onto the image (light tracing: it lands in
 //! whichever pixel it projects to).
 
-use crate::accel::{spawn_ray_to, surface_point};
+use crate::accel::spawn_ray_to;
 use crate::components::{Connections, ShadowRays, split_ranges};
 use crate::integrators::bdpt::{
     BdptSettings, BdptState, CONNECT_CHUNK, DIM_LIGHT_PICK, DIM_LIGHT_POINT, StrategyFilter,
@@ -15,7 +15,7 @@ use crate::integrators::bdpt::{
 };
 use crate::path::{PathContext, Vertex, VertexKind};
 use crate::pipeline::{Flow, System};
-use crate::sampling::{SampleKey, sample_cdf, uniform_triangle};
+use crate::sampling::SampleKey;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -82,7 +82,7 @@ impl System<BdptState> for ConnectStrategies {
         let (first, pixels, seed) = (s.wave.first, s.pixels, settings.seed);
         let weighted = settings.strategies == StrategyFilter::All;
         let emitters = &s.data.scene.emitters;
-        let tris = &s.data.scene.triangles;
+        let scene = &s.data.scene;
         let has_light = !emitters.triangle.is_empty();
         let made: usize = shadow
             .into_par_iter()
@@ -124,11 +124,12 @@ impl System<BdptState> for ConnectStrategies {
                                 continue;
                             }
                             let dim = camera_vertex_dim(ti - 1);
-                            let e = sample_cdf(&emitters.cdf, key.get(dim + DIM_LIGHT_PICK));
-                            let b = uniform_triangle(key.get2(dim + DIM_LIGHT_POINT));
-                            let tri = emitters.triangle[e];
-                            let sp = surface_point(tris, tri, b.x, b.y);
-                            let pdf_origin = emitters.pmf[e] / emitters.area[e];
+                            let light = scene.sample_emitter(
+                                key.get(dim + DIM_LIGHT_PICK),
+                                key.get2(dim + DIM_LIGHT_POINT),
+                            );
+                            let (e, tri, sp) = (light.emitter, light.triangle, light.point);
+                            let pdf_origin = light.pdf_area;
                             sampled = [Vertex {
                                 kind: VertexKind::Light,
                                 p: sp.p,

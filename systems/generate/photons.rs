@@ -1,11 +1,11 @@
 //! Emits the next wave of the pass's photons: an emitter picked by power, a point uniform on it, a direction
 //! cosine-distributed about its emitting side, and the power `Le pi / pdf(point)`.
 
-use crate::accel::{offset_ray_origin, surface_point};
+use crate::accel::offset_ray_origin;
 use crate::math::Frame;
 use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonQueue, photon_key};
 use crate::pipeline::{Flow, System};
-use crate::sampling::{cosine_hemisphere, sample_cdf, uniform_triangle};
+use crate::sampling::cosine_hemisphere;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
@@ -29,7 +29,7 @@ impl<S: PhotonQueue + Send> System<S> for EmitPhotons {
         t.len = n;
         t.next += n as u64;
         let emitters = &data.scene.emitters;
-        let tris = &data.scene.triangles;
+
         if emitters.triangle.is_empty() {
             // Nothing emits: the pass is over.
             t.next = t.photons_per_pass;
@@ -45,12 +45,13 @@ impl<S: PhotonQueue + Send> System<S> for EmitPhotons {
             .for_each(|(w, r)| {
                 for i in 0..w.len() {
                     let key = photon_key(seed, pass, first + (w.start + i) as u64);
-                    let e = sample_cdf(&emitters.cdf, key.get(DIM_PICK));
-                    let b = uniform_triangle(key.get2(DIM_POINT));
-                    let sp = surface_point(tris, emitters.triangle[e], b.x, b.y);
+                    let light = data
+                        .scene
+                        .sample_emitter(key.get(DIM_PICK), key.get2(DIM_POINT));
+                    let (e, sp) = (light.emitter, light.point);
                     let local = cosine_hemisphere(key.get2(DIM_DIRECTION));
                     let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
-                    let pdf_point = emitters.pmf[e] / emitters.area[e];
+                    let pdf_point = light.pdf_area;
                     // Le cos / (pdf_point cos / pi); a direction in the tangent plane
                     // carries nothing and is not traced.
                     let alive = local.z > 0.0;

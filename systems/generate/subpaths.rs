@@ -2,14 +2,14 @@
 //! (uniform inside the sample's pixel), and a light vertex (an emitter picked by power, a
 //! point uniform on it) with a cosine-distributed ray leaving its emitting side.
 
-use crate::accel::{offset_ray_origin, surface_point};
+use crate::accel::offset_ray_origin;
 use crate::components::CAMERA_VERTEX;
 use crate::integrators::bdpt::{
     BdptState, CAMERA_DIM_PIXEL, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT, light_key,
 };
 use crate::math::Frame;
 use crate::pipeline::{Flow, System};
-use crate::sampling::{SampleKey, cosine_hemisphere, sample_cdf, uniform_triangle};
+use crate::sampling::{SampleKey, cosine_hemisphere};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -34,7 +34,7 @@ impl System<BdptState> for StartSubpaths {
         let (first, pixels, seed) = (s.wave.first, s.pixels, s.settings.seed);
         let w = cam.width as u64;
         let emitters = &data.scene.emitters;
-        let tris = &data.scene.triangles;
+
         let has_light = !emitters.triangle.is_empty();
         let sample_of = |k: usize| {
             let g = first + k as u64;
@@ -98,11 +98,11 @@ impl System<BdptState> for StartSubpaths {
                     let k = v.start - cap + i;
                     let (pixel, index) = sample_of(k);
                     let key = light_key(seed, pixel, index);
-                    let e = sample_cdf(&emitters.cdf, key.get(LIGHT_DIM_PICK));
-                    let b = uniform_triangle(key.get2(LIGHT_DIM_POINT));
-                    let tri = emitters.triangle[e];
-                    let sp = surface_point(tris, tri, b.x, b.y);
-                    let pdf_origin = emitters.pmf[e] / emitters.area[e];
+                    let light = data
+                        .scene
+                        .sample_emitter(key.get(LIGHT_DIM_PICK), key.get2(LIGHT_DIM_POINT));
+                    let (e, tri, sp) = (light.emitter, light.triangle, light.point);
+                    let pdf_origin = light.pdf_area;
                     let le = emitters.radiance[e];
                     let local = cosine_hemisphere(key.get2(LIGHT_DIM_DIRECTION));
                     let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
