@@ -67,8 +67,9 @@ pub struct RenderArgs {
     pub scene: PathBuf,
     #[arg(long, default_value = "pt", value_parser = parse_integrator)]
     pub integrator: IntegratorKind,
-    /// Samples per pixel (default 64 unless --time is given).
-    #[arg(long, conflicts_with = "time", value_parser = clap::value_parser!(u64).range(1..))]
+    /// Samples per pixel (default 64 unless --time is given). A pass is one sample per
+    /// pixel, so this is also the number of passes (ppm, sppm).
+    #[arg(long, visible_alias = "passes", conflicts_with = "time", value_parser = clap::value_parser!(u64).range(1..))]
     pub spp: Option<u64>,
     /// Render for this many wall-clock seconds (whole passes).
     #[arg(long, value_parser = parse_seconds)]
@@ -78,6 +79,8 @@ pub struct RenderArgs {
     pub threads: Option<u64>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    #[command(flatten)]
+    pub photons: PhotonArgs,
     /// Maximum number of bounces (default: unlimited; Russian roulette ends paths).
     #[arg(long)]
     pub max_depth: Option<u32>,
@@ -93,6 +96,45 @@ pub struct RenderArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Options of the photon mappers.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct PhotonArgs {
+    /// Photons traced per pass (ppm, sppm).
+    #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_PHOTONS_PER_PASS, value_parser = clap::value_parser!(u64).range(1..))]
+    pub photons_per_pass: u64,
+    /// Fraction of each pass's photons a pixel keeps, in (0, 1) (ppm, sppm).
+    #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_ALPHA, value_parser = parse_alpha)]
+    pub alpha: f32,
+    /// Initial gather radius in scene units (ppm, sppm; default: 0.5% of the scene's
+    /// bounding-box diagonal).
+    #[arg(long, value_parser = parse_radius)]
+    pub radius: Option<f32>,
+}
+
+impl PhotonArgs {
+    pub fn settings(&self) -> crate::integrators::PhotonSettings {
+        crate::integrators::PhotonSettings {
+            photons_per_pass: self.photons_per_pass,
+            alpha: self.alpha,
+            radius: self.radius,
+        }
+    }
+}
+
+fn parse_alpha(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
+        _ => Err(format!("alpha must be a number in (0, 1), not {s}")),
+    }
+}
+
+fn parse_radius(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
+        _ => Err(format!("the radius must be a positive number, not {s}")),
+    }
 }
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
@@ -343,6 +385,7 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
         max_depth: args.max_depth.unwrap_or(u32::MAX),
         mis: args.mis.heuristic(),
         strategy_images: args.strategy_images.is_some(),
+        photons: args.photons.settings(),
     };
     let cpu_start = cpu_seconds();
     let outcome = pool.install(|| {
@@ -497,6 +540,15 @@ pub fn render_report(
         o.shadow_rays(),
         mega(o.shadow_rays() as f64 / wall)
     );
+    if let Some(emit) = o.stats.get("emit_photons") {
+        let _ = writeln!(
+            r,
+            "  photons           {} emitted ({}photons/s), {} passes/s",
+            emit.emitted,
+            mega(emit.emitted as f64 / wall),
+            format_args!("{:.2}", o.passes as f64 / wall)
+        );
+    }
     let _ = writeln!(
         r,
         "  NaN/Inf samples   {} (counted, never added)",
@@ -709,6 +761,12 @@ fn describe_reference(job: &ReferenceJob, o: &crate::reference::ReferenceOutcome
 }
 
 fn reference_command(args: &ReferenceArgs) -> Result<i32> {
+    if !args.integrator.is_unbiased() {
+        bail!(
+            "--integrator {}: a reference needs an unbiased integrator (pt or bdpt)",
+            args.integrator
+        );
+    }
     let data = load_scene(&args.scene)?;
     let output = args.output.clone().unwrap_or_else(|| {
         PathBuf::from("reference").join(format!(

@@ -3,6 +3,7 @@
 
 /// Making new work: camera rays (and later light paths and photons).
 pub mod generate {
+    pub mod camera_chains;
     pub mod camera_rays;
     pub mod photons;
     pub mod subpaths;
@@ -16,12 +17,14 @@ pub mod trace {
 
 /// What happens at a surface: emission found, queues by material, scattering, roulette.
 pub mod shade {
+    pub mod compact_camera_chains;
     pub mod compact_photons;
     pub mod compact_subpaths;
     pub mod conductor;
     pub mod dielectric;
     pub mod diffuse;
     pub mod emitted_light;
+    pub mod extend_camera_chains;
     pub mod extend_subpaths;
     pub mod interpolate_surfaces;
     pub mod russian_roulette;
@@ -34,6 +37,7 @@ pub mod shade {
 /// Joining paths to lights: light sampling and the shadow rays' contributions.
 pub mod connect {
     pub mod apply_shadow;
+    pub mod sample_direct_light;
     pub mod sample_lights;
     pub mod strategies;
 }
@@ -41,5 +45,9 @@ pub mod connect {
 /// Collecting finished work into the film.
 pub mod gather {
     pub mod connections;
+    pub mod direct_light;
     pub mod film;
+    pub mod photon_grid;
+    pub mod progressive_update;
+    pub mod visible_point_photons;
 }

@@ -11,6 +11,7 @@ mod rays;
 mod shadow;
 mod surfaces;
 mod vertices;
+mod visible_points;
 
 pub use paths::{PathFlags, Paths, PathsChunk, PathsView};
 pub use photons::{
@@ -20,6 +21,11 @@ pub use photons::{
 pub use rays::{Hits, HitsChunk, HitsView, MISS, Rays, RaysChunk, RaysView};
 pub use shadow::{ShadowRays, ShadowRaysChunk, ShadowRaysView};
 pub use surfaces::{Surfaces, SurfacesChunk, SurfacesView};
+pub use visible_points::{
+    CameraChains, CameraChainsChunk, CameraChainsView, NO_VISIBLE_POINT, PixelEstimates,
+    PixelEstimatesChunk, PixelEstimatesView, VisiblePoints, VisiblePointsChunk,
+    VisiblePointsView,
+};
 pub use vertices::{
     CAMERA_VERTEX, Connections, ConnectionsChunk, ConnectionsView, PathVertices, PathVerticesChunk,
     PathVerticesView, Walkers, WalkersChunk, WalkersView,

@@ -2,6 +2,7 @@
 
 pub mod bdpt;
 pub mod pt;
+pub mod sppm;
 
 use crate::accel::Accel;
 use crate::scene::PreparedScene;
@@ -33,6 +34,10 @@ pub enum IntegratorKind {
     Pt,
     /// Bidirectional path tracing: every strategy (s, t), MIS-weighted.
     Bdpt,
+    /// Progressive photon mapping: visible points found once, passes of photons.
+    Ppm,
+    /// Stochastic progressive photon mapping: new visible points every pass.
+    Sppm,
 }
 
 /// Every integrator name the project knows, built or planned, in the order reports list them.
@@ -61,12 +66,19 @@ fn built_names() -> String {
 
 impl IntegratorKind {
     /// The integrators this binary can run, in the order of `KNOWN_INTEGRATORS`.
-    pub const BUILT: &'static [IntegratorKind] = &[IntegratorKind::Pt, IntegratorKind::Bdpt];
+    pub const BUILT: &'static [IntegratorKind] = &[
+        IntegratorKind::Pt,
+        IntegratorKind::Bdpt,
+        IntegratorKind::Ppm,
+        IntegratorKind::Sppm,
+    ];
 
     pub fn as_str(self) -> &'static str {
         match self {
             IntegratorKind::Pt => "pt",
             IntegratorKind::Bdpt => "bdpt",
+            IntegratorKind::Ppm => "ppm",
+            IntegratorKind::Sppm => "sppm",
         }
     }
 
@@ -74,7 +86,15 @@ impl IntegratorKind {
         match self {
             IntegratorKind::Pt => "path tracing with next-event estimation and MIS",
             IntegratorKind::Bdpt => "bidirectional path tracing, every strategy MIS-weighted",
+            IntegratorKind::Ppm => "progressive photon mapping (visible points found once)",
+            IntegratorKind::Sppm => "stochastic progressive photon mapping",
         }
+    }
+
+    /// Whether the integrator is unbiased (its renders can serve as references and resume
+    /// from a checkpoint); the photon mappers are consistent but biased.
+    pub fn is_unbiased(self) -> bool {
+        matches!(self, IntegratorKind::Pt | IntegratorKind::Bdpt)
     }
 
     /// Parses an integrator name (case-insensitive). A planned but unbuilt name is
@@ -104,8 +124,29 @@ impl std::fmt::Display for IntegratorKind {
     }
 }
 
+/// Settings of the photon mappers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PhotonSettings {
+    /// Photons traced per pass (ppm, sppm).
+    pub photons_per_pass: u64,
+    /// Fraction of a pass's photons each pixel keeps (ppm, sppm).
+    pub alpha: f32,
+    /// Initial gather radius in scene units (default: a fraction of the scene diagonal).
+    pub radius: Option<f32>,
+}
+
+impl Default for PhotonSettings {
+    fn default() -> Self {
+        PhotonSettings {
+            photons_per_pass: sppm::DEFAULT_PHOTONS_PER_PASS,
+            alpha: sppm::DEFAULT_ALPHA,
+            radius: None,
+        }
+    }
+}
+
 /// Settings of a render; each integrator reads those that concern it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
     pub seed: u64,
     /// Maximum number of scattering events; `u32::MAX` for unlimited.
@@ -114,6 +155,7 @@ pub struct RenderSettings {
     pub mis: crate::path::MisHeuristic,
     /// Keep each strategy's weighted contribution as its own image (bdpt).
     pub strategy_images: bool,
+    pub photons: PhotonSettings,
 }
 
 impl Default for RenderSettings {
@@ -123,6 +165,7 @@ impl Default for RenderSettings {
             max_depth: u32::MAX,
             mis: crate::path::MisHeuristic::Power,
             strategy_images: false,
+            photons: PhotonSettings::default(),
         }
     }
 }
@@ -185,6 +228,21 @@ fn run(
                 ..bdpt::BdptSettings::new(settings.seed, settings.max_depth)
             };
             bdpt::render_from(data, bdpt_settings, budget, control, from)
+        }
+        IntegratorKind::Ppm | IntegratorKind::Sppm => {
+            assert!(
+                from.is_none(),
+                "{kind} is biased and does not resume (callers check is_unbiased)"
+            );
+            let p = settings.photons;
+            let progressive = sppm::ProgressiveSettings {
+                max_depth: settings.max_depth,
+                photons_per_pass: p.photons_per_pass,
+                alpha: p.alpha,
+                initial_radius: p.radius,
+                ..sppm::ProgressiveSettings::new(settings.seed, kind == IntegratorKind::Sppm)
+            };
+            sppm::render(data, progressive, budget, control)
         }
     }
 }

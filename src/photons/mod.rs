@@ -64,6 +64,9 @@ pub struct PhotonTracing {
     pub seed: u64,
     /// Highest number of scattering events before a photon is stored and ends.
     pub max_depth: u32,
+    /// Store photons at the first surface they meet (direct light). Integrators that
+    /// sample direct light at their gather points leave them out.
+    pub store_direct: bool,
     /// Pass number (the sample index of every photon's random numbers).
     pub pass: u64,
     /// Photons this pass emits in all, and the index of the next one to emit.
@@ -94,6 +97,7 @@ impl PhotonTracing {
         PhotonTracing {
             seed,
             max_depth,
+            store_direct: true,
             rays: Rays::new(wavefront),
             hits: Hits::new(wavefront),
             walkers: PhotonWalkers::new(wavefront),

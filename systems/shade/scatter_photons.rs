@@ -28,7 +28,7 @@ impl<S: PhotonQueue + Send> System<S> for ScatterPhotons {
         let (data, t) = state.photon_queue();
         let n = t.active;
         let scene = &data.scene;
-        let max_depth = t.max_depth;
+        let (max_depth, store_direct) = (t.max_depth, t.store_direct);
         let chunks = n.div_ceil(CHUNK);
         t.chunk_photons.resize_with(chunks, Vec::new);
         let hits = &t.hits;
@@ -59,7 +59,7 @@ impl<S: PhotonQueue + Send> System<S> for ScatterPhotons {
                     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let wo = -r.dir[i].normalize();
                     let depth = w.depth[i];
-                    if !matches!(material, Material::Dielectric { .. }) {
+                    if !matches!(material, Material::Dielectric { .. }) && (depth > 0 || store_direct) {
                         let mut flags = 0;
                         if depth == 0 {
                             flags |= PhotonFlags::DIRECT;

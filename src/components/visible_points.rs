@@ -1,0 +1,62 @@
+use crate::sampling::SampleKey;
+use glam::{DVec3, Vec3};
+
+/// `VisiblePoints::triangle` of a pixel whose camera chain found no surface to gather at.
+pub const NO_VISIBLE_POINT: u32 = u32::MAX;
+
+crate::soa! {
+    /// Camera chains of the photon mappers in flight: a camera ray that follows specular
+    /// (delta) bounces until it meets a surface where photons are gathered. Compacted as
+    /// they end; each carries its pixel.
+    pub struct CameraChains, CameraChainsChunk, CameraChainsView {
+        pixel: u32,
+        key: SampleKey,
+        /// Product of the specular weights since the camera.
+        beta: Vec3,
+        /// Emission met along the chain, weighted by `beta` at the time.
+        emitted: Vec3,
+        depth: u32,
+        alive: bool,
+        /// Where the chain ended (`triangle == NO_VISIBLE_POINT`: nowhere to gather).
+        p: Vec3,
+        p_error: Vec3,
+        /// Geometric normal, on the side the chain arrived from (for diffuse surfaces).
+        ng: Vec3,
+        /// Shading normal, in the hemisphere of `ng`.
+        ns: Vec3,
+        wo: Vec3,
+        triangle: u32,
+    }
+}
+
+crate::soa! {
+    /// One visible point per pixel (slot = pixel): where the pixel's camera chain met a
+    /// surface that is not specular, and what the chain carried there.
+    pub struct VisiblePoints, VisiblePointsChunk, VisiblePointsView {
+        p: Vec3,
+        p_error: Vec3,
+        ng: Vec3,
+        ns: Vec3,
+        wo: Vec3,
+        /// The surface's triangle, or `NO_VISIBLE_POINT`.
+        triangle: u32,
+        beta: Vec3,
+        /// Emission the chain met on its way (seen directly or through specular surfaces).
+        emitted: Vec3,
+    }
+}
+
+crate::soa! {
+    /// Per-pixel statistics of progressive photon mapping (slot = pixel): the gather
+    /// radius, the photon count N and flux tau of the progressive estimate, and the sum over
+    /// passes of the light found without photons (emission seen and direct light sampled).
+    pub struct PixelEstimates, PixelEstimatesChunk, PixelEstimatesView {
+        radius: f32,
+        photons: f64,
+        flux: DVec3,
+        direct: DVec3,
+        /// This pass's photons M found within the radius and their flux tau_M.
+        pass_photons: u32,
+        pass_flux: Vec3,
+    }
+}

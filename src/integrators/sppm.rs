@@ -1,0 +1,361 @@
+//! Progressive photon mapping (`--integrator ppm`, Hachisuka, Ogaki and Jensen 2008) and
+//! stochastic progressive photon mapping (`--integrator sppm`, Hachisuka and Jensen 2009): one
+//! graph, the two differing only in when visible points are found.
+//!
+//! Every pixel has a visible point: where its camera ray, having followed specular bounces,
+//! meets a surface that is not specular. Each pass traces `photons_per_pass` photons, gathers
+//! those within each pixel's radius R, and updates the pixel's statistics (alpha = 0.7 by
+//! default):
+//!
+//! ```text
+//! N' = N + alpha M,   R' = R sqrt(N' / (N + M)),   tau' = (tau + tau_M) N' / (N + M)
+//! L  = D / passes + tau / (pi R^2 N_emitted)
+//! ```
+//!
+//! where M photons carrying tau_M = sum beta f(wo, wi) power were found this pass, and D sums
+//! over passes what needs no photons: emission seen directly or through specular surfaces,
+//! and direct light at the visible point by light sampling (so photons stored at their first
+//! surface are not kept: every gathered photon has bounced at least once).
+//!
+//! PPM finds the visible points once (pass 0's camera rays) and keeps them; SPPM traces new
+//! camera rays, with new jitter, every pass, so its estimate also averages over the pixel
+//! area, over the choices at glass, and over everything else a camera ray samples. PPM's
+//! pixels converge to the value at one fixed point each: aliased edges and whatever one
+//! choice at the glass showed stay in its image, whatever the number of passes.
+//!
+//! The graph of one pass:
+//!
+//! ```text
+//! generate_camera_chains              a camera ray per pixel (PPM: pass 0 only)
+//! loop camera_bounces (while chains are live):
+//!     trace_closest -> extend_camera_chains -> compact_camera_chains
+//! sample_direct_light                 a light sample per visible point
+//! trace_shadow
+//! add_direct_light                    D += emission seen + unoccluded light sample
+//! photons                             (nested: emit, then trace -> scatter -> compact)
+//! build_photon_grid                   hash grid over this pass's photons, cell = max radius
+//! gather_photons                      M and tau_M per visible point
+//! update_pixel_estimates              the progressive update above
+//! ```
+//!
+//! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
+//! nothing grows with the number of passes.
+
+use crate::components::{
+    CameraChains, Hits, NO_VISIBLE_POINT, PixelEstimates, Rays, ShadowRays, VisiblePoints,
+};
+use crate::film::Film;
+use crate::integrators::{Budget, Control, RenderOutcome, SceneData};
+use crate::photons::{HashGrid, PhotonPass};
+use crate::pipeline::{Graph, Node, Stats};
+use crate::systems::{connect, gather, generate, shade, trace};
+use glam::DVec3;
+use std::ops::Range;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// Default photons per pass.
+pub const DEFAULT_PHOTONS_PER_PASS: u64 = 250_000;
+/// Default alpha: the fraction of new photons a pass keeps.
+pub const DEFAULT_ALPHA: f32 = 0.7;
+/// Default initial radius, as a fraction of the scene's bounding-box diagonal.
+pub const DEFAULT_RADIUS_FRACTION: f32 = 0.005;
+
+/// The settings of PPM and SPPM.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProgressiveSettings {
+    pub seed: u64,
+    /// Maximum number of scattering events of camera chains and photons; `u32::MAX` for
+    /// unlimited.
+    pub max_depth: u32,
+    pub photons_per_pass: u64,
+    pub alpha: f32,
+    /// Initial gather radius in scene units (`None`: `DEFAULT_RADIUS_FRACTION` of the scene
+    /// diagonal).
+    pub initial_radius: Option<f32>,
+    /// SPPM (true): new visible points every pass. PPM (false): pass 0's, kept.
+    pub stochastic: bool,
+}
+
+impl ProgressiveSettings {
+    pub fn new(seed: u64, stochastic: bool) -> ProgressiveSettings {
+        ProgressiveSettings {
+            seed,
+            max_depth: u32::MAX,
+            photons_per_pass: DEFAULT_PHOTONS_PER_PASS,
+            alpha: DEFAULT_ALPHA,
+            initial_radius: None,
+            stochastic,
+        }
+    }
+
+    /// The initial radius in `scene`.
+    pub fn radius_in(&self, data: &SceneData) -> f32 {
+        self.initial_radius.unwrap_or_else(|| {
+            let s = &data.scene;
+            DEFAULT_RADIUS_FRACTION * (s.bounds_max - s.bounds_min).length()
+        })
+    }
+}
+
+/// The state of PPM and SPPM: one slot per pixel in every per-pixel store.
+pub struct ProgressiveState {
+    pub data: Arc<SceneData>,
+    pub settings: ProgressiveSettings,
+    pub pixels: usize,
+    /// The pass being rendered.
+    pub pass: u64,
+    /// Whether this pass traces camera chains (SPPM: always; PPM: pass 0).
+    pub find_visible_points: bool,
+    /// Camera chains in flight: slots `0..active`, with their rays and hits.
+    pub chains: CameraChains,
+    pub rays: Rays,
+    pub hits: Hits,
+    pub active: usize,
+    pub visible: VisiblePoints,
+    pub shadow: ShadowRays,
+    pub estimates: PixelEstimates,
+    pub photon_pass: PhotonPass,
+    /// Grid over this pass's photons (built by `build_photon_grid`).
+    pub grid: Option<HashGrid>,
+    /// Photons emitted over all passes.
+    pub photons_emitted: u64,
+    /// NaN or Inf contributions dropped.
+    pub nonfinite: u64,
+    pub scratch_chains: CameraChains,
+    pub scratch_rays: Rays,
+    pub order: Vec<u32>,
+}
+
+impl ProgressiveState {
+    pub fn new(data: Arc<SceneData>, settings: ProgressiveSettings) -> ProgressiveState {
+        let cam = data.scene.camera;
+        let pixels = cam.width as usize * cam.height as usize;
+        let mut estimates = PixelEstimates::new(pixels);
+        estimates.radius.fill(settings.radius_in(&data));
+        let mut photon_pass = PhotonPass::new(data.clone(), settings.seed, settings.max_depth);
+        // Direct light comes from light sampling at the visible points.
+        photon_pass.tracing.store_direct = false;
+        ProgressiveState {
+            data,
+            settings,
+            pixels,
+            pass: 0,
+            find_visible_points: true,
+            chains: CameraChains::new(pixels),
+            rays: Rays::new(pixels),
+            hits: Hits::new(pixels),
+            active: 0,
+            visible: VisiblePoints::new(pixels),
+            shadow: ShadowRays::new(pixels),
+            estimates,
+            photon_pass,
+            grid: None,
+            photons_emitted: 0,
+            nonfinite: 0,
+            scratch_chains: CameraChains::new(pixels),
+            scratch_rays: Rays::new(pixels),
+            order: Vec::with_capacity(pixels),
+        }
+    }
+
+    /// Prepares pass `pass`: whether it finds visible points, and its photons.
+    pub fn begin_pass(&mut self, pass: u64) {
+        self.pass = pass;
+        self.find_visible_points = self.settings.stochastic || pass == 0;
+        self.photon_pass
+            .tracing
+            .begin_pass(pass, self.settings.photons_per_pass);
+    }
+
+    /// The image so far: per pixel D / passes + tau / (pi R^2 N_emitted).
+    pub fn film(&self, passes: u64) -> Film {
+        let cam = self.data.scene.camera;
+        let e = &self.estimates;
+        let n_emitted = self.photons_emitted.max(1) as f64;
+        let mut nonfinite = self.nonfinite;
+        let sum = (0..self.pixels)
+            .map(|i| {
+                let r = e.radius[i] as f64;
+                let photons = e.flux[i] / (std::f64::consts::PI * r * r * n_emitted);
+                let value = e.direct[i] + photons * passes as f64;
+                if value.is_finite() {
+                    value
+                } else {
+                    nonfinite += 1;
+                    DVec3::ZERO
+                }
+            })
+            .collect();
+        Film::from_parts(
+            cam.width as usize,
+            cam.height as usize,
+            sum,
+            vec![passes; self.pixels],
+            Vec::new(),
+            nonfinite,
+        )
+        .expect("one sum and count per pixel")
+    }
+
+    /// Bytes of state per pixel: chains and rays (double buffered), hits, visible point,
+    /// shadow ray and statistics.
+    pub fn bytes_per_pixel(&self) -> usize {
+        2 * (CameraChains::bytes_per_item() + Rays::bytes_per_item())
+            + Hits::bytes_per_item()
+            + VisiblePoints::bytes_per_item()
+            + ShadowRays::bytes_per_item()
+            + PixelEstimates::bytes_per_item()
+    }
+
+    /// Bytes of this pass's stored photons and their grid.
+    pub fn photon_bytes(&self) -> usize {
+        let t = &self.photon_pass.tracing;
+        t.photons.capacity() * crate::components::Photons::bytes_per_item()
+            + t.stored * 2 * std::mem::size_of::<u32>()
+    }
+}
+
+impl crate::systems::trace::closest::ClosestHitQueue for ProgressiveState {
+    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
+        (&self.data.accel, &self.rays, &mut self.hits, self.active)
+    }
+}
+
+impl crate::systems::trace::shadow::ShadowQueue for ProgressiveState {
+    fn shadow_queue(&mut self) -> (&crate::accel::Accel, &mut ShadowRays, Range<usize>) {
+        (&self.data.accel, &mut self.shadow, 0..self.pixels)
+    }
+}
+
+impl shade::extend_camera_chains::CameraChainQueue for ProgressiveState {
+    fn new_chains(&self) -> (u64, u64, usize) {
+        let n = if self.find_visible_points { self.pixels } else { 0 };
+        (self.settings.seed, self.pass, n)
+    }
+
+    fn camera_chain_queue(&mut self) -> shade::extend_camera_chains::ChainQueue<'_> {
+        shade::extend_camera_chains::ChainQueue {
+            data: &self.data,
+            max_depth: self.settings.max_depth,
+            chains: &mut self.chains,
+            rays: &mut self.rays,
+            hits: &self.hits,
+            active: &mut self.active,
+            visible: &mut self.visible,
+            scratch_chains: &mut self.scratch_chains,
+            scratch_rays: &mut self.scratch_rays,
+            order: &mut self.order,
+        }
+    }
+}
+
+impl connect::sample_direct_light::VisiblePointLights for ProgressiveState {
+    fn direct_light_queue(&mut self) -> connect::sample_direct_light::DirectLightQueue<'_> {
+        connect::sample_direct_light::DirectLightQueue {
+            data: &self.data,
+            visible: &self.visible,
+            shadow: &mut self.shadow,
+            direct: &mut self.estimates.direct,
+            seed: self.settings.seed,
+            sample_index: self.pass,
+            nonfinite: &mut self.nonfinite,
+        }
+    }
+}
+
+/// The graph of one pass (the same for PPM and SPPM; see the module's documentation).
+pub fn graph() -> Graph<ProgressiveState> {
+    Graph::new(
+        "sppm",
+        vec![
+            Node::system(generate::camera_chains::GenerateCameraChains),
+            Node::Loop {
+                name: "camera_bounces",
+                queue_len: |s: &ProgressiveState| s.active,
+                body: vec![
+                    Node::system(trace::closest::TraceClosest),
+                    Node::system(shade::extend_camera_chains::ExtendCameraChains),
+                    Node::system(shade::compact_camera_chains::CompactCameraChains),
+                ],
+            },
+            Node::system(connect::sample_direct_light::SampleDirectLight),
+            Node::system(trace::shadow::TraceShadow),
+            Node::system(gather::direct_light::AddDirectLight),
+            Node::nested(crate::photons::graph(), |s: &mut ProgressiveState| {
+                &mut s.photon_pass
+            }),
+            Node::system(gather::photon_grid::BuildPhotonGrid),
+            Node::system(gather::visible_point_photons::GatherPhotons),
+            Node::system(gather::progressive_update::UpdatePixelEstimates),
+        ],
+    )
+}
+
+/// Renders with PPM or SPPM: a sample budget is a number of passes, a time budget ends at
+/// the first pass boundary past it (at least one pass). A stop request ends the render at a
+/// pass boundary, keeping every finished pass.
+pub fn render(
+    data: Arc<SceneData>,
+    settings: ProgressiveSettings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    let start = Instant::now();
+    let graph = graph();
+    let mut state = ProgressiveState::new(data, settings);
+    let mut stats = Stats::default();
+    let total = match budget {
+        Budget::SamplesPerPixel(n) => Some(n),
+        Budget::Seconds(_) => None,
+    };
+    let mut passes = 0;
+    loop {
+        let over = match budget {
+            Budget::SamplesPerPixel(n) => passes >= n,
+            Budget::Seconds(s) => passes > 0 && start.elapsed().as_secs_f64() >= s,
+        };
+        if over || control.stopped() {
+            break;
+        }
+        state.begin_pass(passes);
+        graph.run(&mut state, &mut stats);
+        passes += 1;
+        (control.progress)(passes, total);
+    }
+    let interrupted = control.stopped() && total.is_some_and(|t| passes < t);
+    RenderOutcome {
+        film: state.film(passes),
+        stats,
+        passes,
+        samples: passes * state.pixels as u64,
+        wall: start.elapsed(),
+        interrupted,
+        systems: graph.system_names(),
+        bytes_per_path: state.bytes_per_pixel(),
+        wavefront: state.pixels,
+        layers: Vec::new(),
+    }
+}
+
+/// Runs `passes` passes and returns the state (for tests of the statistics).
+pub fn run_passes(
+    data: Arc<SceneData>,
+    settings: ProgressiveSettings,
+    passes: u64,
+) -> ProgressiveState {
+    let graph = graph();
+    let mut state = ProgressiveState::new(data, settings);
+    let mut stats = Stats::default();
+    for pass in 0..passes {
+        state.begin_pass(pass);
+        graph.run(&mut state, &mut stats);
+    }
+    state
+}
+
+/// Whether pixel `i`'s camera chain found a surface to gather at.
+#[inline]
+pub fn has_visible_point(visible: &VisiblePoints, i: usize) -> bool {
+    visible.triangle[i] != NO_VISIBLE_POINT
+}

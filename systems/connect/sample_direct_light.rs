@@ -1,0 +1,111 @@
+//! Direct light at the photon mappers' visible points: an emitter picked by power, a point
+//! uniform on it, and a shadow ray carrying what that point brings if unoccluded. Light
+//! sampling alone (no MIS): the visible point never samples its BSDF toward a light, and the
+//! photons that land first at a surface are not gathered, so nothing else counts this light.
+
+use crate::accel::spawn_ray_to;
+use crate::components::{NO_VISIBLE_POINT, ShadowRays, VisiblePoints};
+use crate::integrators::SceneData;
+use crate::math::Frame;
+use crate::pipeline::{Flow, System};
+use crate::sampling::SampleKey;
+use glam::DVec3;
+use rayon::prelude::*;
+
+/// The light-sample stream of (pixel, sample index): apart from the camera chains', so that a
+/// pass that keeps its visible points (PPM) still samples the light anew.
+#[inline]
+pub fn light_key(seed: u64, pixel: u64, sample_index: u64) -> SampleKey {
+    SampleKey::new(seed, pixel | 1 << 61, sample_index)
+}
+
+/// What direct lighting at visible points works on (slot = pixel everywhere).
+pub struct DirectLightQueue<'a> {
+    pub data: &'a SceneData,
+    pub visible: &'a VisiblePoints,
+    pub shadow: &'a mut ShadowRays,
+    /// Per-pixel sums that the emission seen and the unoccluded light samples are added to.
+    pub direct: &'a mut [DVec3],
+    pub seed: u64,
+    pub sample_index: u64,
+    pub nonfinite: &'a mut u64,
+}
+
+pub trait VisiblePointLights {
+    fn direct_light_queue(&mut self) -> DirectLightQueue<'_>;
+}
+
+pub struct SampleDirectLight;
+
+impl<S: VisiblePointLights + Send> System<S> for SampleDirectLight {
+    fn name(&self) -> &'static str {
+        "sample_direct_light"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["visible_points", "emitters"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["shadow_rays"]
+    }
+    fn run(&self, state: &mut S) -> Flow {
+        let q = state.direct_light_queue();
+        let (data, visible, seed, index) = (q.data, q.visible, q.seed, q.sample_index);
+        let scene = &data.scene;
+        let pixels = visible.capacity();
+        let has_emitters = !scene.emitters.triangle.is_empty();
+        let cast: usize = q
+            .shadow
+            .chunks_mut(0..pixels)
+            .into_par_iter()
+            .map(|c| {
+                let mut cast = 0;
+                for i in 0..c.len() {
+                    c.t_max[i] = 0.0;
+                    let pixel = c.start + i;
+                    let tri = visible.triangle[pixel];
+                    if tri == NO_VISIBLE_POINT || !has_emitters {
+                        continue;
+                    }
+                    let key = light_key(seed, pixel as u64, index);
+                    let sampled = scene.sample_emitter(key.get(0), key.get2(1));
+                    let light = sampled.point;
+                    let (p, ng) = (visible.p[pixel], visible.ng[pixel]);
+                    let to_light = light.p - p;
+                    let dist2 = to_light.length_squared();
+                    let wi = to_light / dist2.sqrt();
+                    let cos_light = -wi.dot(light.ng);
+                    let wo = visible.wo[pixel];
+                    if cos_light <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                        continue;
+                    }
+                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
+                    let frame = Frame::from_normal(visible.ns[pixel]);
+                    let wi_local = frame.to_local(wi);
+                    let f = material.eval(frame.to_local(wo), wi_local);
+                    if f.max_element() <= 0.0 {
+                        continue;
+                    }
+                    let pdf = sampled.pdf_area * dist2 / cos_light;
+                    let (origin, dir, t_max) = spawn_ray_to(
+                        p,
+                        visible.p_error[pixel],
+                        ng,
+                        light.p,
+                        light.p_error,
+                        light.ng,
+                    );
+                    c.origin[i] = origin;
+                    c.dir[i] = dir;
+                    c.t_max[i] = t_max;
+                    c.contribution[i] = visible.beta[pixel]
+                        * f
+                        * (wi_local.z.abs() / pdf)
+                        * scene.emitters.radiance[sampled.emitter];
+                    cast += 1;
+                }
+                cast
+            })
+            .sum();
+        Flow::new(pixels, cast)
+    }
+}
