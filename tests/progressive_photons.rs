@@ -1,0 +1,129 @@
+//! PPM and SPPM: the progressive update on unit cases, convergence on the analytic furnace,
+//! error against a path-traced reference that falls with passes, and thread-count
+//! determinism.
+
+mod common;
+use common::*;
+use glam::DVec3;
+use stagelight::film::Image;
+use stagelight::integrators::sppm::{self, ProgressiveSettings};
+use stagelight::integrators::{Budget, Control, SceneData};
+use stagelight::systems::gather::progressive_update::progressive_update;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+fn render(data: Arc<SceneData>, settings: ProgressiveSettings, passes: u64) -> Image {
+    let stop = AtomicBool::new(false);
+    let control = Control {
+        stop: &stop,
+        progress: &|_, _| {},
+    };
+    let o = sppm::render(data, settings, Budget::SamplesPerPixel(passes), &control);
+    assert_eq!(o.passes, passes);
+    assert_eq!(o.film.nonfinite, 0);
+    o.film.image()
+}
+
+fn settings(seed: u64, stochastic: bool, photons: u64) -> ProgressiveSettings {
+    ProgressiveSettings {
+        photons_per_pass: photons,
+        ..ProgressiveSettings::new(seed, stochastic)
+    }
+}
+
+#[test]
+fn progressive_update_follows_the_ppm_formulas() {
+    let tau = DVec3::new(1.0, 2.0, 3.0);
+    let tau_m = DVec3::new(0.5, 0.25, 0.0);
+    // N = 10, M = 5, alpha = 0.7: N' = 13.5, R' = R sqrt(13.5 / 15), tau' = (tau + tau_M) 0.9.
+    let (n, r, t) = progressive_update(10.0, 2.0, tau, 5, tau_m, 0.7);
+    assert!((n - 13.5).abs() < 1e-12);
+    assert!((r as f64 - 2.0 * (0.9f64).sqrt()).abs() < 1e-6);
+    assert!((t - (tau + tau_m) * 0.9).length() < 1e-12);
+    // The first pass: N = 0 keeps alpha M photons and shrinks the radius by sqrt(alpha).
+    let (n, r, t) = progressive_update(0.0, 1.0, DVec3::ZERO, 4, tau_m, 0.5);
+    assert!((n - 2.0).abs() < 1e-12);
+    assert!((r as f64 - 0.5f64.sqrt()).abs() < 1e-6);
+    assert!((t - tau_m * 0.5).length() < 1e-12);
+    // No photons found: nothing changes.
+    assert_eq!(progressive_update(3.0, 0.25, tau, 0, DVec3::ZERO, 0.7), (3.0, 0.25, tau));
+    // alpha = 1 keeps everything: the radius stays and the flux just adds.
+    let (n, r, t) = progressive_update(7.0, 0.3, tau, 3, tau_m, 1.0);
+    assert_eq!((n, r), (10.0, 0.3));
+    assert!((t - (tau + tau_m)).length() < 1e-12);
+}
+
+/// Mean |L - 2| over the furnace's pixels and the image mean.
+fn furnace_error(image: &Image) -> (f64, f64) {
+    let n = image.pixels.len() as f64;
+    let dev = image.pixels.iter().map(|p| (p[1] as f64 - 2.0).abs()).sum::<f64>() / n;
+    let mean = image.pixels.iter().map(|p| p[1] as f64).sum::<f64>() / n;
+    (dev, mean)
+}
+
+#[test]
+fn ppm_and_sppm_converge_to_two_in_the_furnace() {
+    let data = Arc::new(SceneData::new(load_small("furnace.ron", 32)));
+    for stochastic in [false, true] {
+        let few = furnace_error(&render(data.clone(), settings(3, stochastic, 20_000), 2));
+        let many = furnace_error(&render(data.clone(), settings(3, stochastic, 20_000), 32));
+        let name = if stochastic { "sppm" } else { "ppm" };
+        // The per-pixel error shrinks with passes (noise and bias both fall) ...
+        assert!(
+            many.0 < 0.6 * few.0,
+            "{name}: mean |L - 2| {} after 32 passes, {} after 2",
+            many.0,
+            few.0
+        );
+        // ... and the image mean is 2: the estimate's bias in a uniform radiance field is
+        // zero (every disc sees the same density), so only noise remains.
+        assert!((many.1 - 2.0).abs() < 0.01, "{name}: mean {}", many.1);
+    }
+}
+
+#[test]
+fn sppm_error_against_path_tracing_falls_with_passes_on_the_cornell_box() {
+    let data = Arc::new(SceneData::new(load_small("cornell_box.ron", 48)));
+    let reference = render_pt(load_small("cornell_box.ron", 48), 1024, 99, u32::MAX)
+        .film
+        .image();
+    let relmse = |passes| {
+        let image = render(data.clone(), settings(5, true, 40_000), passes);
+        stagelight::metrics::compare(&image, &reference)
+            .expect("same size, finite")
+            .relmse
+    };
+    let (e2, e8, e32) = (relmse(2), relmse(8), relmse(32));
+    assert!(
+        e8 < 0.8 * e2 && e32 < 0.8 * e8,
+        "relMSE after 2, 8, 32 passes: {e2}, {e8}, {e32}"
+    );
+}
+
+#[test]
+fn sppm_is_bit_identical_for_one_and_three_threads() {
+    let data = Arc::new(SceneData::new(load_small("torus_glass.ron", 32)));
+    let image = |threads| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| render(data.clone(), settings(8, true, 30_000), 3))
+    };
+    let (a, b) = (image(1), image(3));
+    assert!(a.pixels == b.pixels, "1 and 3 threads differ");
+}
+
+#[test]
+fn ppm_keeps_its_visible_points_and_sppm_renews_them() {
+    let data = Arc::new(SceneData::new(load_small("cornell_box.ron", 16)));
+    for stochastic in [false, true] {
+        let one = sppm::run_passes(data.clone(), settings(1, stochastic, 5_000), 1);
+        let two = sppm::run_passes(data.clone(), settings(1, stochastic, 5_000), 2);
+        let same = one.visible.p == two.visible.p;
+        assert_eq!(same, !stochastic, "stochastic = {stochastic}");
+        // Memory does not grow with passes: one visible point and estimate per pixel.
+        assert_eq!(two.visible.capacity(), 16 * 16);
+        assert_eq!(two.estimates.capacity(), 16 * 16);
+    }
+}
