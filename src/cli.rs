@@ -111,6 +111,20 @@ pub struct PhotonArgs {
     /// bounding-box diagonal).
     #[arg(long, value_parser = parse_radius)]
     pub radius: Option<f32>,
+    /// Photons traced for the photon maps (pm).
+    #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_PHOTONS, value_parser = clap::value_parser!(u64).range(1..))]
+    pub photons: u64,
+    /// Photons per density estimate (pm).
+    #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_K as u32, value_parser = clap::value_parser!(u32).range(1..))]
+    pub k: u32,
+    /// Largest density-estimate radius in scene units (pm; default: 2% of the scene's
+    /// bounding-box diagonal).
+    #[arg(long, value_parser = parse_radius)]
+    pub max_radius: Option<f32>,
+    /// Take indirect light straight from the global photon map instead of final gathering
+    /// (pm).
+    #[arg(long)]
+    pub no_final_gather: bool,
 }
 
 impl PhotonArgs {
@@ -119,6 +133,10 @@ impl PhotonArgs {
             photons_per_pass: self.photons_per_pass,
             alpha: self.alpha,
             radius: self.radius,
+            photons: self.photons,
+            k: self.k as usize,
+            max_radius: self.max_radius,
+            final_gather: !self.no_final_gather,
         }
     }
 }

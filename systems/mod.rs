@@ -5,6 +5,7 @@
 pub mod generate {
     pub mod camera_chains;
     pub mod camera_rays;
+    pub mod final_gather_rays;
     pub mod photons;
     pub mod subpaths;
 }
@@ -44,9 +45,13 @@ pub mod connect {
 
 /// Collecting finished work into the film.
 pub mod gather {
+    pub mod caustic_photons;
     pub mod connections;
     pub mod direct_light;
     pub mod film;
+    pub mod global_photons;
+    pub mod pass_film;
+    pub mod photon_maps;
     pub mod photon_grid;
     pub mod progressive_update;
     pub mod visible_point_photons;

@@ -1,6 +1,7 @@
 //! Integrators: one file each, with its graph of systems and its parameters.
 
 pub mod bdpt;
+pub mod pm;
 pub mod pt;
 pub mod sppm;
 
@@ -34,6 +35,8 @@ pub enum IntegratorKind {
     Pt,
     /// Bidirectional path tracing: every strategy (s, t), MIS-weighted.
     Bdpt,
+    /// Photon mapping: photon maps traced once, final gathering.
+    Pm,
     /// Progressive photon mapping: visible points found once, passes of photons.
     Ppm,
     /// Stochastic progressive photon mapping: new visible points every pass.
@@ -69,6 +72,7 @@ impl IntegratorKind {
     pub const BUILT: &'static [IntegratorKind] = &[
         IntegratorKind::Pt,
         IntegratorKind::Bdpt,
+        IntegratorKind::Pm,
         IntegratorKind::Ppm,
         IntegratorKind::Sppm,
     ];
@@ -77,6 +81,7 @@ impl IntegratorKind {
         match self {
             IntegratorKind::Pt => "pt",
             IntegratorKind::Bdpt => "bdpt",
+            IntegratorKind::Pm => "pm",
             IntegratorKind::Ppm => "ppm",
             IntegratorKind::Sppm => "sppm",
         }
@@ -86,6 +91,7 @@ impl IntegratorKind {
         match self {
             IntegratorKind::Pt => "path tracing with next-event estimation and MIS",
             IntegratorKind::Bdpt => "bidirectional path tracing, every strategy MIS-weighted",
+            IntegratorKind::Pm => "photon mapping: global and caustic maps, final gathering",
             IntegratorKind::Ppm => "progressive photon mapping (visible points found once)",
             IntegratorKind::Sppm => "stochastic progressive photon mapping",
         }
@@ -133,6 +139,15 @@ pub struct PhotonSettings {
     pub alpha: f32,
     /// Initial gather radius in scene units (default: a fraction of the scene diagonal).
     pub radius: Option<f32>,
+    /// Photons traced for the photon maps (pm).
+    pub photons: u64,
+    /// Photons per density estimate (pm).
+    pub k: usize,
+    /// Largest density-estimate radius in scene units (pm; default: a fraction of the scene
+    /// diagonal).
+    pub max_radius: Option<f32>,
+    /// Indirect light by final gathering (pm); else straight from the global map.
+    pub final_gather: bool,
 }
 
 impl Default for PhotonSettings {
@@ -141,6 +156,10 @@ impl Default for PhotonSettings {
             photons_per_pass: sppm::DEFAULT_PHOTONS_PER_PASS,
             alpha: sppm::DEFAULT_ALPHA,
             radius: None,
+            photons: pm::DEFAULT_PHOTONS,
+            k: pm::DEFAULT_K,
+            max_radius: None,
+            final_gather: true,
         }
     }
 }
@@ -228,6 +247,22 @@ fn run(
                 ..bdpt::BdptSettings::new(settings.seed, settings.max_depth)
             };
             bdpt::render_from(data, bdpt_settings, budget, control, from)
+        }
+        IntegratorKind::Pm => {
+            assert!(
+                from.is_none(),
+                "pm is biased and does not resume (callers check is_unbiased)"
+            );
+            let p = settings.photons;
+            let pm_settings = pm::PmSettings {
+                max_depth: settings.max_depth,
+                photons: p.photons,
+                k: p.k,
+                max_radius: p.max_radius,
+                final_gather: p.final_gather,
+                ..pm::PmSettings::new(settings.seed)
+            };
+            pm::render(data, pm_settings, budget, control)
         }
         IntegratorKind::Ppm | IntegratorKind::Sppm => {
             assert!(

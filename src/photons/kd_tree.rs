@@ -48,11 +48,17 @@ fn build(points: &mut [(Vec3, u32)], axis: &mut [u8]) {
     }
 }
 
-/// The k nearest found so far: (squared distance, index), largest first once full.
+/// The k nearest found so far, as (squared distance, index): a max-heap on (distance, index)
+/// once full, so the farthest is `found[0]` and each better point costs O(log k).
 pub struct Nearest {
     pub found: Vec<(f32, u32)>,
     k: usize,
     max_d2: f32,
+}
+
+#[inline]
+fn farther(a: (f32, u32), b: (f32, u32)) -> bool {
+    a.0 > b.0 || (a.0 == b.0 && a.1 > b.1)
 }
 
 impl Nearest {
@@ -79,14 +85,42 @@ impl Nearest {
         if d2 > self.bound() {
             return;
         }
-        if self.found.len() == self.k {
-            self.found[0] = (d2, i);
+        let h = &mut self.found;
+        if h.len() < self.k {
+            // Sift up.
+            h.push((d2, i));
+            let mut c = h.len() - 1;
+            while c > 0 {
+                let parent = (c - 1) / 2;
+                if !farther(h[c], h[parent]) {
+                    break;
+                }
+                h.swap(c, parent);
+                c = parent;
+            }
         } else {
-            self.found.push((d2, i));
+            if !farther(h[0], (d2, i)) {
+                return;
+            }
+            // Replace the farthest and sift down.
+            h[0] = (d2, i);
+            let mut p = 0;
+            loop {
+                let (l, r) = (2 * p + 1, 2 * p + 2);
+                let mut big = p;
+                if l < h.len() && farther(h[l], h[big]) {
+                    big = l;
+                }
+                if r < h.len() && farther(h[r], h[big]) {
+                    big = r;
+                }
+                if big == p {
+                    break;
+                }
+                h.swap(p, big);
+                p = big;
+            }
         }
-        // Keep the farthest first (k is small: a sort of a nearly sorted short list).
-        self.found
-            .sort_unstable_by(|a, b| b.0.total_cmp(&a.0).then(b.1.cmp(&a.1)));
     }
 
     /// Squared distance of the farthest of the neighbours found.
@@ -115,12 +149,17 @@ impl KdTree {
         self.points.len()
     }
 
+    /// Bytes the tree holds.
+    pub fn bytes(&self) -> usize {
+        self.points.len() * (std::mem::size_of::<Vec3>() + std::mem::size_of::<u32>() + 1)
+    }
+
     pub fn is_empty(&self) -> bool {
         self.points.is_empty()
     }
 
-    /// The (at most) `k` points nearest to `q` within `max_radius`, farthest first, as
-    /// (squared distance, original index).
+    /// The (at most) `k` points nearest to `q` within `max_radius`, as (squared distance,
+    /// original index), the farthest first (the rest in heap order).
     pub fn nearest(&self, q: Vec3, k: usize, max_radius: f32, out: &mut Nearest) {
         *out = Nearest {
             found: std::mem::take(&mut out.found),

@@ -226,3 +226,110 @@ impl PhotonPass {
         graph.run(self, stats);
     }
 }
+
+/// The photon maps of PM: every stored photon (global) and, where the scene has specular
+/// surfaces, those whose path was L S+ D (caustic), each with a kd-tree for k-nearest queries.
+pub struct PhotonMaps {
+    pub photons: crate::components::Photons,
+    pub global: KdTree,
+    /// The caustic photons' kd-tree, with each tree point's index into `photons`.
+    pub caustic: Option<(KdTree, Vec<u32>)>,
+    /// Photons emitted to make the maps (the estimates divide by it).
+    pub emitted: u64,
+}
+
+impl PhotonMaps {
+    /// Bytes the maps hold.
+    pub fn bytes(&self) -> usize {
+        let caustic = self.caustic.as_ref().map_or(0, |(t, i)| t.bytes() + 4 * i.len());
+        self.photons.capacity() * crate::components::Photons::bytes_per_item()
+            + self.global.bytes()
+            + caustic
+    }
+}
+
+/// Least |cos| between a photon's surface normal and the query's: photons on other planes
+/// (round a corner) do not count.
+pub const NORMAL_COSINE: f32 = 0.5;
+
+/// Where a density estimate is made: a point, its normal on the viewer's side, and the BSDF.
+pub struct GatherPoint {
+    pub p: Vec3,
+    pub ng: Vec3,
+    pub frame: crate::math::Frame,
+    pub wo_local: Vec3,
+    pub material: crate::bsdf::Material,
+}
+
+impl GatherPoint {
+    /// The gather point of slot `i` of `visible`, if it has one.
+    #[inline]
+    pub fn of(
+        scene: &crate::scene::PreparedScene,
+        visible: &crate::components::VisiblePoints,
+        i: usize,
+    ) -> Option<GatherPoint> {
+        let tri = visible.triangle[i];
+        if tri == crate::components::NO_VISIBLE_POINT {
+            return None;
+        }
+        let frame = crate::math::Frame::from_normal(visible.ns[i]);
+        Some(GatherPoint {
+            p: visible.p[i],
+            ng: visible.ng[i],
+            frame,
+            wo_local: frame.to_local(visible.wo[i]),
+            material: scene.materials[scene.triangles.material[tri as usize] as usize],
+        })
+    }
+
+    /// f(wo, wi) times the power of photon `k`, or None when the photon is on another
+    /// plane or arrived from the other side.
+    #[inline]
+    pub fn reflected(&self, photons: &crate::components::Photons, k: usize) -> Option<Vec3> {
+        let wi = photons.wi[k];
+        if photons.ng[k].dot(self.ng).abs() < NORMAL_COSINE || wi.dot(self.ng) <= 0.0 {
+            return None;
+        }
+        Some(self.material.eval(self.wo_local, self.frame.to_local(wi)) * photons.power[k])
+    }
+}
+
+/// The k-nearest density estimate of reflected radiance at `at`, before division by the
+/// photons emitted: sum f(wo, wi) power / (pi r^2). When k photons are found within
+/// `max_radius`, r is the distance to the k-th and the sum runs over the k - 1 nearer ones: in
+/// a uniform photon density those lie uniformly in the disc of radius r, so the estimate is
+/// exact in expectation (counting the k-th as well overestimates by k / (k - 1)). With fewer
+/// found, r is `max_radius` and all of them count. `index` maps tree points to photons;
+/// `keep` filters them by flags.
+pub fn density_estimate(
+    tree: &KdTree,
+    index: Option<&[u32]>,
+    photons: &crate::components::Photons,
+    at: &GatherPoint,
+    k: usize,
+    max_radius: f32,
+    keep: impl Fn(PhotonFlags) -> bool,
+    nearest: &mut Nearest,
+) -> Vec3 {
+    tree.nearest(at.p, k, max_radius, nearest);
+    if nearest.found.is_empty() {
+        return Vec3::ZERO;
+    }
+    let (r2, skip) = if nearest.found.len() == k {
+        // found[0] is the k-th nearest: it sets the radius and is left out of the sum.
+        (nearest.radius2(), 1)
+    } else {
+        (max_radius * max_radius, 0)
+    };
+    let mut sum = Vec3::ZERO;
+    for &(_, i) in &nearest.found[skip..] {
+        let k = index.map_or(i, |m| m[i as usize]) as usize;
+        if keep(photons.flags[k])
+            && let Some(v) = at.reflected(photons, k)
+        {
+            sum += v;
+        }
+    }
+    sum / (std::f32::consts::PI * r2.max(f32::MIN_POSITIVE))
+}

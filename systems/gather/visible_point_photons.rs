@@ -1,18 +1,13 @@
 //! Finds, for every visible point, this pass's photons within its pixel's radius: their
 //! count M and the flux tau_M = beta sum f(wo, wi) power they bring. A photon counts only on
-//! the visible point's side and plane (its surface's normal within 60 degrees of the visible
-//! point's, and arriving on the side the camera sees), so light does not bleed through thin
-//! walls or round corners.
+//! the visible point's side and plane (see `photons::GatherPoint::reflected`), so light does
+//! not bleed round corners or through a wall from the photons on its far side.
 
-use crate::components::NO_VISIBLE_POINT;
 use crate::integrators::sppm::ProgressiveState;
-use crate::math::Frame;
+use crate::photons::GatherPoint;
 use crate::pipeline::{Flow, System};
 use glam::Vec3;
 use rayon::prelude::*;
-
-/// Least |cos| between a photon's surface normal and the visible point's.
-pub const NORMAL_COSINE: f32 = 0.5;
 
 pub struct GatherPhotons;
 
@@ -43,24 +38,16 @@ impl System<ProgressiveState> for GatherPhotons {
                     e.pass_photons[i] = 0;
                     e.pass_flux[i] = Vec3::ZERO;
                     let pixel = e.start + i;
-                    let tri = visible.triangle[pixel];
-                    let Some(grid) = grid else { continue };
-                    if tri == NO_VISIBLE_POINT {
+                    let (Some(grid), Some(at)) = (grid, GatherPoint::of(scene, visible, pixel))
+                    else {
                         continue;
-                    }
-                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
-                    let (p, ng, wo) = (visible.p[pixel], visible.ng[pixel], visible.wo[pixel]);
-                    let frame = Frame::from_normal(visible.ns[pixel]);
-                    let wo_local = frame.to_local(wo);
+                    };
                     let (mut m, mut flux) = (0u32, Vec3::ZERO);
-                    grid.for_each_within(points, p, e.radius[i], |k| {
-                        let k = k as usize;
-                        let wi = photons.wi[k];
-                        if photons.ng[k].dot(ng).abs() < NORMAL_COSINE || wi.dot(ng) <= 0.0 {
-                            return;
+                    grid.for_each_within(points, at.p, e.radius[i], |k| {
+                        if let Some(v) = at.reflected(photons, k as usize) {
+                            m += 1;
+                            flux += v;
                         }
-                        m += 1;
-                        flux += material.eval(wo_local, frame.to_local(wi)) * photons.power[k];
                     });
                     e.pass_photons[i] = m;
                     e.pass_flux[i] = visible.beta[pixel] * flux;

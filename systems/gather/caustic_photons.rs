@@ -1,0 +1,65 @@
+//! Caustics at PM's visible points: a density estimate of the k nearest caustic photons.
+
+use crate::integrators::pm::PmState;
+use crate::photons::{GatherPoint, Nearest, density_estimate};
+use crate::pipeline::{Flow, System};
+use rayon::prelude::*;
+
+pub struct GatherCaustics;
+
+impl System<PmState> for GatherCaustics {
+    fn name(&self) -> &'static str {
+        "gather_caustics"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["photon_maps", "visible_points"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["pass_radiance"]
+    }
+    fn run(&self, s: &mut PmState) -> Flow {
+        let Some(maps) = &s.maps else {
+            return Flow::default();
+        };
+        let Some((tree, index)) = &maps.caustic else {
+            return Flow::default();
+        };
+        let (scene, visible) = (&s.data.scene, &s.visible);
+        let k = s.settings.k;
+        let max_radius = s.settings.max_radius_in(&s.data);
+        let scale = 1.0 / maps.emitted.max(1) as f32;
+        let chunk = crate::components::CHUNK;
+        let gathered: usize = s
+            .pass_radiance
+            .par_chunks_mut(chunk)
+            .enumerate()
+            .map(|(c, out)| {
+                let mut nearest = Nearest::new(k, max_radius);
+                let mut gathered = 0;
+                for (j, sum) in out.iter_mut().enumerate() {
+                    let pixel = c * chunk + j;
+                    let Some(at) = GatherPoint::of(scene, visible, pixel) else {
+                        continue;
+                    };
+                    let l = density_estimate(
+                        tree,
+                        Some(index),
+                        &maps.photons,
+                        &at,
+                        k,
+                        max_radius,
+                        |_| true,
+                        &mut nearest,
+                    );
+                    let value = visible.beta[pixel] * l * scale;
+                    if value.is_finite() {
+                        *sum += value.as_dvec3();
+                    }
+                    gathered += 1;
+                }
+                gathered
+            })
+            .sum();
+        Flow::new(s.pixels, gathered)
+    }
+}

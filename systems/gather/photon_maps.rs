@@ -1,0 +1,43 @@
+//! Builds PM's photon maps from the photons just traced: a kd-tree over every stored photon
+//! (the global map) and, where the scene has specular surfaces, one over the caustic photons.
+
+use crate::components::PhotonFlags;
+use crate::integrators::pm::PmState;
+use crate::photons::{KdTree, PhotonMaps};
+use crate::pipeline::{Flow, System};
+
+pub struct BuildPhotonMaps;
+
+impl System<PmState> for BuildPhotonMaps {
+    fn name(&self) -> &'static str {
+        "build_photon_maps"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["photons"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["photon_maps"]
+    }
+    fn run(&self, s: &mut PmState) -> Flow {
+        let t = &mut s.photon_pass.tracing;
+        let stored = t.stored;
+        let photons = std::mem::take(&mut t.photons);
+        t.stored = 0;
+        let global = KdTree::build(&photons.p[..stored]);
+        let caustic = s.caustics.then(|| {
+            let index: Vec<u32> = (0..stored as u32)
+                .filter(|&i| photons.flags[i as usize].has(PhotonFlags::CAUSTIC))
+                .collect();
+            let points: Vec<_> = index.iter().map(|&i| photons.p[i as usize]).collect();
+            (KdTree::build(&points), index)
+        });
+        let in_maps = stored + caustic.as_ref().map_or(0, |c| c.1.len());
+        s.maps = Some(PhotonMaps {
+            photons,
+            global,
+            caustic,
+            emitted: t.emitted,
+        });
+        Flow::new(stored, in_maps)
+    }
+}

@@ -1,0 +1,92 @@
+//! PM's final gathering: from each visible point, one direction sampled from its BSDF starts
+//! a chain (slot = pixel) that follows specular bounces to a surface where the global map is
+//! read. Pixels with no visible point, or whose sample carries nothing, start a dead chain,
+//! which the compaction that follows ends with no gather point.
+
+use crate::bsdf::TransportMode;
+use crate::components::NO_VISIBLE_POINT;
+use crate::integrators::pm::{ChainPhase, PmState};
+use crate::math::Frame;
+use crate::pipeline::{Flow, System};
+use crate::sampling::SampleKey;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// The stream of pixel `pixel`'s final-gather chain in pass `pass`: dimensions 0 and 1 draw
+/// the direction, then the chain's bounces as camera chains do.
+#[inline]
+pub fn gather_key(seed: u64, pixel: u64, pass: u64) -> SampleKey {
+    SampleKey::new(seed, pixel | 1 << 60, pass)
+}
+
+pub struct GenerateFinalGatherRays;
+
+impl System<PmState> for GenerateFinalGatherRays {
+    fn name(&self) -> &'static str {
+        "generate_final_gather_rays"
+    }
+    fn reads(&self) -> &'static [&'static str] {
+        &["visible_points"]
+    }
+    fn writes(&self) -> &'static [&'static str] {
+        &["camera_chains", "rays"]
+    }
+    fn run(&self, s: &mut PmState) -> Flow {
+        s.phase = ChainPhase::FinalGather;
+        let (scene, visible) = (&s.data.scene, &s.visible);
+        let (seed, pass, n) = (s.settings.seed, s.pass, s.pixels);
+        let rays = s.rays.chunks_mut(0..n);
+        let started: usize = s
+            .chains
+            .chunks_mut(0..n)
+            .into_par_iter()
+            .zip(rays)
+            .map(|(c, r)| {
+                let mut started = 0;
+                for i in 0..c.len() {
+                    let pixel = c.start + i;
+                    c.pixel[i] = pixel as u32;
+                    c.alive[i] = false;
+                    c.triangle[i] = NO_VISIBLE_POINT;
+                    c.emitted[i] = Vec3::ZERO;
+                    c.depth[i] = 0;
+                    let tri = visible.triangle[pixel];
+                    if tri == NO_VISIBLE_POINT {
+                        continue;
+                    }
+                    let key = gather_key(seed, pixel as u64, pass);
+                    c.key[i] = key;
+                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
+                    let (ng, wo) = (visible.ng[pixel], visible.wo[pixel]);
+                    let frame = Frame::from_normal(visible.ns[pixel]);
+                    let wo_local = frame.to_local(wo);
+                    let Some(bs) = material.sample(wo_local, key.get2(0), TransportMode::Radiance)
+                    else {
+                        continue;
+                    };
+                    let wi = frame.to_world(bs.wi).normalize();
+                    if bs.pdf <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                        continue;
+                    }
+                    let beta = visible.beta[pixel] * bs.value * (bs.wi.z.abs() / bs.pdf);
+                    if beta.max_element() <= 0.0 {
+                        continue;
+                    }
+                    c.beta[i] = beta;
+                    c.alive[i] = true;
+                    r.origin[i] = crate::accel::offset_ray_origin(
+                        visible.p[pixel],
+                        visible.p_error[pixel],
+                        ng,
+                        wi,
+                    );
+                    r.dir[i] = wi;
+                    started += 1;
+                }
+                started
+            })
+            .sum();
+        s.active = n;
+        Flow::new(n, started)
+    }
+}
