@@ -266,6 +266,12 @@ pub struct CompareArgs {
     /// Where --preset finds its scenes.
     #[arg(long, default_value = "scenes")]
     pub scenes_dir: PathBuf,
+    /// Photons per pass of the thesis preset's biased runs (PM traces this many in all).
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(1..),
+          default_values_t = crate::compare::thesis::PHOTONS_PER_PASS)]
+    pub thesis_photons: Vec<u64>,
+    #[command(flatten)]
+    pub photons: PhotonArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -876,6 +882,7 @@ fn compare_plan(args: &CompareArgs) -> Result<ComparePlan> {
         settings: RenderSettings {
             seed: args.seed,
             max_depth: args.max_depth.unwrap_or(u32::MAX),
+            photons: args.photons.settings(),
             ..RenderSettings::default()
         },
     })
@@ -1106,7 +1113,13 @@ fn thesis_command(args: &CompareArgs) -> Result<i32> {
             &pool,
             args.quiet,
         )? {
-            SceneRun::Done(c) => {
+            SceneRun::Done(mut c) => {
+                if !c.interrupted {
+                    let (runs, stopped) =
+                        thesis_biased_runs(&scene, &c.reference, &plan, args, &stop, &pool)?;
+                    c.results.extend(runs);
+                    c.interrupted |= stopped;
+                }
                 report::write_report(&c, &scene_dir)?;
                 interrupted |= c.interrupted;
                 comparisons.push((key, *c));
@@ -1131,7 +1144,7 @@ fn thesis_command(args: &CompareArgs) -> Result<i32> {
     let summary = out_dir.join(report::SUMMARY_MD);
     std::fs::write(
         &summary,
-        thesis::summary_markdown(&scenes, pool.current_num_threads()),
+        thesis::summary_markdown(&scenes, pool.current_num_threads(), &args.thesis_photons),
     )
     .with_context(|| summary.display().to_string())?;
     let csv = out_dir.join(report::RESULTS_CSV);
@@ -1148,6 +1161,53 @@ fn thesis_command(args: &CompareArgs) -> Result<i32> {
     }
     print_out(&text);
     Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
+}
+
+/// The thesis preset's biased runs of one scene: each row of `thesis::BIASED` at each of
+/// `--thesis-photons`, against the scene's reference. Returns the runs and whether a stop cut
+/// them short.
+fn thesis_biased_runs(
+    scene: &Path,
+    reference: &Image,
+    plan: &ComparePlan,
+    args: &CompareArgs,
+    stop: &AtomicBool,
+    pool: &rayon::ThreadPool,
+) -> Result<(Vec<crate::compare::RunResult>, bool)> {
+    let data = load_scene(scene)?;
+    let mut runs = Vec::new();
+    for &photons in &args.thesis_photons {
+        for (name, passes, row) in thesis::BIASED {
+            let kind = IntegratorKind::from_name(name).map_err(|e| anyhow::anyhow!("{e}"))?;
+            if !args.quiet {
+                eprintln!("  {row} at {photons} photons");
+            }
+            let settings = RenderSettings {
+                photons: crate::integrators::PhotonSettings {
+                    photons_per_pass: photons,
+                    photons,
+                    ..args.photons.settings()
+                },
+                ..plan.settings
+            };
+            let job = CompareJob {
+                data: data.clone(),
+                reference,
+                integrators: &[kind],
+                unit: BudgetUnit::Spp,
+                budgets: &[passes as f64],
+                settings,
+            };
+            let (results, stopped) = pool
+                .install(|| crate::compare::run_comparison(&job, stop, &|_, _| {}))
+                .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
+            runs.extend(results);
+            if stopped {
+                return Ok((runs, true));
+            }
+        }
+    }
+    Ok((runs, false))
 }
 
 /// One CSV of every scene's runs, with a scene column first.

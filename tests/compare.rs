@@ -381,7 +381,7 @@ fn the_thesis_tables_list_unbuilt_algorithms_as_missing() {
             comparison: None,
         })
         .collect();
-    let md = summary_markdown(&scenes, 2);
+    let md = summary_markdown(&scenes, 2, &stagelight::compare::thesis::PHOTONS_PER_PASS);
     assert!(md.contains("## Unbiased algorithms, by samples per pixel"));
     assert!(md.contains("## Biased algorithms, by photons per pass"));
     assert!(md.contains("| 25 spp: s | thesis s | relMSE |"), "{md}");
@@ -416,6 +416,8 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         scenes.to_str().unwrap(),
         "--reference-spp",
         "256",
+        "--thesis-photons",
+        "2000,4000",
         "--quiet",
         "-o",
         out.to_str().unwrap(),
@@ -455,12 +457,22 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         .find(|l| l.starts_with("| room | BDPT |"))
         .expect("a BDPT row");
     assert!(!bdpt_row.contains("missing"), "{bdpt_row}");
+    // The biased rows have our seconds and relMSE at the photon budgets asked for, and no
+    // thesis seconds (it measured 250k and 500k only).
+    assert!(md.contains("| 2k photons/pass: s | thesis s | relMSE |"), "{md}");
+    for row in ["| torus | PM |", "| torus | PPM, 3 passes |", "| room | PPM, 75 passes |"] {
+        let line = md.lines().find(|l| l.starts_with(row)).expect(row);
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        assert!(cells[3].parse::<f64>().is_ok(), "seconds cell: {line}");
+        assert_eq!(cells[4], "", "no thesis seconds at 2k: {line}");
+        assert!(cells[5].parse::<f64>().is_ok(), "relMSE cell: {line}");
+    }
     let mut reader = csv::Reader::from_path(out.join("results.csv")).unwrap();
     assert_eq!(&reader.headers().unwrap()[0], "scene");
     assert_eq!(
         reader.records().count(),
-        18,
-        "3 scenes x PT and BDPT at 3 budgets"
+        36,
+        "3 scenes x (PT and BDPT at 3 budgets + PM, PPM 3 and PPM 75 at 2 photon budgets)"
     );
     let _ = std::fs::remove_dir_all(&dir);
 }

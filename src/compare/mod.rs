@@ -202,7 +202,7 @@ pub fn run_comparison(
                 passes: outcome.passes,
                 closest_rays: outcome.closest_rays(),
                 shadow_rays: outcome.shadow_rays(),
-                photons: 0,
+                photons: outcome.stats.get("emit_photons").map_or(0, |s| s.emitted),
                 metrics,
                 image,
             });
