@@ -51,8 +51,8 @@ pub mod gather {
     pub mod film;
     pub mod global_photons;
     pub mod pass_film;
-    pub mod photon_maps;
     pub mod photon_grid;
+    pub mod photon_maps;
     pub mod progressive_update;
     pub mod visible_point_photons;
 }

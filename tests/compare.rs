@@ -459,8 +459,15 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
     assert!(!bdpt_row.contains("missing"), "{bdpt_row}");
     // The biased rows have our seconds and relMSE at the photon budgets asked for, and no
     // thesis seconds (it measured 250k and 500k only).
-    assert!(md.contains("| 2k photons/pass: s | thesis s | relMSE |"), "{md}");
-    for row in ["| torus | PM |", "| torus | PPM, 3 passes |", "| room | PPM, 75 passes |"] {
+    assert!(
+        md.contains("| 2k photons/pass: s | thesis s | relMSE |"),
+        "{md}"
+    );
+    for row in [
+        "| torus | PM |",
+        "| torus | PPM, 3 passes |",
+        "| room | PPM, 75 passes |",
+    ] {
         let line = md.lines().find(|l| l.starts_with(row)).expect(row);
         let cells: Vec<&str> = line.split('|').map(str::trim).collect();
         assert!(cells[3].parse::<f64>().is_ok(), "seconds cell: {line}");

@@ -47,7 +47,10 @@ fn progressive_update_follows_the_ppm_formulas() {
     assert!((r as f64 - 0.5f64.sqrt()).abs() < 1e-6);
     assert!((t - tau_m * 0.5).length() < 1e-12);
     // No photons found: nothing changes.
-    assert_eq!(progressive_update(3.0, 0.25, tau, 0, DVec3::ZERO, 0.7), (3.0, 0.25, tau));
+    assert_eq!(
+        progressive_update(3.0, 0.25, tau, 0, DVec3::ZERO, 0.7),
+        (3.0, 0.25, tau)
+    );
     // alpha = 1 keeps everything: the radius stays and the flux just adds.
     let (n, r, t) = progressive_update(7.0, 0.3, tau, 3, tau_m, 1.0);
     assert_eq!((n, r), (10.0, 0.3));
@@ -57,7 +60,12 @@ fn progressive_update_follows_the_ppm_formulas() {
 /// Mean |L - 2| over the furnace's pixels and the image mean.
 fn furnace_error(image: &Image) -> (f64, f64) {
     let n = image.pixels.len() as f64;
-    let dev = image.pixels.iter().map(|p| (p[1] as f64 - 2.0).abs()).sum::<f64>() / n;
+    let dev = image
+        .pixels
+        .iter()
+        .map(|p| (p[1] as f64 - 2.0).abs())
+        .sum::<f64>()
+        / n;
     let mean = image.pixels.iter().map(|p| p[1] as f64).sum::<f64>() / n;
     (dev, mean)
 }

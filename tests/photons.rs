@@ -198,3 +198,27 @@ fn kd_tree_finds_the_k_nearest() {
         }
     }
 }
+
+#[test]
+fn grid_and_kd_tree_answer_both_queries_alike() {
+    let points = random_points(20_000, 5);
+    let tree = stagelight::photons::KdTree::build(&points);
+    let grid = stagelight::photons::HashGrid::build(&points, 1.0);
+    let mut near = stagelight::photons::Nearest::new(1, 1.0);
+    for q in random_points(200, 6) {
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        tree.for_each_within(q, 0.7, |i| a.push(i));
+        grid.for_each_within(&points, q, 0.7, |i| b.push(i));
+        a.sort_unstable();
+        b.sort_unstable();
+        assert!(!a.is_empty() || q.length() > 0.0);
+        assert_eq!(a, b);
+        grid.nearest(&points, q, 30, 1.0, &mut near);
+        let mut from_grid = near.found.clone();
+        tree.nearest(q, 30, 1.0, &mut near);
+        let mut from_tree = near.found.clone();
+        from_grid.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        from_tree.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)));
+        assert_eq!(from_grid, from_tree);
+    }
+}

@@ -232,7 +232,11 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
                     .and_then(|j| thesis.map(|t| format!("{}", t[j])))
                     .unwrap_or_default();
                 // PM traces `photons` in all, PPM that many per pass.
-                let traced = if integrator == "pm" { photons } else { photons * passes };
+                let traced = if integrator == "pm" {
+                    photons
+                } else {
+                    photons * passes
+                };
                 let run = built.and_then(|kind| {
                     scene.comparison.and_then(|c| {
                         c.results.iter().find(|r| {

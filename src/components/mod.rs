@@ -21,14 +21,13 @@ pub use photons::{
 pub use rays::{Hits, HitsChunk, HitsView, MISS, Rays, RaysChunk, RaysView};
 pub use shadow::{ShadowRays, ShadowRaysChunk, ShadowRaysView};
 pub use surfaces::{Surfaces, SurfacesChunk, SurfacesView};
-pub use visible_points::{
-    CameraChains, CameraChainsChunk, CameraChainsView, NO_VISIBLE_POINT, PixelEstimates,
-    PixelEstimatesChunk, PixelEstimatesView, VisiblePoints, VisiblePointsChunk,
-    VisiblePointsView,
-};
 pub use vertices::{
     CAMERA_VERTEX, Connections, ConnectionsChunk, ConnectionsView, PathVertices, PathVerticesChunk,
     PathVerticesView, Walkers, WalkersChunk, WalkersView,
+};
+pub use visible_points::{
+    CameraChains, CameraChainsChunk, CameraChainsView, NO_VISIBLE_POINT, PixelEstimates,
+    PixelEstimatesChunk, PixelEstimatesView, VisiblePoints, VisiblePointsChunk, VisiblePointsView,
 };
 
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.

@@ -124,7 +124,8 @@ impl PmState {
         let pixels = cam.width as usize * cam.height as usize;
         let mut photon_pass = PhotonPass::new(data.clone(), settings.seed, settings.max_depth);
         photon_pass.tracing.begin_pass(0, settings.photons);
-        let caustics = crate::integrators::pt::used_kinds(&data).contains(&MaterialKind::Dielectric);
+        let caustics =
+            crate::integrators::pt::used_kinds(&data).contains(&MaterialKind::Dielectric);
         PmState {
             settings,
             pixels,
@@ -231,7 +232,9 @@ pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
             name: "photon_maps",
             queue_len: |s: &PmState| s.maps.is_none() as usize,
             body: vec![
-                Node::nested(crate::photons::graph(), |s: &mut PmState| &mut s.photon_pass),
+                Node::nested(crate::photons::graph(), |s: &mut PmState| {
+                    &mut s.photon_pass
+                }),
                 Node::system(gather::photon_maps::BuildPhotonMaps),
             ],
         },

@@ -230,7 +230,11 @@ impl crate::systems::trace::shadow::ShadowQueue for ProgressiveState {
 
 impl shade::extend_camera_chains::CameraChainQueue for ProgressiveState {
     fn new_chains(&self) -> (u64, u64, usize) {
-        let n = if self.find_visible_points { self.pixels } else { 0 };
+        let n = if self.find_visible_points {
+            self.pixels
+        } else {
+            0
+        };
         (self.settings.seed, self.pass, n)
     }
 

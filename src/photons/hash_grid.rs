@@ -3,6 +3,7 @@
 //! indices by cell hash (in parallel; ties keep index order, so the layout never depends on
 //! the thread count).
 
+use super::Nearest;
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
@@ -88,5 +89,18 @@ impl HashGrid {
                 }
             }
         }
+    }
+
+    /// The (at most) `k` points nearest to `q` within `max_radius` (<= the build radius): the
+    /// k-nearest query of PM, for comparison with `KdTree` (it visits every point of the 27
+    /// cells, so it suits a `max_radius` close to the k-th distance).
+    pub fn nearest(&self, points: &[Vec3], q: Vec3, k: usize, max_radius: f32, out: &mut Nearest) {
+        *out = Nearest::new(k, max_radius);
+        if k == 0 {
+            return;
+        }
+        self.for_each_within(points, q, max_radius, |i| {
+            out.offer(points[i as usize].distance_squared(q), i)
+        });
     }
 }

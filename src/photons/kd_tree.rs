@@ -80,8 +80,10 @@ impl Nearest {
         }
     }
 
+    /// Offers a candidate at squared distance `d2`: kept if within the maximum radius and
+    /// nearer than the farthest of k already found.
     #[inline]
-    fn offer(&mut self, d2: f32, i: u32) {
+    pub fn offer(&mut self, d2: f32, i: u32) {
         if d2 > self.bound() {
             return;
         }
@@ -121,6 +123,16 @@ impl Nearest {
                 p = big;
             }
         }
+    }
+
+    /// How many neighbours a query keeps.
+    pub fn k(&self) -> usize {
+        self.k
+    }
+
+    /// The largest search radius.
+    pub fn max_radius(&self) -> f32 {
+        self.max_d2.sqrt()
     }
 
     /// Squared distance of the farthest of the neighbours found.
@@ -169,6 +181,31 @@ impl KdTree {
         out.found.clear();
         if k > 0 {
             self.search(0, self.points.len(), q, out);
+        }
+    }
+
+    /// Calls `f(original index)` for every point within `radius` of `q` (the fixed-radius
+    /// query of the PPM/SPPM gather, for comparison with `HashGrid`).
+    pub fn for_each_within(&self, q: Vec3, radius: f32, mut f: impl FnMut(u32)) {
+        self.within(0, self.points.len(), q, radius * radius, &mut f);
+    }
+
+    fn within(&self, lo: usize, hi: usize, q: Vec3, r2: f32, f: &mut impl FnMut(u32)) {
+        if lo >= hi {
+            return;
+        }
+        let mid = lo + (hi - lo) / 2;
+        let p = self.points[mid];
+        let a = self.axis[mid] as usize;
+        let d = q[a] - p[a];
+        if p.distance_squared(q) <= r2 {
+            f(self.order[mid]);
+        }
+        if d <= 0.0 || d * d <= r2 {
+            self.within(lo, mid, q, r2, f);
+        }
+        if d > 0.0 || d * d <= r2 {
+            self.within(mid + 1, hi, q, r2, f);
         }
     }
 

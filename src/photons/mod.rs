@@ -241,7 +241,10 @@ pub struct PhotonMaps {
 impl PhotonMaps {
     /// Bytes the maps hold.
     pub fn bytes(&self) -> usize {
-        let caustic = self.caustic.as_ref().map_or(0, |(t, i)| t.bytes() + 4 * i.len());
+        let caustic = self
+            .caustic
+            .as_ref()
+            .map_or(0, |(t, i)| t.bytes() + 4 * i.len());
         self.photons.capacity() * crate::components::Photons::bytes_per_item()
             + self.global.bytes()
             + caustic
@@ -300,18 +303,18 @@ impl GatherPoint {
 /// `max_radius`, r is the distance to the k-th and the sum runs over the k - 1 nearer ones: in
 /// a uniform photon density those lie uniformly in the disc of radius r, so the estimate is
 /// exact in expectation (counting the k-th as well overestimates by k / (k - 1)). With fewer
-/// found, r is `max_radius` and all of them count. `index` maps tree points to photons;
-/// `keep` filters them by flags.
+/// found, r is the maximum radius and all of them count. `nearest` gives k and the maximum
+/// radius (and holds the search's scratch); `index` maps tree points to photons; `keep`
+/// filters them by flags.
 pub fn density_estimate(
     tree: &KdTree,
     index: Option<&[u32]>,
     photons: &crate::components::Photons,
     at: &GatherPoint,
-    k: usize,
-    max_radius: f32,
     keep: impl Fn(PhotonFlags) -> bool,
     nearest: &mut Nearest,
 ) -> Vec3 {
+    let (k, max_radius) = (nearest.k(), nearest.max_radius());
     tree.nearest(at.p, k, max_radius, nearest);
     if nearest.found.is_empty() {
         return Vec3::ZERO;

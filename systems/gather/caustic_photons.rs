@@ -29,13 +29,13 @@ impl System<PmState> for GatherCaustics {
         let max_radius = s.settings.max_radius_in(&s.data);
         let scale = 1.0 / maps.emitted.max(1) as f32;
         let chunk = crate::components::CHUNK;
-        let gathered: usize = s
+        let (gathered, nonfinite) = s
             .pass_radiance
             .par_chunks_mut(chunk)
             .enumerate()
             .map(|(c, out)| {
                 let mut nearest = Nearest::new(k, max_radius);
-                let mut gathered = 0;
+                let (mut gathered, mut nonfinite) = (0, 0);
                 for (j, sum) in out.iter_mut().enumerate() {
                     let pixel = c * chunk + j;
                     let Some(at) = GatherPoint::of(scene, visible, pixel) else {
@@ -46,20 +46,21 @@ impl System<PmState> for GatherCaustics {
                         Some(index),
                         &maps.photons,
                         &at,
-                        k,
-                        max_radius,
                         |_| true,
                         &mut nearest,
                     );
                     let value = visible.beta[pixel] * l * scale;
                     if value.is_finite() {
                         *sum += value.as_dvec3();
+                    } else {
+                        nonfinite += 1;
                     }
                     gathered += 1;
                 }
-                gathered
+                (gathered, nonfinite)
             })
-            .sum();
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        s.nonfinite += nonfinite;
         Flow::new(s.pixels, gathered)
     }
 }

@@ -39,13 +39,13 @@ impl System<PmState> for GatherGlobalPhotons {
             final_gather || !(f.has(PhotonFlags::DIRECT) || f.has(PhotonFlags::CAUSTIC))
         };
         let chunk = crate::components::CHUNK;
-        let gathered: usize = s
+        let (gathered, nonfinite) = s
             .pass_radiance
             .par_chunks_mut(chunk)
             .enumerate()
             .map(|(c, out)| {
                 let mut nearest = Nearest::new(k, max_radius);
-                let mut gathered = 0;
+                let (mut gathered, mut nonfinite) = (0, 0);
                 for (j, sum) in out.iter_mut().enumerate() {
                     let pixel = c * chunk + j;
                     let Some(at) = GatherPoint::of(scene, points, pixel) else {
@@ -56,20 +56,21 @@ impl System<PmState> for GatherGlobalPhotons {
                         None,
                         &maps.photons,
                         &at,
-                        k,
-                        max_radius,
                         keep,
                         &mut nearest,
                     );
                     let value = points.beta[pixel] * l * scale;
                     if value.is_finite() {
                         *sum += value.as_dvec3();
+                    } else {
+                        nonfinite += 1;
                     }
                     gathered += 1;
                 }
-                gathered
+                (gathered, nonfinite)
             })
-            .sum();
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        s.nonfinite += nonfinite;
         Flow::new(s.pixels, gathered)
     }
 }

@@ -26,7 +26,11 @@ pub fn progressive_update(
     let m = m as f64;
     let n_new = n + alpha * m;
     let ratio = n_new / (n + m);
-    (n_new, (radius as f64 * ratio.sqrt()) as f32, (tau + tau_m) * ratio)
+    (
+        n_new,
+        (radius as f64 * ratio.sqrt()) as f32,
+        (tau + tau_m) * ratio,
+    )
 }
 
 pub struct UpdatePixelEstimates;

@@ -16,7 +16,12 @@ impl System<ProgressiveState> for GatherPhotons {
         "gather_photons"
     }
     fn reads(&self) -> &'static [&'static str] {
-        &["photon_grid", "photons", "visible_points", "pixel_estimates.radius"]
+        &[
+            "photon_grid",
+            "photons",
+            "visible_points",
+            "pixel_estimates.radius",
+        ]
     }
     fn writes(&self) -> &'static [&'static str] {
         &["pixel_estimates.pass_photons", "pixel_estimates.pass_flux"]

@@ -59,7 +59,9 @@ impl<S: PhotonQueue + Send> System<S> for ScatterPhotons {
                     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let wo = -r.dir[i].normalize();
                     let depth = w.depth[i];
-                    if !matches!(material, Material::Dielectric { .. }) && (depth > 0 || store_direct) {
+                    if !matches!(material, Material::Dielectric { .. })
+                        && (depth > 0 || store_direct)
+                    {
                         let mut flags = 0;
                         if depth == 0 {
                             flags |= PhotonFlags::DIRECT;
