@@ -101,12 +101,23 @@ fn render_writes_exr_and_png_and_reports() {
 
 #[test]
 fn ctrl_c_saves_the_finished_passes_and_exits_130() {
-    let dir = temp_dir("sigint");
+    ctrl_c_case("pt");
+}
+
+#[test]
+fn ctrl_c_saves_the_finished_photon_passes_and_exits_130() {
+    ctrl_c_case("sppm");
+}
+
+fn ctrl_c_case(integrator: &str) {
+    let dir = temp_dir(&format!("sigint-{integrator}"));
     let out = dir.join("long.exr");
     let child = Command::new(env!("CARGO_BIN_EXE_stagelight"))
         .args([
             "render",
             "scenes/cornell_box.ron",
+            "--integrator",
+            integrator,
             "--spp",
             "1000000",
             "--quiet",
@@ -181,4 +192,67 @@ fn strategy_images_need_bdpt() {
     ]);
     assert_eq!(o.status.code(), Some(1));
     assert!(stderr(&o).contains("--strategy-images needs --integrator bdpt"));
+}
+
+#[test]
+fn photon_mappers_render_and_report_their_photons() {
+    let dir = temp_dir("photon-mappers");
+    for (integrator, extra) in [
+        ("sppm", ["--photons-per-pass", "20000"]),
+        ("ppm", ["--photons-per-pass", "20000"]),
+        ("pm", ["--photons", "20000"]),
+    ] {
+        let out = dir.join(format!("{integrator}.exr"));
+        let mut args = vec![
+            "render",
+            "scenes/torus_glass.ron",
+            "--integrator",
+            integrator,
+        ];
+        args.extend(["--passes", "2", "--quiet", "-o", out.to_str().unwrap()]);
+        args.extend(extra);
+        let o = stagelight(&args);
+        assert_eq!(o.status.code(), Some(0), "{integrator}: {}", stderr(&o));
+        let report = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            report.contains("photons/s") && report.contains("passes/s"),
+            "{report}"
+        );
+        assert!(report.contains("emit_photons"), "{report}");
+        assert!(out.exists() && out.with_extension("png").exists());
+    }
+}
+
+#[test]
+fn photon_mapper_options_are_checked() {
+    for (args, message) in [
+        (
+            vec!["--integrator", "sppm", "--alpha", "1.5"],
+            "alpha must be a number in (0, 1)",
+        ),
+        (
+            vec!["--integrator", "ppm", "--radius", "0"],
+            "the radius must be a positive number",
+        ),
+        (vec!["--integrator", "pm", "--k", "0"], "--k"),
+        (vec!["--integrator", "pm", "--photons", "0"], "--photons"),
+    ] {
+        let mut all = vec!["render", "scenes/cornell_box.ron"];
+        all.extend(args);
+        let o = stagelight(&all);
+        assert_eq!(o.status.code(), Some(1), "{all:?}");
+        assert!(stderr(&o).contains(message), "{all:?}: {}", stderr(&o));
+    }
+    let o = stagelight(&[
+        "reference",
+        "scenes/cornell_box.ron",
+        "--integrator",
+        "sppm",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("needs an unbiased integrator"),
+        "{}",
+        stderr(&o)
+    );
 }
