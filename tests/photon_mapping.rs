@@ -32,6 +32,14 @@ fn settings(seed: u64, stochastic: bool, photons: u64) -> ProgressiveSettings {
     }
 }
 
+fn on_threads<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> T {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(f)
+}
+
 #[test]
 fn progressive_update_follows_the_ppm_formulas() {
     let tau = DVec3::new(1.0, 2.0, 3.0);
@@ -113,11 +121,9 @@ fn sppm_error_against_path_tracing_falls_with_passes_on_the_cornell_box() {
 fn sppm_is_bit_identical_for_one_and_three_threads() {
     let data = Arc::new(SceneData::new(load_small("torus_glass.ron", 32)));
     let image = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| render(data.clone(), settings(8, true, 30_000), 3))
+        on_threads(threads, || {
+            render(data.clone(), settings(8, true, 30_000), 3)
+        })
     };
     let (a, b) = (image(1), image(3));
     assert!(a.pixels == b.pixels, "1 and 3 threads differ");
@@ -187,15 +193,13 @@ fn pm_has_a_caustic_map_only_where_there_are_specular_surfaces() {
 fn pm_is_bit_identical_for_one_and_three_threads() {
     let data = Arc::new(SceneData::new(load_small("torus_glass.ron", 32)));
     let image = |threads| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
         let settings = pm::PmSettings {
             photons: 30_000,
             ..pm::PmSettings::new(2)
         };
-        pool.install(|| render_pm(data.clone(), settings, 2).film.image())
+        on_threads(threads, || {
+            render_pm(data.clone(), settings, 2).film.image()
+        })
     };
     assert!(image(1).pixels == image(3).pixels, "1 and 3 threads differ");
 }

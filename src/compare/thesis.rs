@@ -176,22 +176,7 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
                             .find(|r| r.integrator == kind && r.budget == *spp as f64)
                     })
                 });
-                match (built, run) {
-                    (None, _) => {
-                        let _ = write!(s, " missing | {thesis_s} | missing |");
-                    }
-                    (Some(_), None) => {
-                        let _ = write!(s, " not run | {thesis_s} | |");
-                    }
-                    (Some(_), Some(r)) => {
-                        let _ = write!(
-                            s,
-                            " {} | {thesis_s} | {} |",
-                            secs(r.wall),
-                            sci(r.metrics.relmse)
-                        );
-                    }
-                }
+                s += &cells(built.is_some(), run, &thesis_s);
             }
             s.push('\n');
         }
@@ -244,22 +229,7 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
                         })
                     })
                 });
-                match (built, run) {
-                    (None, _) => {
-                        let _ = write!(s, " missing | {thesis_s} | missing |");
-                    }
-                    (Some(_), None) => {
-                        let _ = write!(s, " not run | {thesis_s} | |");
-                    }
-                    (Some(_), Some(r)) => {
-                        let _ = write!(
-                            s,
-                            " {} | {thesis_s} | {} |",
-                            secs(r.wall),
-                            sci(r.metrics.relmse)
-                        );
-                    }
-                }
+                s += &cells(built.is_some(), run, &thesis_s);
             }
             s.push('\n');
         }
@@ -301,6 +271,19 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
         }
     }
     s
+}
+
+/// One budget's three cells (our seconds, the thesis' seconds, our relMSE) of a row.
+fn cells(built: bool, run: Option<&RunResult>, thesis_s: &str) -> String {
+    match (built, run) {
+        (false, _) => format!(" missing | {thesis_s} | missing |"),
+        (true, None) => format!(" not run | {thesis_s} | |"),
+        (true, Some(r)) => format!(
+            " {} | {thesis_s} | {} |",
+            secs(r.wall),
+            sci(r.metrics.relmse)
+        ),
+    }
 }
 
 fn scene_label(key: &str) -> &'static str {

@@ -249,10 +249,7 @@ fn run(
             bdpt::render_from(data, bdpt_settings, budget, control, from)
         }
         IntegratorKind::Pm => {
-            assert!(
-                from.is_none(),
-                "pm is biased and does not resume (callers check is_unbiased)"
-            );
+            refuse_resume(kind, from);
             let p = settings.photons;
             let pm_settings = pm::PmSettings {
                 max_depth: settings.max_depth,
@@ -265,10 +262,7 @@ fn run(
             pm::render(data, pm_settings, budget, control)
         }
         IntegratorKind::Ppm | IntegratorKind::Sppm => {
-            assert!(
-                from.is_none(),
-                "{kind} is biased and does not resume (callers check is_unbiased)"
-            );
+            refuse_resume(kind, from);
             let p = settings.photons;
             let progressive = sppm::ProgressiveSettings {
                 max_depth: settings.max_depth,
@@ -280,6 +274,49 @@ fn run(
             sppm::render(data, progressive, budget, control)
         }
     }
+}
+
+/// Passes of an integrator that renders pass by pass (the photon mappers): calls `pass(i)`
+/// for i = 0, 1, ... until the budget is spent (a sample budget counts passes; a time budget
+/// ends at the first pass boundary past it, after at least one pass) or a stop is asked for,
+/// reporting progress after each. Returns (passes done, whether a stop cut a sample budget
+/// short).
+pub(crate) fn pass_by_pass(
+    budget: Budget,
+    control: &Control,
+    mut pass: impl FnMut(u64),
+) -> (u64, bool) {
+    let start = Instant::now();
+    let total = match budget {
+        Budget::SamplesPerPixel(n) => Some(n),
+        Budget::Seconds(_) => None,
+    };
+    let mut passes = 0;
+    loop {
+        let over = match budget {
+            Budget::SamplesPerPixel(n) => passes >= n,
+            Budget::Seconds(s) => passes > 0 && start.elapsed().as_secs_f64() >= s,
+        };
+        if over || control.stopped() {
+            break;
+        }
+        pass(passes);
+        passes += 1;
+        (control.progress)(passes, total);
+    }
+    (
+        passes,
+        control.stopped() && total.is_some_and(|t| passes < t),
+    )
+}
+
+/// The biased integrators keep per-pixel statistics a film checkpoint does not hold, so they
+/// cannot resume; callers check `is_unbiased` first (`reference` refuses them).
+fn refuse_resume(kind: IntegratorKind, from: Option<Resume>) {
+    assert!(
+        from.is_none(),
+        "{kind} is biased and does not resume (callers check is_unbiased)"
+    );
 }
 
 /// How long a render runs: samples per pixel, or wall seconds (whole passes).

@@ -34,7 +34,7 @@
 use crate::bsdf::MaterialKind;
 use crate::components::{CameraChains, Hits, Rays, ShadowRays, VisiblePoints};
 use crate::film::Film;
-use crate::integrators::{Budget, Control, RenderOutcome, SceneData};
+use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
 use crate::photons::{PhotonMaps, PhotonPass};
 use crate::pipeline::{Graph, Node, Stats};
 use crate::systems::{connect, gather, generate, shade, trace};
@@ -273,26 +273,11 @@ pub fn render(
     let mut state = PmState::new(data, settings);
     let graph = graph(&settings, state.caustics);
     let mut stats = Stats::default();
-    let total = match budget {
-        Budget::SamplesPerPixel(n) => Some(n),
-        Budget::Seconds(_) => None,
-    };
-    let mut passes = 0;
-    loop {
-        let over = match budget {
-            Budget::SamplesPerPixel(n) => passes >= n,
-            Budget::Seconds(s) => passes > 0 && start.elapsed().as_secs_f64() >= s,
-        };
-        if over || control.stopped() {
-            break;
-        }
-        state.pass = passes;
+    let (passes, interrupted) = pass_by_pass(budget, control, |pass| {
+        state.pass = pass;
         state.phase = ChainPhase::Camera;
         graph.run(&mut state, &mut stats);
-        passes += 1;
-        (control.progress)(passes, total);
-    }
-    let interrupted = control.stopped() && total.is_some_and(|t| passes < t);
+    });
     state.film.nonfinite += state.nonfinite;
     RenderOutcome {
         bytes_per_path: state.bytes_per_pixel(),

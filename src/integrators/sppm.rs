@@ -45,7 +45,7 @@ use crate::components::{
     CameraChains, Hits, NO_VISIBLE_POINT, PixelEstimates, Rays, ShadowRays, VisiblePoints,
 };
 use crate::film::Film;
-use crate::integrators::{Budget, Control, RenderOutcome, SceneData};
+use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node, Stats};
 use crate::systems::{connect, gather, generate, shade, trace};
@@ -309,25 +309,10 @@ pub fn render(
     let graph = graph();
     let mut state = ProgressiveState::new(data, settings);
     let mut stats = Stats::default();
-    let total = match budget {
-        Budget::SamplesPerPixel(n) => Some(n),
-        Budget::Seconds(_) => None,
-    };
-    let mut passes = 0;
-    loop {
-        let over = match budget {
-            Budget::SamplesPerPixel(n) => passes >= n,
-            Budget::Seconds(s) => passes > 0 && start.elapsed().as_secs_f64() >= s,
-        };
-        if over || control.stopped() {
-            break;
-        }
-        state.begin_pass(passes);
+    let (passes, interrupted) = pass_by_pass(budget, control, |pass| {
+        state.begin_pass(pass);
         graph.run(&mut state, &mut stats);
-        passes += 1;
-        (control.progress)(passes, total);
-    }
-    let interrupted = control.stopped() && total.is_some_and(|t| passes < t);
+    });
     RenderOutcome {
         film: state.film(passes),
         stats,

@@ -336,3 +336,60 @@ pub fn density_estimate(
     }
     sum / (std::f32::consts::PI * r2.max(f32::MIN_POSITIVE))
 }
+
+/// A photon map to estimate from: a kd-tree over (some of) `photons`, with each tree point's
+/// index into them (`None`: the tree holds all, in order).
+pub struct MapQuery<'a> {
+    pub tree: &'a KdTree,
+    pub index: Option<&'a [u32]>,
+    pub photons: &'a crate::components::Photons,
+    pub k: usize,
+    pub max_radius: f32,
+    /// 1 / photons emitted.
+    pub scale: f32,
+}
+
+impl MapQuery<'_> {
+    /// Adds to each pixel's sum in `out` (slot = pixel) the density estimate at its point of
+    /// `points`, weighted by the point's throughput; pixels without a point get nothing.
+    /// Returns (estimates made, NaN or Inf estimates dropped).
+    pub fn add_estimates(
+        &self,
+        scene: &crate::scene::PreparedScene,
+        points: &crate::components::VisiblePoints,
+        keep: impl Fn(PhotonFlags) -> bool + Sync,
+        out: &mut [glam::DVec3],
+    ) -> (usize, u64) {
+        use rayon::prelude::*;
+        let chunk = crate::components::CHUNK;
+        out.par_chunks_mut(chunk)
+            .enumerate()
+            .map(|(c, out)| {
+                let mut nearest = Nearest::new(self.k, self.max_radius);
+                let (mut made, mut nonfinite) = (0, 0);
+                for (j, sum) in out.iter_mut().enumerate() {
+                    let pixel = c * chunk + j;
+                    let Some(at) = GatherPoint::of(scene, points, pixel) else {
+                        continue;
+                    };
+                    let l = density_estimate(
+                        self.tree,
+                        self.index,
+                        self.photons,
+                        &at,
+                        &keep,
+                        &mut nearest,
+                    );
+                    let value = points.beta[pixel] * l * self.scale;
+                    if value.is_finite() {
+                        *sum += value.as_dvec3();
+                    } else {
+                        nonfinite += 1;
+                    }
+                    made += 1;
+                }
+                (made, nonfinite)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+    }
+}

@@ -5,9 +5,8 @@
 
 use crate::components::PhotonFlags;
 use crate::integrators::pm::PmState;
-use crate::photons::{GatherPoint, Nearest, density_estimate};
+use crate::photons::MapQuery;
 use crate::pipeline::{Flow, System};
-use rayon::prelude::*;
 
 pub struct GatherGlobalPhotons;
 
@@ -31,46 +30,20 @@ impl System<PmState> for GatherGlobalPhotons {
         } else {
             &s.visible
         };
-        let scene = &s.data.scene;
-        let k = s.settings.k;
-        let max_radius = s.settings.max_radius_in(&s.data);
-        let scale = 1.0 / maps.emitted.max(1) as f32;
-        let keep = move |f: PhotonFlags| {
+        let query = MapQuery {
+            tree: &maps.global,
+            index: None,
+            photons: &maps.photons,
+            k: s.settings.k,
+            max_radius: s.settings.max_radius_in(&s.data),
+            scale: 1.0 / maps.emitted.max(1) as f32,
+        };
+        let keep = |f: PhotonFlags| {
             final_gather || !(f.has(PhotonFlags::DIRECT) || f.has(PhotonFlags::CAUSTIC))
         };
-        let chunk = crate::components::CHUNK;
-        let (gathered, nonfinite) = s
-            .pass_radiance
-            .par_chunks_mut(chunk)
-            .enumerate()
-            .map(|(c, out)| {
-                let mut nearest = Nearest::new(k, max_radius);
-                let (mut gathered, mut nonfinite) = (0, 0);
-                for (j, sum) in out.iter_mut().enumerate() {
-                    let pixel = c * chunk + j;
-                    let Some(at) = GatherPoint::of(scene, points, pixel) else {
-                        continue;
-                    };
-                    let l = density_estimate(
-                        &maps.global,
-                        None,
-                        &maps.photons,
-                        &at,
-                        keep,
-                        &mut nearest,
-                    );
-                    let value = points.beta[pixel] * l * scale;
-                    if value.is_finite() {
-                        *sum += value.as_dvec3();
-                    } else {
-                        nonfinite += 1;
-                    }
-                    gathered += 1;
-                }
-                (gathered, nonfinite)
-            })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        let (made, nonfinite) =
+            query.add_estimates(&s.data.scene, points, keep, &mut s.pass_radiance);
         s.nonfinite += nonfinite;
-        Flow::new(s.pixels, gathered)
+        Flow::new(s.pixels, made)
     }
 }
