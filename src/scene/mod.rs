@@ -107,7 +107,53 @@ pub struct EmitterPoint {
     pub pdf_area: f32,
 }
 
+/// A light sample seen from a surface point: the direction to it, its solid-angle density,
+/// the shadow ray that tests it and the radiance it sends.
+#[derive(Clone, Copy, Debug)]
+pub struct LightSample {
+    pub wi: Vec3,
+    pub pdf: f32,
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub t_max: f32,
+    pub radiance: Vec3,
+}
+
 impl PreparedScene {
+    /// Next-event estimation's light sample from the surface point (p, its error bound,
+    /// geometric normal ng) seen along wo: an emitter point by `sample_emitter`, or None when
+    /// the point faces away from it or it lies on the other side of the surface than wo.
+    #[inline(always)]
+    pub fn sample_light_from(
+        &self,
+        p: Vec3,
+        p_error: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        u_pick: f32,
+        u_point: glam::Vec2,
+    ) -> Option<LightSample> {
+        let sampled = self.sample_emitter(u_pick, u_point);
+        let light = sampled.point;
+        let to_light = light.p - p;
+        let dist2 = to_light.length_squared();
+        let wi = to_light / dist2.sqrt();
+        let cos_light = -wi.dot(light.ng);
+        if cos_light <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+            return None;
+        }
+        let (origin, dir, t_max) =
+            crate::accel::spawn_ray_to(p, p_error, ng, light.p, light.p_error, light.ng);
+        Some(LightSample {
+            wi,
+            pdf: sampled.pdf_area * dist2 / cos_light,
+            origin,
+            dir,
+            t_max,
+            radiance: self.emitters.radiance[sampled.emitter],
+        })
+    }
+
     /// The emitter point for `u_pick` (which emitter) and `u_point` (where on it). The scene
     /// must have an emitter.
     #[inline]

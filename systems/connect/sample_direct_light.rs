@@ -3,7 +3,6 @@
 //! sampling alone (no MIS): the visible point never samples its BSDF toward a light, and the
 //! photons that land first at a surface are not gathered, so nothing else counts this light.
 
-use crate::accel::spawn_ray_to;
 use crate::components::{NO_VISIBLE_POINT, ShadowRays, VisiblePoints};
 use crate::integrators::SceneData;
 use crate::math::Frame;
@@ -67,40 +66,29 @@ impl<S: VisiblePointLights + Send> System<S> for SampleDirectLight {
                         continue;
                     }
                     let key = light_key(seed, pixel as u64, index);
-                    let sampled = scene.sample_emitter(key.get(0), key.get2(1));
-                    let light = sampled.point;
-                    let (p, ng) = (visible.p[pixel], visible.ng[pixel]);
-                    let to_light = light.p - p;
-                    let dist2 = to_light.length_squared();
-                    let wi = to_light / dist2.sqrt();
-                    let cos_light = -wi.dot(light.ng);
                     let wo = visible.wo[pixel];
-                    if cos_light <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                    let Some(light) = scene.sample_light_from(
+                        visible.p[pixel],
+                        visible.p_error[pixel],
+                        visible.ng[pixel],
+                        wo,
+                        key.get(0),
+                        key.get2(1),
+                    ) else {
                         continue;
-                    }
+                    };
                     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let frame = Frame::from_normal(visible.ns[pixel]);
-                    let wi_local = frame.to_local(wi);
+                    let wi_local = frame.to_local(light.wi);
                     let f = material.eval(frame.to_local(wo), wi_local);
                     if f.max_element() <= 0.0 {
                         continue;
                     }
-                    let pdf = sampled.pdf_area * dist2 / cos_light;
-                    let (origin, dir, t_max) = spawn_ray_to(
-                        p,
-                        visible.p_error[pixel],
-                        ng,
-                        light.p,
-                        light.p_error,
-                        light.ng,
-                    );
-                    c.origin[i] = origin;
-                    c.dir[i] = dir;
-                    c.t_max[i] = t_max;
-                    c.contribution[i] = visible.beta[pixel]
-                        * f
-                        * (wi_local.z.abs() / pdf)
-                        * scene.emitters.radiance[sampled.emitter];
+                    c.origin[i] = light.origin;
+                    c.dir[i] = light.dir;
+                    c.t_max[i] = light.t_max;
+                    c.contribution[i] =
+                        visible.beta[pixel] * f * (wi_local.z.abs() / light.pdf) * light.radiance;
                     cast += 1;
                 }
                 cast

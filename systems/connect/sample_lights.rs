@@ -2,7 +2,6 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
-use crate::accel::spawn_ray_to;
 use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
@@ -77,8 +76,6 @@ fn sample_chunk(
     surfaces: &Surfaces,
     c: ShadowRaysChunk,
 ) -> usize {
-    let emitters = &data.scene.emitters;
-
     let mut cast = 0;
     let range = c.start..c.start + c.len();
     let hits = hits.view(range.clone());
@@ -90,40 +87,27 @@ fn sample_chunk(
         let surf = Surface::at(data, &surfaces, hits.triangle[i], i, rays.dir[i]);
         let key = paths.key[i];
         let dim = bounce_dim(paths.depth[i]);
-        let sampled = data.scene.sample_emitter(
+        let Some(light) = data.scene.sample_light_from(
+            surf.p,
+            surf.p_error,
+            surf.ng,
+            surf.wo,
             key.get(dim + DIM_LIGHT_PICK),
             key.get2(dim + DIM_LIGHT_POINT),
-        );
-        let (e, light) = (sampled.emitter, sampled.point);
-        let to_light = light.p - surf.p;
-        let dist2 = to_light.length_squared();
-        let wi = to_light / dist2.sqrt();
-        let cos_light = -wi.dot(light.ng);
-        if cos_light <= 0.0 || !surf.reflects_geometrically(wi) {
+        ) else {
             continue;
-        }
-        let wi_local = surf.frame.to_local(wi);
+        };
+        let wi_local = surf.frame.to_local(light.wi);
         let f = surf.material.eval(surf.wo_local, wi_local);
         if f == Vec3::ZERO {
             continue;
         }
-        let light_pdf = sampled.pdf_area * dist2 / cos_light;
-        let weight = power_heuristic(light_pdf, surf.material.pdf(surf.wo_local, wi_local));
-        let (origin, dir, t_max) = spawn_ray_to(
-            surf.p,
-            surf.p_error,
-            surf.ng,
-            light.p,
-            light.p_error,
-            light.ng,
-        );
-        c.origin[i] = origin;
-        c.dir[i] = dir;
-        c.t_max[i] = t_max;
-        c.contribution[i] = paths.throughput[i]
-            * f
-            * (wi_local.z.abs() * weight / light_pdf)
-            * emitters.radiance[e];
+        let weight = power_heuristic(light.pdf, surf.material.pdf(surf.wo_local, wi_local));
+        c.origin[i] = light.origin;
+        c.dir[i] = light.dir;
+        c.t_max[i] = light.t_max;
+        c.contribution[i] =
+            paths.throughput[i] * f * (wi_local.z.abs() * weight / light.pdf) * light.radiance;
         cast += 1;
     }
     cast
