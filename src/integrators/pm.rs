@@ -32,11 +32,12 @@
 //! ```
 
 use crate::bsdf::MaterialKind;
-use crate::components::{CameraChains, Hits, Rays, ShadowRays, VisiblePoints};
+use crate::components::{Hits, Rays, ShadowRays, VisiblePoints};
 use crate::film::Film;
 use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
 use crate::photons::{PhotonMaps, PhotonPass};
 use crate::pipeline::{Graph, Node, Stats};
+use crate::systems::shade::extend_camera_chains::ChainWavefront;
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::DVec3;
 use std::ops::Range;
@@ -97,10 +98,7 @@ pub struct PmState {
     pub pixels: usize,
     pub pass: u64,
     pub phase: ChainPhase,
-    pub chains: CameraChains,
-    pub rays: Rays,
-    pub hits: Hits,
-    pub active: usize,
+    pub wave: ChainWavefront,
     pub visible: VisiblePoints,
     /// Where each pixel's final-gather ray landed (slot = pixel).
     pub gather_points: VisiblePoints,
@@ -113,9 +111,6 @@ pub struct PmState {
     pub caustics: bool,
     pub film: Film,
     pub nonfinite: u64,
-    pub scratch_chains: CameraChains,
-    pub scratch_rays: Rays,
-    pub order: Vec<u32>,
 }
 
 impl PmState {
@@ -131,10 +126,7 @@ impl PmState {
             pixels,
             pass: 0,
             phase: ChainPhase::Camera,
-            chains: CameraChains::new(pixels),
-            rays: Rays::new(pixels),
-            hits: Hits::new(pixels),
-            active: 0,
+            wave: ChainWavefront::new(pixels),
             visible: VisiblePoints::new(pixels),
             gather_points: VisiblePoints::new(pixels),
             shadow: ShadowRays::new(pixels),
@@ -144,9 +136,6 @@ impl PmState {
             caustics,
             film: Film::new(cam.width as usize, cam.height as usize),
             nonfinite: 0,
-            scratch_chains: CameraChains::new(pixels),
-            scratch_rays: Rays::new(pixels),
-            order: Vec::with_capacity(pixels),
             data,
         }
     }
@@ -154,8 +143,7 @@ impl PmState {
     /// Bytes of state per pixel: chains and rays (double buffered), hits, visible and gather
     /// points, shadow ray and the pass's radiance.
     pub fn bytes_per_pixel(&self) -> usize {
-        2 * (CameraChains::bytes_per_item() + Rays::bytes_per_item())
-            + Hits::bytes_per_item()
+        ChainWavefront::bytes_per_slot()
             + 2 * VisiblePoints::bytes_per_item()
             + ShadowRays::bytes_per_item()
             + std::mem::size_of::<DVec3>()
@@ -164,7 +152,12 @@ impl PmState {
 
 impl crate::systems::trace::closest::ClosestHitQueue for PmState {
     fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
-        (&self.data.accel, &self.rays, &mut self.hits, self.active)
+        (
+            &self.data.accel,
+            &self.wave.rays,
+            &mut self.wave.hits,
+            self.wave.active,
+        )
     }
 }
 
@@ -184,18 +177,8 @@ impl shade::extend_camera_chains::CameraChainQueue for PmState {
             ChainPhase::Camera => &mut self.visible,
             ChainPhase::FinalGather => &mut self.gather_points,
         };
-        shade::extend_camera_chains::ChainQueue {
-            data: &self.data,
-            max_depth: self.settings.max_depth,
-            chains: &mut self.chains,
-            rays: &mut self.rays,
-            hits: &self.hits,
-            active: &mut self.active,
-            visible,
-            scratch_chains: &mut self.scratch_chains,
-            scratch_rays: &mut self.scratch_rays,
-            order: &mut self.order,
-        }
+        self.wave
+            .queue(&self.data, self.settings.max_depth, visible)
     }
 }
 
@@ -216,7 +199,7 @@ impl connect::sample_direct_light::VisiblePointLights for PmState {
 fn camera_bounces(name: &'static str) -> Node<PmState> {
     Node::Loop {
         name,
-        queue_len: |s: &PmState| s.active,
+        queue_len: |s: &PmState| s.wave.active,
         body: vec![
             Node::system(trace::closest::TraceClosest),
             Node::system(shade::extend_camera_chains::ExtendCameraChains),

@@ -41,13 +41,12 @@
 //! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
 //! nothing grows with the number of passes.
 
-use crate::components::{
-    CameraChains, Hits, NO_VISIBLE_POINT, PixelEstimates, Rays, ShadowRays, VisiblePoints,
-};
+use crate::components::{Hits, NO_VISIBLE_POINT, PixelEstimates, Rays, ShadowRays, VisiblePoints};
 use crate::film::Film;
 use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node, Stats};
+use crate::systems::shade::extend_camera_chains::ChainWavefront;
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::DVec3;
 use std::ops::Range;
@@ -107,11 +106,8 @@ pub struct ProgressiveState {
     pub pass: u64,
     /// Whether this pass traces camera chains (SPPM: always; PPM: pass 0).
     pub find_visible_points: bool,
-    /// Camera chains in flight: slots `0..active`, with their rays and hits.
-    pub chains: CameraChains,
-    pub rays: Rays,
-    pub hits: Hits,
-    pub active: usize,
+    /// Camera chains in flight.
+    pub wave: ChainWavefront,
     pub visible: VisiblePoints,
     pub shadow: ShadowRays,
     pub estimates: PixelEstimates,
@@ -122,9 +118,6 @@ pub struct ProgressiveState {
     pub photons_emitted: u64,
     /// NaN or Inf contributions dropped.
     pub nonfinite: u64,
-    pub scratch_chains: CameraChains,
-    pub scratch_rays: Rays,
-    pub order: Vec<u32>,
 }
 
 impl ProgressiveState {
@@ -142,10 +135,7 @@ impl ProgressiveState {
             pixels,
             pass: 0,
             find_visible_points: true,
-            chains: CameraChains::new(pixels),
-            rays: Rays::new(pixels),
-            hits: Hits::new(pixels),
-            active: 0,
+            wave: ChainWavefront::new(pixels),
             visible: VisiblePoints::new(pixels),
             shadow: ShadowRays::new(pixels),
             estimates,
@@ -153,9 +143,6 @@ impl ProgressiveState {
             grid: None,
             photons_emitted: 0,
             nonfinite: 0,
-            scratch_chains: CameraChains::new(pixels),
-            scratch_rays: Rays::new(pixels),
-            order: Vec::with_capacity(pixels),
         }
     }
 
@@ -201,8 +188,7 @@ impl ProgressiveState {
     /// Bytes of state per pixel: chains and rays (double buffered), hits, visible point,
     /// shadow ray and statistics.
     pub fn bytes_per_pixel(&self) -> usize {
-        2 * (CameraChains::bytes_per_item() + Rays::bytes_per_item())
-            + Hits::bytes_per_item()
+        ChainWavefront::bytes_per_slot()
             + VisiblePoints::bytes_per_item()
             + ShadowRays::bytes_per_item()
             + PixelEstimates::bytes_per_item()
@@ -218,7 +204,12 @@ impl ProgressiveState {
 
 impl crate::systems::trace::closest::ClosestHitQueue for ProgressiveState {
     fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
-        (&self.data.accel, &self.rays, &mut self.hits, self.active)
+        (
+            &self.data.accel,
+            &self.wave.rays,
+            &mut self.wave.hits,
+            self.wave.active,
+        )
     }
 }
 
@@ -239,18 +230,8 @@ impl shade::extend_camera_chains::CameraChainQueue for ProgressiveState {
     }
 
     fn camera_chain_queue(&mut self) -> shade::extend_camera_chains::ChainQueue<'_> {
-        shade::extend_camera_chains::ChainQueue {
-            data: &self.data,
-            max_depth: self.settings.max_depth,
-            chains: &mut self.chains,
-            rays: &mut self.rays,
-            hits: &self.hits,
-            active: &mut self.active,
-            visible: &mut self.visible,
-            scratch_chains: &mut self.scratch_chains,
-            scratch_rays: &mut self.scratch_rays,
-            order: &mut self.order,
-        }
+        self.wave
+            .queue(&self.data, self.settings.max_depth, &mut self.visible)
     }
 }
 
@@ -276,7 +257,7 @@ pub fn graph() -> Graph<ProgressiveState> {
             Node::system(generate::camera_chains::GenerateCameraChains),
             Node::Loop {
                 name: "camera_bounces",
-                queue_len: |s: &ProgressiveState| s.active,
+                queue_len: |s: &ProgressiveState| s.wave.active,
                 body: vec![
                     Node::system(trace::closest::TraceClosest),
                     Node::system(shade::extend_camera_chains::ExtendCameraChains),

@@ -24,8 +24,9 @@ impl<S: CameraChainQueue + Send> System<S> for GenerateCameraChains {
         let q = state.camera_chain_queue();
         let cam = q.data.scene.camera.frustum();
         let w = cam.width as u64;
-        let rays = q.rays.chunks_mut(0..n);
-        q.chains
+        let rays = q.wave.rays.chunks_mut(0..n);
+        q.wave
+            .chains
             .chunks_mut(0..n)
             .into_par_iter()
             .zip(rays)
@@ -45,7 +46,7 @@ impl<S: CameraChainQueue + Send> System<S> for GenerateCameraChains {
                     c.alive[i] = true;
                 }
             });
-        *q.active = n;
+        q.wave.active = n;
         Flow::new(n, n)
     }
 }

@@ -35,8 +35,9 @@ impl System<PmState> for GenerateFinalGatherRays {
         s.phase = ChainPhase::FinalGather;
         let (scene, visible) = (&s.data.scene, &s.visible);
         let (seed, pass, n) = (s.settings.seed, s.pass, s.pixels);
-        let rays = s.rays.chunks_mut(0..n);
+        let rays = s.wave.rays.chunks_mut(0..n);
         let started: usize = s
+            .wave
             .chains
             .chunks_mut(0..n)
             .into_par_iter()
@@ -86,7 +87,7 @@ impl System<PmState> for GenerateFinalGatherRays {
                 started
             })
             .sum();
-        s.active = n;
+        s.wave.active = n;
         Flow::new(n, started)
     }
 }

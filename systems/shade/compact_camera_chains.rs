@@ -21,8 +21,9 @@ impl<S: CameraChainQueue + Send> System<S> for CompactCameraChains {
     fn run(&self, state: &mut S) -> Flow {
         use std::mem::swap;
         let q = state.camera_chain_queue();
-        let n = *q.active;
-        let (c, v) = (&*q.chains, &mut *q.visible);
+        let w = q.wave;
+        let n = w.active;
+        let (c, v) = (&w.chains, q.visible);
         // Each pixel has one chain: ended chains write disjoint slots.
         for i in (0..n).filter(|&i| !c.alive[i]) {
             let pixel = c.pixel[i] as usize;
@@ -35,13 +36,13 @@ impl<S: CameraChainQueue + Send> System<S> for CompactCameraChains {
             v.beta[pixel] = c.beta[i];
             v.emitted[pixel] = c.emitted[i];
         }
-        live_slots(&c.alive[..n], q.order);
-        q.scratch_chains.gather_from(q.chains, q.order);
-        gather_column(&mut q.scratch_rays.origin, &q.rays.origin, q.order);
-        gather_column(&mut q.scratch_rays.dir, &q.rays.dir, q.order);
-        swap(q.chains, q.scratch_chains);
-        swap(q.rays, q.scratch_rays);
-        *q.active = q.order.len();
-        Flow::new(n, *q.active)
+        live_slots(&c.alive[..n], &mut w.order);
+        w.scratch_chains.gather_from(&w.chains, &w.order);
+        gather_column(&mut w.scratch_rays.origin, &w.rays.origin, &w.order);
+        gather_column(&mut w.scratch_rays.dir, &w.rays.dir, &w.order);
+        swap(&mut w.chains, &mut w.scratch_chains);
+        swap(&mut w.rays, &mut w.scratch_rays);
+        w.active = w.order.len();
+        Flow::new(n, w.active)
     }
 }

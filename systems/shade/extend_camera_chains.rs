@@ -24,19 +24,61 @@ pub fn bounce_dim(depth: u32) -> u32 {
     2 + depth * DIMS_PER_BOUNCE
 }
 
+/// Camera chains in flight (slots `0..active`) with their rays and hits, and the scratch
+/// stores compaction swaps them with: one slot per pixel, allocated once.
+pub struct ChainWavefront {
+    pub chains: CameraChains,
+    pub rays: Rays,
+    pub hits: Hits,
+    pub active: usize,
+    pub scratch_chains: CameraChains,
+    pub scratch_rays: Rays,
+    pub order: Vec<u32>,
+}
+
+impl ChainWavefront {
+    pub fn new(slots: usize) -> ChainWavefront {
+        ChainWavefront {
+            chains: CameraChains::new(slots),
+            rays: Rays::new(slots),
+            hits: Hits::new(slots),
+            active: 0,
+            scratch_chains: CameraChains::new(slots),
+            scratch_rays: Rays::new(slots),
+            order: Vec::with_capacity(slots),
+        }
+    }
+
+    /// Bytes per slot: chains and rays (double buffered), hits, compaction order.
+    pub fn bytes_per_slot() -> usize {
+        2 * (CameraChains::bytes_per_item() + Rays::bytes_per_item())
+            + Hits::bytes_per_item()
+            + std::mem::size_of::<u32>()
+    }
+
+    /// The queue of the chain systems, ending chains into `visible`.
+    pub fn queue<'a>(
+        &'a mut self,
+        data: &'a SceneData,
+        max_depth: u32,
+        visible: &'a mut VisiblePoints,
+    ) -> ChainQueue<'a> {
+        ChainQueue {
+            data,
+            max_depth,
+            wave: self,
+            visible,
+        }
+    }
+}
+
 /// What the chain systems work on.
 pub struct ChainQueue<'a> {
     pub data: &'a SceneData,
     pub max_depth: u32,
-    pub chains: &'a mut CameraChains,
-    pub rays: &'a mut Rays,
-    pub hits: &'a Hits,
-    pub active: &'a mut usize,
+    pub wave: &'a mut ChainWavefront,
     /// Where ended chains go, at their pixel's slot.
     pub visible: &'a mut VisiblePoints,
-    pub scratch_chains: &'a mut CameraChains,
-    pub scratch_rays: &'a mut Rays,
-    pub order: &'a mut Vec<u32>,
 }
 
 /// A state with camera chains.
@@ -61,11 +103,12 @@ impl<S: CameraChainQueue + Send> System<S> for ExtendCameraChains {
     }
     fn run(&self, state: &mut S) -> Flow {
         let q = state.camera_chain_queue();
-        let n = *q.active;
-        let (data, hits, max_depth) = (q.data, q.hits, q.max_depth);
+        let w = q.wave;
+        let n = w.active;
+        let (data, hits, max_depth) = (q.data, &w.hits, q.max_depth);
         let scene = &data.scene;
-        let rays = q.rays.chunks_mut(0..n);
-        let live: usize = q
+        let rays = w.rays.chunks_mut(0..n);
+        let live: usize = w
             .chains
             .chunks_mut(0..n)
             .into_par_iter()
