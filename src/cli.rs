@@ -508,7 +508,8 @@ fn mega(x: f64) -> String {
     } else if x >= 1e3 {
         format!("{:.3} k", x / 1e3)
     } else {
-        format!("{x:.0}")
+        // Small rates (passes/s) keep two decimals.
+        format!("{x:.2}")
     }
 }
 
@@ -657,12 +658,18 @@ fn bench_command(
     let mut samples_per_s = Vec::new();
     let mut closest_per_s = Vec::new();
     let mut shadow_per_s = Vec::new();
+    let mut photons_per_s = Vec::new();
+    let mut passes_per_s = Vec::new();
     let mut last = None;
     for r in 0..runs {
         let (o, wall, cpu) = run_once(r as u64);
         samples_per_s.push(o.samples as f64 / wall);
         closest_per_s.push(o.closest_rays() as f64 / wall);
         shadow_per_s.push(o.shadow_rays() as f64 / wall);
+        if let Some(emit) = o.stats.get("emit_photons") {
+            photons_per_s.push(emit.emitted as f64 / wall);
+            passes_per_s.push(o.passes as f64 / wall);
+        }
         last = Some((o, cpu));
     }
     use std::fmt::Write;
@@ -683,7 +690,12 @@ fn bench_command(
         ("samples/s", &mut samples_per_s),
         ("closest-hit rays/s", &mut closest_per_s),
         ("shadow rays/s", &mut shadow_per_s),
+        ("photons/s", &mut photons_per_s),
+        ("passes/s", &mut passes_per_s),
     ] {
+        if v.is_empty() {
+            continue; // no photons
+        }
         v.sort_by(f64::total_cmp);
         let _ = writeln!(
             t,
