@@ -117,6 +117,8 @@ pub struct Scratch {
     pub order: Vec<u32>,
     /// Queue of each slot, for sorting.
     pub queue: Vec<u8>,
+    /// Slots per queue (three material kinds, then the ended paths) in each chunk, for sorting.
+    pub chunk_counts: Vec<[usize; 4]>,
 }
 
 impl PtState {
@@ -143,6 +145,7 @@ impl PtState {
                 paths: Paths::new(capacity),
                 order: Vec::with_capacity(capacity),
                 queue: vec![0; capacity],
+                chunk_counts: Vec::with_capacity(capacity.div_ceil(crate::components::CHUNK)),
             },
         }
     }
