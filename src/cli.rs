@@ -114,8 +114,9 @@ pub struct PhotonArgs {
     /// Photons traced for the photon maps (pm).
     #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_PHOTONS, value_parser = clap::value_parser!(u64).range(1..))]
     pub photons: u64,
-    /// Photons per density estimate (pm).
-    #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_K as u32, value_parser = clap::value_parser!(u32).range(1..))]
+    /// Photons per density estimate (pm; at least 2: the estimate sums the k - 1 nearest over
+    /// the disc through the k-th).
+    #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_K as u32, value_parser = clap::value_parser!(u32).range(2..))]
     pub k: u32,
     /// Largest density-estimate radius in scene units (pm; default: 2% of the scene's
     /// bounding-box diagonal).

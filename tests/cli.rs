@@ -235,6 +235,7 @@ fn photon_mapper_options_are_checked() {
             "the radius must be a positive number",
         ),
         (vec!["--integrator", "pm", "--k", "0"], "--k"),
+        (vec!["--integrator", "pm", "--k", "1"], "--k"),
         (vec!["--integrator", "pm", "--photons", "0"], "--photons"),
     ] {
         let mut all = vec!["render", "scenes/cornell_box.ron"];

@@ -56,6 +56,7 @@ pub struct PmSettings {
     pub seed: u64,
     pub max_depth: u32,
     pub photons: u64,
+    /// Photons per density estimate, at least 2 (the k - 1 nearest over the k-th's disc).
     pub k: usize,
     /// Largest search radius in scene units (`None`: `DEFAULT_MAX_RADIUS_FRACTION` of the
     /// scene diagonal).
@@ -252,6 +253,7 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
+    assert!(settings.k >= 2, "PM needs k >= 2 (the CLI refuses less)");
     let start = Instant::now();
     let mut state = PmState::new(data, settings);
     let graph = graph(&settings, state.caustics);
