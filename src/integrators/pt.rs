@@ -118,7 +118,7 @@ pub struct Scratch {
     /// Queue of each slot, for sorting.
     pub queue: Vec<u8>,
     /// Slots per queue (three material kinds, then the ended paths) in each chunk, for sorting.
-    pub chunk_counts: Vec<[usize; 4]>,
+    pub chunk_counts: Vec<[usize; crate::systems::shade::sort_by_material::QUEUES]>,
 }
 
 impl PtState {

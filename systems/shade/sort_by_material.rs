@@ -22,7 +22,7 @@ fn queue_of(kind: MaterialKind) -> u8 {
 
 const DROPPED: u8 = 3;
 /// The three material queues and the dropped paths.
-const QUEUES: usize = 4;
+pub const QUEUES: usize = 4;
 
 impl System<PtState> for SortByMaterial {
     fn name(&self) -> &'static str {
