@@ -4,6 +4,9 @@
 //! stream is a pixel (or a light path's index) and the sample is its sample index. No generator
 //! carries state between threads, so the image does not depend on which thread ran which path.
 
+mod primary;
+pub use primary::PrimarySamples;
+
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
 
