@@ -47,8 +47,8 @@ fn visible_points(data: &Arc<SceneData>) -> Vec<Vec3> {
     };
     let state = sppm::run_passes(data.clone(), settings, 1);
     (0..state.pixels)
-        .filter(|&i| state.visible.triangle[i] != NO_VISIBLE_POINT)
-        .map(|i| state.visible.p[i])
+        .filter(|&i| state.camera_walk.visible.triangle[i] != NO_VISIBLE_POINT)
+        .map(|i| state.camera_walk.visible.p[i])
         .collect()
 }
 

@@ -21,13 +21,11 @@ pub mod shade {
     pub mod compact_camera_chains;
     pub mod compact_photons;
     pub mod compact_subpaths;
-    pub mod conductor;
-    pub mod dielectric;
-    pub mod diffuse;
     pub mod emitted_light;
     pub mod extend_camera_chains;
     pub mod extend_subpaths;
     pub mod interpolate_surfaces;
+    pub mod material;
     pub mod russian_roulette;
     pub mod scatter_photons;
     pub mod sort_by_material;

@@ -135,10 +135,10 @@ fn ppm_keeps_its_visible_points_and_sppm_renews_them() {
     for stochastic in [false, true] {
         let one = sppm::run_passes(data.clone(), settings(1, stochastic, 5_000), 1);
         let two = sppm::run_passes(data.clone(), settings(1, stochastic, 5_000), 2);
-        let same = one.visible.p == two.visible.p;
+        let same = one.camera_walk.visible.p == two.camera_walk.visible.p;
         assert_eq!(same, !stochastic, "stochastic = {stochastic}");
         // Memory does not grow with passes: one visible point and estimate per pixel.
-        assert_eq!(two.visible.capacity(), 16 * 16);
+        assert_eq!(two.camera_walk.visible.capacity(), 16 * 16);
         assert_eq!(two.estimates.capacity(), 16 * 16);
     }
 }

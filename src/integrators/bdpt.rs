@@ -30,7 +30,6 @@ use crate::sampling::SampleKey;
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::{DVec3, Vec3};
 use std::collections::BTreeMap;
-use std::ops::Range;
 use std::sync::Arc;
 
 /// Samples per wave. Each holds two subpaths and their connections, about ten times a path
@@ -210,13 +209,6 @@ impl BdptState {
         }
     }
 
-    /// Makes sure the store for vertex `depth` exists (allocated once, kept for later waves).
-    pub fn ensure_depth(&mut self, depth: usize) {
-        while self.vertices.len() <= depth {
-            self.vertices.push(PathVertices::new(2 * self.capacity));
-        }
-    }
-
     /// Bytes of wavefront state per sample slot as allocated now: walkers and rays (double
     /// buffered), hits, the vertex stores of every depth reached so far and the largest
     /// connection batch so far.
@@ -234,17 +226,17 @@ impl BdptState {
     }
 }
 
-impl crate::systems::trace::closest::ClosestHitQueue for BdptState {
-    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
-        (&self.data.accel, &self.rays, &mut self.hits, self.active)
-    }
-}
-
-impl crate::systems::trace::shadow::ShadowQueue for BdptState {
-    fn shadow_queue(&mut self) -> (&crate::accel::Accel, &mut ShadowRays, Range<usize>) {
-        (&self.data.accel, &mut self.shadow, 0..self.connections_len)
-    }
-}
+/// Columns the driver sets before the graph runs (for `Graph::check`).
+pub const INPUTS: &[&str] = &[
+    "data",
+    "settings",
+    "pixels",
+    "wave",
+    "capacity",
+    "film",
+    "strategy_sums",
+    "scratch",
+];
 
 /// The BDPT graph (the same for every scene: material code runs only for materials present).
 pub fn graph() -> Graph<BdptState> {

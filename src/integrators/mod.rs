@@ -5,21 +5,9 @@ pub mod pm;
 pub mod pt;
 pub mod sppm;
 
-use crate::accel::Accel;
-use crate::scene::PreparedScene;
+pub mod camera_walk;
 
-/// A prepared scene with its acceleration structure: everything systems read while rendering.
-pub struct SceneData {
-    pub scene: PreparedScene,
-    pub accel: Accel,
-}
-
-impl SceneData {
-    pub fn new(scene: PreparedScene) -> SceneData {
-        let accel = Accel::build(&scene.triangles);
-        SceneData { scene, accel }
-    }
-}
+pub use crate::scene::SceneData;
 
 use crate::film::Film;
 use crate::pipeline::Stats;

@@ -32,15 +32,14 @@
 //! ```
 
 use crate::bsdf::MaterialKind;
-use crate::components::{Hits, Rays, ShadowRays, VisiblePoints};
+use crate::components::ShadowRays;
 use crate::film::Film;
+use crate::integrators::camera_walk::{self, CameraWalk};
 use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
 use crate::photons::{PhotonMaps, PhotonPass};
 use crate::pipeline::{Graph, Node, Stats};
-use crate::systems::shade::extend_camera_chains::ChainWavefront;
-use crate::systems::{connect, gather, generate, shade, trace};
+use crate::systems::{connect, gather, generate, trace};
 use glam::DVec3;
-use std::ops::Range;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -84,25 +83,16 @@ impl PmSettings {
     }
 }
 
-/// Which surfaces the camera chains are looking for.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ChainPhase {
-    /// From the camera to the visible points.
-    Camera,
-    /// From the visible points to the final-gather points.
-    FinalGather,
-}
-
+/// The state of PM: one slot per pixel in every per-pixel store.
 pub struct PmState {
     pub data: Arc<SceneData>,
     pub settings: PmSettings,
     pub pixels: usize,
     pub pass: u64,
-    pub phase: ChainPhase,
-    pub wave: ChainWavefront,
-    pub visible: VisiblePoints,
-    /// Where each pixel's final-gather ray landed (slot = pixel).
-    pub gather_points: VisiblePoints,
+    /// Chains from the camera to the visible points.
+    pub camera_walk: CameraWalk,
+    /// Chains from the visible points to where their final-gather rays land.
+    pub gather_walk: CameraWalk,
     pub shadow: ShadowRays,
     /// This pass's radiance per pixel.
     pub pass_radiance: Vec<DVec3>,
@@ -126,10 +116,8 @@ impl PmState {
             settings,
             pixels,
             pass: 0,
-            phase: ChainPhase::Camera,
-            wave: ChainWavefront::new(pixels),
-            visible: VisiblePoints::new(pixels),
-            gather_points: VisiblePoints::new(pixels),
+            camera_walk: CameraWalk::new(data.clone(), settings.seed, settings.max_depth),
+            gather_walk: CameraWalk::new(data.clone(), settings.seed, settings.max_depth),
             shadow: ShadowRays::new(pixels),
             pass_radiance: vec![DVec3::ZERO; pixels],
             photon_pass,
@@ -144,86 +132,49 @@ impl PmState {
     /// Bytes of state per pixel: chains and rays (double buffered), hits, visible and gather
     /// points, shadow ray and the pass's radiance.
     pub fn bytes_per_pixel(&self) -> usize {
-        ChainWavefront::bytes_per_slot()
-            + 2 * VisiblePoints::bytes_per_item()
+        2 * CameraWalk::bytes_per_slot()
             + ShadowRays::bytes_per_item()
             + std::mem::size_of::<DVec3>()
     }
 }
 
-impl crate::systems::trace::closest::ClosestHitQueue for PmState {
-    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
-        (
-            &self.data.accel,
-            &self.wave.rays,
-            &mut self.wave.hits,
-            self.wave.active,
-        )
-    }
-}
-
-impl crate::systems::trace::shadow::ShadowQueue for PmState {
-    fn shadow_queue(&mut self) -> (&crate::accel::Accel, &mut ShadowRays, Range<usize>) {
-        (&self.data.accel, &mut self.shadow, 0..self.pixels)
-    }
-}
-
-impl shade::extend_camera_chains::CameraChainQueue for PmState {
-    fn new_chains(&self) -> (u64, u64, usize) {
-        (self.settings.seed, self.pass, self.pixels)
-    }
-
-    fn camera_chain_queue(&mut self) -> shade::extend_camera_chains::ChainQueue<'_> {
-        let visible = match self.phase {
-            ChainPhase::Camera => &mut self.visible,
-            ChainPhase::FinalGather => &mut self.gather_points,
-        };
-        self.wave
-            .queue(&self.data, self.settings.max_depth, visible)
-    }
-}
-
-impl connect::sample_direct_light::VisiblePointLights for PmState {
-    fn direct_light_queue(&mut self) -> connect::sample_direct_light::DirectLightQueue<'_> {
-        connect::sample_direct_light::DirectLightQueue {
-            data: &self.data,
-            visible: &self.visible,
-            shadow: &mut self.shadow,
-            direct: &mut self.pass_radiance,
-            seed: self.settings.seed,
-            sample_index: self.pass,
-            nonfinite: &mut self.nonfinite,
-        }
-    }
-}
-
-fn camera_bounces(name: &'static str) -> Node<PmState> {
-    Node::Loop {
-        name,
-        queue_len: |s: &PmState| s.wave.active,
-        body: vec![
-            Node::system(trace::closest::TraceClosest),
-            Node::system(shade::extend_camera_chains::ExtendCameraChains),
-            Node::system(shade::compact_camera_chains::CompactCameraChains),
-        ],
-    }
-}
+/// Columns the driver sets before each pass (for `Graph::check`); the walks, the maps and
+/// the photon pass persist across passes.
+pub const INPUTS: &[&str] = &[
+    "data",
+    "settings",
+    "pixels",
+    "pass",
+    "caustics",
+    "film",
+    "maps",
+    "photon_pass",
+    "camera_walk",
+    "gather_walk",
+];
 
 /// The graph of one pass, for a scene with (`caustics`) or without specular surfaces.
 pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
     let mut nodes = vec![
-        Node::Loop {
+        Node::Once {
             name: "photon_maps",
-            queue_len: |s: &PmState| s.maps.is_none() as usize,
+            needed: |s: &PmState| s.maps.is_none(),
             body: vec![
-                Node::nested(crate::photons::graph(), |s: &mut PmState| {
-                    &mut s.photon_pass
-                }),
+                Node::nested(
+                    crate::photons::graph(),
+                    "photon_pass",
+                    |s: &mut PmState| &mut s.photon_pass,
+                    crate::photons::INPUTS,
+                ),
                 Node::system(gather::photon_maps::BuildPhotonMaps),
             ],
         },
-        Node::system(generate::camera_chains::GenerateCameraChains),
-        camera_bounces("camera_bounces"),
+        Node::nested(
+            camera_walk::from_camera("camera_bounces"),
+            "camera_walk",
+            |s: &mut PmState| &mut s.camera_walk,
+            camera_walk::INPUTS,
+        ),
         Node::system(connect::sample_direct_light::SampleDirectLight),
         Node::system(trace::shadow::TraceShadow),
         Node::system(gather::direct_light::AddDirectLight),
@@ -235,12 +186,16 @@ pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
         nodes.push(Node::system(
             generate::final_gather_rays::GenerateFinalGatherRays,
         ));
-        nodes.push(Node::system(
-            shade::compact_camera_chains::CompactCameraChains,
+        nodes.push(Node::nested(
+            camera_walk::from_started("gather_bounces"),
+            "gather_walk",
+            |s: &mut PmState| &mut s.gather_walk,
+            camera_walk::INPUTS,
         ));
-        nodes.push(camera_bounces("gather_bounces"));
+        nodes.push(Node::system(gather::global_photons::GatherGlobalPhotons));
+    } else {
+        nodes.push(Node::system(gather::global_photons::GatherIndirectPhotons));
     }
-    nodes.push(Node::system(gather::global_photons::GatherGlobalPhotons));
     nodes.push(Node::system(gather::pass_film::AddPassToFilm));
     Graph::new("pm", nodes)
 }
@@ -260,7 +215,8 @@ pub fn render(
     let mut stats = Stats::default();
     let (passes, interrupted) = pass_by_pass(budget, control, |pass| {
         state.pass = pass;
-        state.phase = ChainPhase::Camera;
+        state.camera_walk.sample_index = pass;
+        state.camera_walk.starts = state.pixels;
         graph.run(&mut state, &mut stats);
     });
     state.film.nonfinite += state.nonfinite;

@@ -102,6 +102,8 @@ pub struct PtState {
     /// Live paths occupy slots `0..active`.
     pub active: usize,
     pub ranges: MaterialRanges,
+    /// Shadow rays cast this bounce occupy slots `0..shadow_len`.
+    pub shadow_len: usize,
     /// Radiance of each sample of the wave, written when its path ends.
     pub sample_radiance: Vec<Vec3>,
     pub film: Film,
@@ -137,6 +139,7 @@ impl PtState {
             surfaces: Surfaces::new(capacity),
             active: 0,
             ranges: MaterialRanges::default(),
+            shadow_len: 0,
             sample_radiance: vec![Vec3::ZERO; capacity],
             film: Film::new(cam.width as usize, cam.height as usize),
             scratch: Scratch {
@@ -175,6 +178,9 @@ pub fn used_kinds(data: &SceneData) -> Vec<MaterialKind> {
     used
 }
 
+/// Columns the driver sets before the graph runs (for `Graph::check`).
+pub const INPUTS: &[&str] = &["data", "settings", "pixels", "wave", "film", "scratch"];
+
 /// The path tracer's graph for a scene: one shading system per material kind in use, light
 /// sampling only where a non-delta surface and an emitter exist.
 pub fn graph(data: &SceneData) -> Graph<PtState> {
@@ -197,11 +203,7 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
         bounce.push(Node::system(connect::sample_lights::SampleLights));
     }
     for kind in kinds {
-        bounce.push(match kind {
-            MaterialKind::Diffuse => Node::system(shade::diffuse::ShadeDiffuse),
-            MaterialKind::Conductor => Node::system(shade::conductor::ShadeConductor),
-            MaterialKind::Dielectric => Node::system(shade::dielectric::ShadeDielectric),
-        });
+        bounce.push(Node::system(shade::material::ShadeMaterial(kind)));
     }
     if light_sampling {
         bounce.push(Node::system(trace::shadow::TraceShadow));
@@ -223,49 +225,6 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
             Node::system(gather::film::AccumulateFilm),
         ],
     )
-}
-
-impl PtState {
-    /// Ends the path in `slot`: its radiance becomes its sample's value.
-    #[inline]
-    pub fn finish_path(&mut self, slot: usize) {
-        self.sample_radiance[self.paths.sample[slot] as usize] = self.paths.radiance[slot];
-    }
-
-    /// Moves the paths listed in `scratch.order` to slots `0..order.len()`, leaving every
-    /// other path behind. Only what later systems of the bounce read moves: the path state,
-    /// the ray direction (wo) and the hit's triangle and barycentrics. The ray origins and hit
-    /// distances left behind are stale until shading and tracing write them again.
-    pub fn reorder(&mut self) {
-        use crate::components::gather_column;
-        use std::mem::swap;
-        let order = std::mem::take(&mut self.scratch.order);
-        let scratch = &mut self.scratch;
-        scratch.paths.gather_from(&self.paths, &order);
-        gather_column(&mut scratch.rays.dir, &self.rays.dir, &order);
-        gather_column(&mut scratch.hits.triangle, &self.hits.triangle, &order);
-        gather_column(&mut scratch.hits.b1, &self.hits.b1, &order);
-        gather_column(&mut scratch.hits.b2, &self.hits.b2, &order);
-        swap(&mut self.paths, &mut scratch.paths);
-        swap(&mut self.rays.dir, &mut scratch.rays.dir);
-        swap(&mut self.hits.triangle, &mut scratch.hits.triangle);
-        swap(&mut self.hits.b1, &mut scratch.hits.b1);
-        swap(&mut self.hits.b2, &mut scratch.hits.b2);
-        self.active = order.len();
-        self.scratch.order = order;
-    }
-}
-
-impl crate::systems::trace::closest::ClosestHitQueue for PtState {
-    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
-        (&self.data.accel, &self.rays, &mut self.hits, self.active)
-    }
-}
-
-impl crate::systems::trace::shadow::ShadowQueue for PtState {
-    fn shadow_queue(&mut self) -> (&crate::accel::Accel, &mut ShadowRays, Range<usize>) {
-        (&self.data.accel, &mut self.shadow, self.ranges.non_delta())
-    }
 }
 
 /// Renders with the path tracer until the budget is spent or a stop is asked for; the film

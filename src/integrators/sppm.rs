@@ -41,15 +41,14 @@
 //! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
 //! nothing grows with the number of passes.
 
-use crate::components::{Hits, NO_VISIBLE_POINT, PixelEstimates, Rays, ShadowRays, VisiblePoints};
+use crate::components::{PixelEstimates, ShadowRays};
 use crate::film::Film;
+use crate::integrators::camera_walk::{self, CameraWalk};
 use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node, Stats};
-use crate::systems::shade::extend_camera_chains::ChainWavefront;
-use crate::systems::{connect, gather, generate, shade, trace};
+use crate::systems::{connect, gather, trace};
 use glam::DVec3;
-use std::ops::Range;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -104,11 +103,9 @@ pub struct ProgressiveState {
     pub pixels: usize,
     /// The pass being rendered.
     pub pass: u64,
-    /// Whether this pass traces camera chains (SPPM: always; PPM: pass 0).
-    pub find_visible_points: bool,
-    /// Camera chains in flight.
-    pub wave: ChainWavefront,
-    pub visible: VisiblePoints,
+    /// Chains from the camera to the visible points (found every pass by SPPM, in the first
+    /// pass only by PPM).
+    pub camera_walk: CameraWalk,
     pub shadow: ShadowRays,
     pub estimates: PixelEstimates,
     pub photon_pass: PhotonPass,
@@ -130,13 +127,11 @@ impl ProgressiveState {
         // Direct light comes from light sampling at the visible points.
         photon_pass.tracing.store_direct = false;
         ProgressiveState {
+            camera_walk: CameraWalk::new(data.clone(), settings.seed, settings.max_depth),
             data,
             settings,
             pixels,
             pass: 0,
-            find_visible_points: true,
-            wave: ChainWavefront::new(pixels),
-            visible: VisiblePoints::new(pixels),
             shadow: ShadowRays::new(pixels),
             estimates,
             photon_pass,
@@ -149,7 +144,9 @@ impl ProgressiveState {
     /// Prepares pass `pass`: whether it finds visible points, and its photons.
     pub fn begin_pass(&mut self, pass: u64) {
         self.pass = pass;
-        self.find_visible_points = self.settings.stochastic || pass == 0;
+        let find_visible_points = self.settings.stochastic || pass == 0;
+        self.camera_walk.sample_index = pass;
+        self.camera_walk.starts = if find_visible_points { self.pixels } else { 0 };
         self.photon_pass
             .tracing
             .begin_pass(pass, self.settings.photons_per_pass);
@@ -188,88 +185,46 @@ impl ProgressiveState {
     /// Bytes of state per pixel: chains and rays (double buffered), hits, visible point,
     /// shadow ray and statistics.
     pub fn bytes_per_pixel(&self) -> usize {
-        ChainWavefront::bytes_per_slot()
-            + VisiblePoints::bytes_per_item()
+        CameraWalk::bytes_per_slot()
             + ShadowRays::bytes_per_item()
             + PixelEstimates::bytes_per_item()
     }
-
-    /// Bytes of this pass's stored photons and their grid.
-    pub fn photon_bytes(&self) -> usize {
-        let t = &self.photon_pass.tracing;
-        t.photons.capacity() * crate::components::Photons::bytes_per_item()
-            + t.stored * 2 * std::mem::size_of::<u32>()
-    }
 }
 
-impl crate::systems::trace::closest::ClosestHitQueue for ProgressiveState {
-    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
-        (
-            &self.data.accel,
-            &self.wave.rays,
-            &mut self.wave.hits,
-            self.wave.active,
-        )
-    }
-}
-
-impl crate::systems::trace::shadow::ShadowQueue for ProgressiveState {
-    fn shadow_queue(&mut self) -> (&crate::accel::Accel, &mut ShadowRays, Range<usize>) {
-        (&self.data.accel, &mut self.shadow, 0..self.pixels)
-    }
-}
-
-impl shade::extend_camera_chains::CameraChainQueue for ProgressiveState {
-    fn new_chains(&self) -> (u64, u64, usize) {
-        let n = if self.find_visible_points {
-            self.pixels
-        } else {
-            0
-        };
-        (self.settings.seed, self.pass, n)
-    }
-
-    fn camera_chain_queue(&mut self) -> shade::extend_camera_chains::ChainQueue<'_> {
-        self.wave
-            .queue(&self.data, self.settings.max_depth, &mut self.visible)
-    }
-}
-
-impl connect::sample_direct_light::VisiblePointLights for ProgressiveState {
-    fn direct_light_queue(&mut self) -> connect::sample_direct_light::DirectLightQueue<'_> {
-        connect::sample_direct_light::DirectLightQueue {
-            data: &self.data,
-            visible: &self.visible,
-            shadow: &mut self.shadow,
-            direct: &mut self.estimates.direct,
-            seed: self.settings.seed,
-            sample_index: self.pass,
-            nonfinite: &mut self.nonfinite,
-        }
-    }
-}
+/// Columns set before each pass (for `Graph::check`); the walk, the estimates and the photon
+/// pass persist across passes.
+pub const INPUTS: &[&str] = &[
+    "data",
+    "settings",
+    "pixels",
+    "pass",
+    "camera_walk",
+    "estimates",
+    "photon_pass",
+    "photons_emitted",
+    "nonfinite",
+];
 
 /// The graph of one pass (the same for PPM and SPPM; see the module's documentation).
 pub fn graph() -> Graph<ProgressiveState> {
     Graph::new(
         "sppm",
         vec![
-            Node::system(generate::camera_chains::GenerateCameraChains),
-            Node::Loop {
-                name: "camera_bounces",
-                queue_len: |s: &ProgressiveState| s.wave.active,
-                body: vec![
-                    Node::system(trace::closest::TraceClosest),
-                    Node::system(shade::extend_camera_chains::ExtendCameraChains),
-                    Node::system(shade::compact_camera_chains::CompactCameraChains),
-                ],
-            },
+            Node::nested(
+                camera_walk::from_camera("camera_bounces"),
+                "camera_walk",
+                |s: &mut ProgressiveState| &mut s.camera_walk,
+                camera_walk::INPUTS,
+            ),
             Node::system(connect::sample_direct_light::SampleDirectLight),
             Node::system(trace::shadow::TraceShadow),
             Node::system(gather::direct_light::AddDirectLight),
-            Node::nested(crate::photons::graph(), |s: &mut ProgressiveState| {
-                &mut s.photon_pass
-            }),
+            Node::nested(
+                crate::photons::graph(),
+                "photon_pass",
+                |s: &mut ProgressiveState| &mut s.photon_pass,
+                crate::photons::INPUTS,
+            ),
             Node::system(gather::photon_grid::BuildPhotonGrid),
             Node::system(gather::visible_point_photons::GatherPhotons),
             Node::system(gather::progressive_update::UpdatePixelEstimates),
@@ -322,10 +277,4 @@ pub fn run_passes(
         graph.run(&mut state, &mut stats);
     }
     state
-}
-
-/// Whether pixel `i`'s camera chain found a surface to gather at.
-#[inline]
-pub fn has_visible_point(visible: &VisiblePoints, i: usize) -> bool {
-    visible.triangle[i] != NO_VISIBLE_POINT
 }

@@ -18,8 +18,8 @@ pub use hash_grid::HashGrid;
 pub use kd_tree::{KdTree, Nearest};
 
 use crate::components::{Hits, PhotonFlags, PhotonWalkers, Photons, Rays};
-use crate::integrators::SceneData;
 use crate::sampling::SampleKey;
+use crate::scene::SceneData;
 use glam::Vec3;
 
 /// Random-number dimensions of a photon: emitter pick (1), point (2), direction (2), then per
@@ -146,11 +146,6 @@ impl PhotonTracing {
     }
 }
 
-/// An integrator state that traces photons.
-pub trait PhotonQueue {
-    fn photon_queue(&mut self) -> (&SceneData, &mut PhotonTracing);
-}
-
 /// Photons in flight per wave.
 pub const WAVEFRONT: usize = 1 << 16;
 
@@ -160,18 +155,8 @@ pub struct PhotonPass {
     pub tracing: PhotonTracing,
 }
 
-impl PhotonQueue for PhotonPass {
-    fn photon_queue(&mut self) -> (&SceneData, &mut PhotonTracing) {
-        (&self.data, &mut self.tracing)
-    }
-}
-
-impl crate::systems::trace::closest::ClosestHitQueue for PhotonPass {
-    fn closest_hit_queue(&mut self) -> (&crate::accel::Accel, &Rays, &mut Hits, usize) {
-        let t = &mut self.tracing;
-        (&self.data.accel, &t.rays, &mut t.hits, t.active)
-    }
-}
+/// Columns set before the photon graph runs (`begin_pass` sets the pass).
+pub const INPUTS: &[&str] = &["data", "tracing"];
 
 /// The photon graph, one pass (a pass is cut into waves of at most `WAVEFRONT` photons):
 ///

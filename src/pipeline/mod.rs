@@ -21,16 +21,125 @@ impl Flow {
     }
 }
 
-/// One step of an integrator over the wavefront state `S`.
+/// The columns a system reads and writes, as paths into its state (`rays`, `data.accel`,
+/// `paths.radiance`). `system!` derives them from the same list that borrows the columns, so
+/// they cannot drift from what the system touches.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Access {
+    pub reads: &'static [&'static str],
+    pub writes: &'static [&'static str],
+}
+
+/// One step of an integrator over the wavefront state `S`. Implement it with `system!`, which
+/// hands the system's body only the columns it declares.
 pub trait System<S>: Send + Sync {
     /// A name that says what the system does; the report lists systems by it.
     fn name(&self) -> &'static str;
-    /// Components (columns) the system reads.
-    fn reads(&self) -> &'static [&'static str];
-    /// Components (columns) the system writes.
-    fn writes(&self) -> &'static [&'static str];
+    /// The columns the system reads and writes.
+    fn access(&self) -> Access;
     /// Runs over the system's queue in `state`.
     fn run(&self, state: &mut S) -> Flow;
+}
+
+/// Declares a system: its name, and for each state it runs on the columns it reads and writes,
+/// then its body. The body sees each declared column as a local binding (`&` for reads, `&mut`
+/// for writes) and nothing else of the state, so an undeclared access does not compile, and
+/// the graph check reads the same list.
+///
+/// ```ignore
+/// pub struct ApplyShadowContributions;
+/// system! {
+///     ApplyShadowContributions = "apply_shadow_contributions";
+///     on PtState {
+///         read shadow, range = shadow_queue;   // `range` binds `&state.shadow_queue`
+///         write radiance = paths.radiance;
+///     }
+///     run { /* uses shadow, range, radiance */ }
+/// }
+/// ```
+///
+/// A system with fields names its `self` in the body and, if its name depends on them, in the
+/// name: `name(this) = this.kind.system_name();` and `run(this) { ... this.kind ... }`.
+/// A system that runs on several states lists one `on` block per state with the same binding
+/// names, so one body serves them all.
+#[macro_export]
+macro_rules! system {
+    (
+        $system:ty = $label:expr;
+        $($rest:tt)*
+    ) => {
+        $crate::system!(@states $system, (_this) $label; $($rest)*);
+    };
+    (
+        $system:ty;
+        name($nthis:ident) = $label:expr;
+        $($rest:tt)*
+    ) => {
+        $crate::system!(@states $system, ($nthis) $label; $($rest)*);
+    };
+    (@states $system:ty, ($nthis:ident) $label:expr;
+        $(on $state:ty { $($columns:tt)* })+
+        run $body:block
+    ) => {
+        $crate::system!(@states $system, ($nthis) $label; $(on $state { $($columns)* })+ run (_this) $body);
+    };
+    (@states $system:ty, ($nthis:ident) $label:expr;
+        $(
+            on $state:ty {
+                $(read $($r:ident $(= $($rp:ident).+)?),+ ;)?
+                $(write $($w:ident $(= $($wp:ident).+)?),+ ;)?
+            }
+        )+
+        run ($this:ident) $body:block
+    ) => {
+        $(
+            impl $crate::pipeline::System<$state> for $system {
+                fn name(&self) -> &'static str {
+                    let $nthis = self;
+                    let _ = $nthis;
+                    $label
+                }
+                fn access(&self) -> $crate::pipeline::Access {
+                    $crate::pipeline::Access {
+                        reads: &[$($($crate::__column_name!($r $(= $($rp).+)?)),+)?],
+                        writes: &[$($($crate::__column_name!($w $(= $($wp).+)?)),+)?],
+                    }
+                }
+                #[allow(unused_variables)]
+                fn run(&self, state: &mut $state) -> $crate::pipeline::Flow {
+                    let $this = self;
+                    let _ = $this;
+                    $($(let $r = &$crate::__column!(state, $r $(= $($rp).+)?);)+)?
+                    $($(let $w = &mut $crate::__column!(state, $w $(= $($wp).+)?);)+)?
+                    $body
+                }
+            }
+        )+
+    };
+}
+
+/// The state field a `system!` binding names (used by `system!`).
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __column {
+    ($state:ident, $name:ident) => {
+        $state.$name
+    };
+    ($state:ident, $name:ident = $($path:ident).+) => {
+        $state.$($path).+
+    };
+}
+
+/// The path of a `system!` binding as a string (used by `system!`).
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __column_name {
+    ($name:ident) => {
+        stringify!($name)
+    };
+    ($name:ident = $head:ident $(. $tail:ident)*) => {
+        concat!(stringify!($head) $(, ".", stringify!($tail))*)
+    };
 }
 
 /// A node of an integrator's graph.
@@ -45,6 +154,13 @@ pub enum Node<S> {
         queue_len: fn(&S) -> usize,
         body: Vec<Node<S>>,
     },
+    /// Runs `body` only when `needed(state)` says the state lacks what the body makes: work
+    /// done once per render (PM's photon maps) in a graph that runs every pass.
+    Once {
+        name: &'static str,
+        needed: fn(&S) -> bool,
+        body: Vec<Node<S>>,
+    },
 }
 
 impl<S> Node<S> {
@@ -52,12 +168,23 @@ impl<S> Node<S> {
         Node::System(Box::new(system))
     }
 
-    /// `graph` run on the part of the state `part` picks.
-    pub fn nested<T: 'static>(graph: Graph<T>, part: fn(&mut S) -> &mut T) -> Node<S>
+    /// `graph` run on the part of the state `part` picks, the field named `part_name`;
+    /// `inputs` are the part's columns set before the nested graph runs (for the check).
+    pub fn nested<T: 'static>(
+        graph: Graph<T>,
+        part_name: &'static str,
+        part: fn(&mut S) -> &mut T,
+        inputs: &'static [&'static str],
+    ) -> Node<S>
     where
         S: 'static,
     {
-        Node::Nested(Box::new(Nested { graph, part }))
+        Node::Nested(Box::new(Nested {
+            graph,
+            part_name,
+            part,
+            inputs,
+        }))
     }
 }
 
@@ -65,11 +192,18 @@ impl<S> Node<S> {
 pub trait NestedGraph<S>: Send + Sync {
     fn run(&self, state: &mut S, stats: &mut Stats);
     fn system_names(&self) -> Vec<&'static str>;
+    /// The field of `S` the nested graph runs on.
+    fn part_name(&self) -> &'static str;
+    /// The nested graph's own check (see `Graph::check`).
+    fn check(&self) -> Vec<String>;
+    fn describe(&self, indent: usize, out: &mut String);
 }
 
 struct Nested<S, T> {
     graph: Graph<T>,
+    part_name: &'static str,
     part: fn(&mut S) -> &mut T,
+    inputs: &'static [&'static str],
 }
 
 impl<S, T> NestedGraph<S> for Nested<S, T> {
@@ -78,6 +212,19 @@ impl<S, T> NestedGraph<S> for Nested<S, T> {
     }
     fn system_names(&self) -> Vec<&'static str> {
         self.graph.system_names()
+    }
+    fn part_name(&self) -> &'static str {
+        self.part_name
+    }
+    fn check(&self) -> Vec<String> {
+        self.graph
+            .check(self.inputs)
+            .into_iter()
+            .map(|p| format!("{} > {p}", self.graph.name))
+            .collect()
+    }
+    fn describe(&self, indent: usize, out: &mut String) {
+        describe_nodes(&self.graph.nodes, indent, out);
     }
 }
 
@@ -148,7 +295,7 @@ impl<S> Graph<S> {
             for n in nodes {
                 match n {
                     Node::System(s) => out.push(s.name()),
-                    Node::Loop { body, .. } => walk(body, out),
+                    Node::Loop { body, .. } | Node::Once { body, .. } => walk(body, out),
                     Node::Nested(g) => out.extend(g.system_names()),
                 }
             }
@@ -158,42 +305,103 @@ impl<S> Graph<S> {
         out
     }
 
-    /// Checks that every column a system reads is written by some system of the graph or
-    /// listed in `inputs` (columns the state holds before the graph runs). Names are
-    /// `component` or `component.column`. Returns the offending (system, column) pairs.
-    pub fn unsatisfied_reads(&self, inputs: &[&str]) -> Vec<(&'static str, &'static str)> {
-        fn collect<S>(nodes: &[Node<S>], f: &mut dyn FnMut(&dyn System<S>)) {
-            for n in nodes {
-                match n {
-                    Node::System(s) => f(s.as_ref()),
-                    Node::Loop { body, .. } => collect(body, f),
-                    // A nested graph is checked on its own state.
-                    Node::Nested(_) => {}
-                }
-            }
-        }
+    /// Checks the graph's data flow in the order it runs: every column a system reads must be
+    /// written by an earlier system (a loop's body counts in order, once) or be one of
+    /// `inputs` (columns set before the graph runs). A path covers its columns and its
+    /// parents (`paths` covers `paths.depth` and the other way round). Nested graphs are
+    /// checked against their own inputs, and count as writing their part. Returns one line per
+    /// problem.
+    pub fn check(&self, inputs: &[&str]) -> Vec<String> {
         let mut written: Vec<&str> = inputs.to_vec();
-        collect(&self.nodes, &mut |s| written.extend(s.writes()));
-        // "paths" covers "paths.depth" and the other way round: a component or one column.
-        let covers = |w: &str, r: &str| {
-            w == r
-                || r.strip_prefix(w).is_some_and(|rest| rest.starts_with('.'))
-                || w.strip_prefix(r).is_some_and(|rest| rest.starts_with('.'))
-        };
-        let mut missing = Vec::new();
-        collect(&self.nodes, &mut |s| {
-            for r in s.reads() {
-                if !written.iter().any(|w| covers(w, r)) {
-                    missing.push((s.name(), *r));
-                }
-            }
-        });
-        missing
+        let mut problems = Vec::new();
+        check_nodes(&self.nodes, &mut written, &mut problems);
+        problems
+    }
+
+    /// The graph as an indented tree, one system per line with the columns it reads and
+    /// writes: what `stagelight graph` prints and the docs show.
+    pub fn describe(&self) -> String {
+        let mut out = String::new();
+        describe_nodes(&self.nodes, 0, &mut out);
+        out
     }
 
     /// Runs the graph once over `state`, recording each system's time and flow in `stats`.
     pub fn run(&self, state: &mut S, stats: &mut Stats) {
         run_nodes(&self.nodes, state, stats);
+    }
+}
+
+fn covers(w: &str, r: &str) -> bool {
+    w == r
+        || r.strip_prefix(w).is_some_and(|rest| rest.starts_with('.'))
+        || w.strip_prefix(r).is_some_and(|rest| rest.starts_with('.'))
+}
+
+fn check_nodes<'a, S>(
+    nodes: &'a [Node<S>],
+    written: &mut Vec<&'a str>,
+    problems: &mut Vec<String>,
+) {
+    for node in nodes {
+        match node {
+            Node::System(s) => {
+                let access = s.access();
+                for r in access.reads {
+                    if !written.iter().any(|w| covers(w, r)) {
+                        problems.push(format!("{} reads {r} before anything writes it", s.name()));
+                    }
+                }
+                written.extend(access.writes);
+            }
+            Node::Loop { body, .. } | Node::Once { body, .. } => {
+                check_nodes(body, written, problems)
+            }
+            Node::Nested(g) => {
+                problems.extend(g.check());
+                written.push(g.part_name());
+            }
+        }
+    }
+}
+
+fn describe_nodes<S>(nodes: &[Node<S>], indent: usize, out: &mut String) {
+    use std::fmt::Write;
+    let pad = "    ".repeat(indent);
+    for node in nodes {
+        match node {
+            Node::System(s) => {
+                let a = s.access();
+                let _ = writeln!(
+                    out,
+                    "{pad}{:<w$} reads {}; writes {}",
+                    s.name(),
+                    list(a.reads),
+                    list(a.writes),
+                    w = 28usize.saturating_sub(pad.len()),
+                );
+            }
+            Node::Loop { name, body, .. } => {
+                let _ = writeln!(out, "{pad}loop {name}:");
+                describe_nodes(body, indent + 1, out);
+            }
+            Node::Once { name, body, .. } => {
+                let _ = writeln!(out, "{pad}once {name}:");
+                describe_nodes(body, indent + 1, out);
+            }
+            Node::Nested(g) => {
+                let _ = writeln!(out, "{pad}on {}:", g.part_name());
+                g.describe(indent + 1, out);
+            }
+        }
+    }
+}
+
+fn list(columns: &[&str]) -> String {
+    if columns.is_empty() {
+        "-".to_string()
+    } else {
+        columns.join(", ")
     }
 }
 
@@ -211,6 +419,11 @@ fn run_nodes<S>(nodes: &[Node<S>], state: &mut S, stats: &mut Stats) {
                 entry.emitted += flow.emitted as u64;
             }
             Node::Nested(graph) => graph.run(state, stats),
+            Node::Once { needed, body, .. } => {
+                if needed(state) {
+                    run_nodes(body, state, stats);
+                }
+            }
             Node::Loop {
                 name,
                 queue_len,
@@ -234,38 +447,61 @@ fn run_nodes<S>(nodes: &[Node<S>], state: &mut S, stats: &mut Stats) {
 mod tests {
     use super::*;
 
+    #[derive(Default)]
+    struct Counters {
+        values: Vec<u32>,
+        decrements: u32,
+    }
+
     struct Countdown;
-    impl System<Vec<u32>> for Countdown {
-        fn name(&self) -> &'static str {
-            "countdown"
+    system! {
+        Countdown = "countdown";
+        on Counters {
+            write values, decrements;
         }
-        fn reads(&self) -> &'static [&'static str] {
-            &["values"]
-        }
-        fn writes(&self) -> &'static [&'static str] {
-            &["values"]
-        }
-        fn run(&self, state: &mut Vec<u32>) -> Flow {
-            let taken = state.len();
-            for v in state.iter_mut() {
+        run {
+            let taken = values.len();
+            for v in values.iter_mut() {
                 *v -= 1;
             }
-            state.retain(|&v| v > 0);
-            Flow::new(taken, state.len())
+            *decrements += taken as u32;
+            values.retain(|&v| v > 0);
+            Flow::new(taken, values.len())
         }
+    }
+
+    struct Report;
+    system! {
+        Report = "report";
+        on Counters {
+            read decrements;
+        }
+        run {
+            Flow::new(*decrements as usize, 0)
+        }
+    }
+
+    fn countdown_graph() -> Graph<Counters> {
+        Graph::new(
+            "test",
+            vec![
+                Node::Loop {
+                    name: "bounces",
+                    queue_len: |s: &Counters| s.values.len(),
+                    body: vec![Node::system(Countdown)],
+                },
+                Node::system(Report),
+            ],
+        )
     }
 
     #[test]
     fn loop_repeats_while_queue_is_non_empty_and_counts_flow() {
-        let graph = Graph::new(
-            "test",
-            vec![Node::Loop {
-                name: "bounces",
-                queue_len: |s: &Vec<u32>| s.len(),
-                body: vec![Node::system(Countdown)],
-            }],
-        );
-        let mut state = vec![1, 3, 2];
+        let graph = countdown_graph();
+        let mut state = Counters {
+            values: vec![1, 3, 2],
+            decrements: 0,
+        };
         let mut stats = Stats::default();
         graph.run(&mut state, &mut stats);
         let s = stats.get("countdown").unwrap();
@@ -273,7 +509,48 @@ mod tests {
         assert_eq!(s.taken, 3 + 2 + 1);
         assert_eq!(s.emitted, 2 + 1);
         assert_eq!(stats.loops, vec![("bounces", 3)]);
-        assert!(graph.unsatisfied_reads(&[]).is_empty());
-        assert_eq!(graph.system_names(), vec!["countdown"]);
+        assert_eq!(graph.system_names(), vec!["countdown", "report"]);
+    }
+
+    #[test]
+    fn access_lists_come_from_the_declaration_and_the_check_follows_graph_order() {
+        let graph = countdown_graph();
+        assert_eq!(
+            System::<Counters>::access(&Countdown),
+            Access {
+                reads: &[],
+                writes: &["values", "decrements"]
+            }
+        );
+        assert!(graph.check(&[]).is_empty());
+        // The reader placed before the writer: the check names it.
+        let reversed = Graph::new(
+            "reversed",
+            vec![Node::system(Report), Node::system(Countdown)],
+        );
+        assert_eq!(
+            reversed.check(&[]),
+            vec!["report reads decrements before anything writes it".to_string()]
+        );
+        assert!(reversed.check(&["decrements"]).is_empty());
+        assert!(graph.describe().contains("loop bounces:\n    countdown"));
+    }
+
+    #[test]
+    fn once_runs_its_body_only_while_needed() {
+        let graph = Graph::new(
+            "once",
+            vec![Node::Once {
+                name: "fill",
+                needed: |s: &Counters| s.values.is_empty(),
+                body: vec![Node::system(Report)],
+            }],
+        );
+        let mut state = Counters::default();
+        let mut stats = Stats::default();
+        graph.run(&mut state, &mut stats);
+        state.values.push(1);
+        graph.run(&mut state, &mut stats);
+        assert_eq!(stats.get("report").unwrap().runs, 1);
     }
 }

@@ -207,3 +207,16 @@ pub fn load_from_str(source: &Path, text: &str) -> Result<PreparedScene, SceneEr
     let world = world::build(&parsed)?;
     prepare(&world)
 }
+
+/// A prepared scene with its acceleration structure: everything systems read while rendering.
+pub struct SceneData {
+    pub scene: PreparedScene,
+    pub accel: crate::accel::Accel,
+}
+
+impl SceneData {
+    pub fn new(scene: PreparedScene) -> SceneData {
+        let accel = crate::accel::Accel::build(&scene.triangles);
+        SceneData { scene, accel }
+    }
+}

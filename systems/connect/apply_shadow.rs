@@ -1,35 +1,30 @@
 //! Adds the contribution of every unoccluded shadow ray to the path that cast it.
 
+use crate::components::CHUNK;
 use crate::integrators::pt::PtState;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use rayon::prelude::*;
 
 pub struct ApplyShadowContributions;
 
-impl System<PtState> for ApplyShadowContributions {
-    fn name(&self) -> &'static str {
-        "apply_shadow_contributions"
+crate::system! {
+    ApplyShadowContributions = "apply_shadow_contributions";
+    on PtState {
+        read shadow, len = shadow_len;
+        write radiance = paths.radiance;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["shadow_rays.unoccluded", "shadow_rays.contribution"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["paths.radiance"]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let shadow = &s.shadow;
-        let range = s.ranges.non_delta();
-        let taken = range.len();
-        let applied: usize = s
-            .paths
-            .chunks_mut(range)
-            .into_par_iter()
-            .map(|p| {
+    run {
+        let taken = *len;
+        let applied: usize = radiance[..taken]
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .map(|(c, radiance)| {
                 let mut applied = 0;
-                let shadow = shadow.view(p.start..p.start + p.len());
-                for i in 0..p.len() {
+                let start = c * CHUNK;
+                let shadow = shadow.view(start..start + radiance.len());
+                for (i, radiance) in radiance.iter_mut().enumerate() {
                     if shadow.unoccluded[i] {
-                        p.radiance[i] += shadow.contribution[i];
+                        *radiance += shadow.contribution[i];
                         applied += 1;
                     }
                 }

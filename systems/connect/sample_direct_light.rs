@@ -3,12 +3,11 @@
 //! sampling alone (no MIS): the visible point never samples its BSDF toward a light, and the
 //! photons that land first at a surface are not gathered, so nothing else counts this light.
 
-use crate::components::{NO_VISIBLE_POINT, ShadowRays, VisiblePoints};
-use crate::integrators::SceneData;
+use crate::components::NO_VISIBLE_POINT;
+use crate::integrators::{pm::PmState, sppm::ProgressiveState};
 use crate::math::Frame;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::sampling::SampleKey;
-use glam::DVec3;
 use rayon::prelude::*;
 
 /// The light-sample stream of (pixel, sample index): apart from the camera chains', so that a
@@ -18,42 +17,24 @@ pub fn light_key(seed: u64, pixel: u64, sample_index: u64) -> SampleKey {
     SampleKey::new(seed, pixel | 1 << 61, sample_index)
 }
 
-/// What direct lighting at visible points works on (slot = pixel everywhere).
-pub struct DirectLightQueue<'a> {
-    pub data: &'a SceneData,
-    pub visible: &'a VisiblePoints,
-    pub shadow: &'a mut ShadowRays,
-    /// Per-pixel sums that the emission seen and the unoccluded light samples are added to.
-    pub direct: &'a mut [DVec3],
-    pub seed: u64,
-    pub sample_index: u64,
-    pub nonfinite: &'a mut u64,
-}
-
-pub trait VisiblePointLights {
-    fn direct_light_queue(&mut self) -> DirectLightQueue<'_>;
-}
-
 pub struct SampleDirectLight;
 
-impl<S: VisiblePointLights + Send> System<S> for SampleDirectLight {
-    fn name(&self) -> &'static str {
-        "sample_direct_light"
+crate::system! {
+    SampleDirectLight = "sample_direct_light";
+    on PmState {
+        read data, visible = camera_walk.visible, seed = settings.seed, index = pass;
+        write shadow;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["visible_points", "emitters"]
+    on ProgressiveState {
+        read data, visible = camera_walk.visible, seed = settings.seed, index = pass;
+        write shadow;
     }
-    fn writes(&self) -> &'static [&'static str] {
-        &["shadow_rays"]
-    }
-    fn run(&self, state: &mut S) -> Flow {
-        let q = state.direct_light_queue();
-        let (data, visible, seed, index) = (q.data, q.visible, q.seed, q.sample_index);
+    run {
+        let (seed, index) = (*seed, *index);
         let scene = &data.scene;
         let pixels = visible.capacity();
         let has_emitters = !scene.emitters.triangle.is_empty();
-        let cast: usize = q
-            .shadow
+        let cast: usize = shadow
             .chunks_mut(0..pixels)
             .into_par_iter()
             .map(|c| {

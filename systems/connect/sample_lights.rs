@@ -5,7 +5,7 @@
 use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::sampling::power_heuristic;
 use crate::systems::shade::Surface;
 use glam::Vec3;
@@ -13,30 +13,18 @@ use rayon::prelude::*;
 
 pub struct SampleLights;
 
-impl System<PtState> for SampleLights {
-    fn name(&self) -> &'static str {
-        "sample_lights"
+crate::system! {
+    SampleLights = "sample_lights";
+    on PtState {
+        read data, hits, rays, paths, surfaces, ranges;
+        write shadow, shadow_len;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &[
-            "hits",
-            "surfaces",
-            "rays.dir",
-            "paths",
-            "material_ranges",
-            "emitters",
-        ]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["shadow_rays"]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let data = &*s.data;
-        let (hits, rays, paths, surfaces) = (&s.hits, &s.rays, &s.paths, &s.surfaces);
-        let range = s.ranges.non_delta();
+    run {
+        let data: &SceneData = data;
+        let range = ranges.non_delta();
         let taken = range.len();
-        let cast: usize = s
-            .shadow
+        *shadow_len = range.end;
+        let cast: usize = shadow
             .chunks_mut(range)
             .into_par_iter()
             .map(|c| {

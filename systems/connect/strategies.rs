@@ -14,7 +14,7 @@ use crate::integrators::bdpt::{
     camera_vertex_dim,
 };
 use crate::path::{PathContext, Vertex, VertexKind};
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::sampling::SampleKey;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -34,55 +34,51 @@ fn strategies(
         .filter(|&(s, t)| settings.uses(s, t))
 }
 
-impl System<BdptState> for ConnectStrategies {
-    fn name(&self) -> &'static str {
-        "connect_strategies"
+crate::system! {
+    ConnectStrategies = "connect_strategies";
+    on BdptState {
+        read wave, capacity, settings, subpath_len, data, vertices, pixels;
+        write connection_start, connections_len, shadow, connections, sample_radiance;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["path_vertices", "subpath_len", "emitters", "camera"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["shadow_rays", "connections", "connection_start"]
-    }
-    fn run(&self, s: &mut BdptState) -> Flow {
-        let n = s.wave.len;
-        let cap = s.capacity;
-        let settings = s.settings;
+    run {
+        let n = wave.len;
+        let cap = *capacity;
+        let settings = *settings;
         // Slots per sample, then where each sample's begin.
-        let lens = &s.subpath_len;
+        let lens = subpath_len;
         let counts: Vec<usize> = (0..n)
             .into_par_iter()
             .with_min_len(CONNECT_CHUNK)
             .map(|k| strategies(&settings, lens[k] as usize, lens[cap + k] as usize).count())
             .collect();
-        let starts = &mut s.connection_start;
+        let starts = &mut *connection_start;
         starts[0] = 0;
         for k in 0..n {
             starts[k + 1] = starts[k] + counts[k];
         }
         let total = starts[n];
-        s.connections_len = total;
-        if s.shadow.capacity() < total {
+        *connections_len = total;
+        if shadow.capacity() < total {
             // Grows to the largest wave seen, then is reused.
-            s.shadow = ShadowRays::new(total);
-            s.connections = Connections::new(total);
+            *shadow = ShadowRays::new(total);
+            *connections = Connections::new(total);
         }
 
-        let ctx = PathContext::new(&s.data.scene);
-        let vertices: Vec<_> = s.vertices.iter().map(|v| v.view(0..v.capacity())).collect();
-        let starts = &s.connection_start;
+        let ctx = PathContext::new(&data.scene);
+        let vertices: Vec<_> = vertices.iter().map(|v| v.view(0..v.capacity())).collect();
+        let starts = &*connection_start;
         let chunk_starts: Vec<usize> = (0..n).step_by(CONNECT_CHUNK).map(|k| starts[k]).collect();
-        let shadow = s.shadow.split_mut(&chunk_starts, total);
-        let conns = s.connections.split_mut(&chunk_starts, total);
+        let shadow = shadow.split_mut(&chunk_starts, total);
+        let conns = connections.split_mut(&chunk_starts, total);
         let radiance = split_ranges(
-            &mut s.sample_radiance,
+            sample_radiance,
             &(0..n).step_by(CONNECT_CHUNK).collect::<Vec<_>>(),
             n,
         );
-        let (first, pixels, seed) = (s.wave.first, s.pixels, settings.seed);
+        let (first, pixels, seed) = (wave.first, *pixels, settings.seed);
         let weighted = settings.strategies == StrategyFilter::All;
-        let emitters = &s.data.scene.emitters;
-        let scene = &s.data.scene;
+        let emitters = &data.scene.emitters;
+        let scene = &data.scene;
         let has_light = !emitters.triangle.is_empty();
         let made: usize = shadow
             .into_par_iter()

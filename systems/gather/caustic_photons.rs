@@ -2,22 +2,18 @@
 
 use crate::integrators::pm::PmState;
 use crate::photons::MapQuery;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 
 pub struct GatherCaustics;
 
-impl System<PmState> for GatherCaustics {
-    fn name(&self) -> &'static str {
-        "gather_caustics"
+crate::system! {
+    GatherCaustics = "gather_caustics";
+    on PmState {
+        read data, settings, maps, visible = camera_walk.visible, pixels;
+        write pass_radiance, nonfinite;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["photon_maps", "visible_points"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["pass_radiance"]
-    }
-    fn run(&self, s: &mut PmState) -> Flow {
-        let Some(maps) = &s.maps else {
+    run {
+        let Some(maps) = maps else {
             return Flow::default();
         };
         let Some((tree, index)) = &maps.caustic else {
@@ -27,13 +23,13 @@ impl System<PmState> for GatherCaustics {
             tree,
             index: Some(index),
             photons: &maps.photons,
-            k: s.settings.k,
-            max_radius: s.settings.max_radius_in(&s.data),
+            k: settings.k,
+            max_radius: settings.max_radius_in(data),
             scale: 1.0 / maps.emitted.max(1) as f32,
         };
-        let (made, nonfinite) =
-            query.add_estimates(&s.data.scene, &s.visible, |_| true, &mut s.pass_radiance);
-        s.nonfinite += nonfinite;
-        Flow::new(s.pixels, made)
+        let (made, dropped) =
+            query.add_estimates(&data.scene, visible, |_| true, pass_radiance);
+        *nonfinite += dropped;
+        Flow::new(*pixels, made)
     }
 }

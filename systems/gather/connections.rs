@@ -6,31 +6,22 @@
 
 use crate::components::CHUNK;
 use crate::integrators::bdpt::BdptState;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 pub struct AccumulateConnections;
 
-impl System<BdptState> for AccumulateConnections {
-    fn name(&self) -> &'static str {
-        "accumulate_connections"
+crate::system! {
+    AccumulateConnections = "accumulate_connections";
+    on BdptState {
+        read wave, shadow, connections, connection_start, connections_len, pixels, strategy_images = settings.strategy_images;
+        write sample_radiance, film, strategy_sums;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &[
-            "shadow_rays",
-            "connections",
-            "connection_start",
-            "sample_radiance",
-        ]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["film", "strategy_sums"]
-    }
-    fn run(&self, s: &mut BdptState) -> Flow {
-        let n = s.wave.len;
-        let (shadow, conns, starts) = (&s.shadow, &s.connections, &s.connection_start);
-        s.sample_radiance[..n]
+    run {
+        let n = wave.len;
+        let (conns, starts) = (connections, connection_start);
+        sample_radiance[..n]
             .par_chunks_mut(CHUNK)
             .enumerate()
             .for_each(|(c, out)| {
@@ -43,30 +34,29 @@ impl System<BdptState> for AccumulateConnections {
                     }
                 }
             });
-        let (first, pixels) = (s.wave.first, s.pixels);
-        for (k, &value) in s.sample_radiance[..n].iter().enumerate() {
-            s.film
+        let (first, pixels) = (wave.first, *pixels);
+        for (k, &value) in sample_radiance[..n].iter().enumerate() {
+            film
                 .add_sample(((first + k as u64) % pixels) as usize, value);
         }
-        let total = s.connections_len;
+        let total = *connections_len;
         let mut splats = 0;
         for slot in 0..total {
             if conns.t[slot] == 1 && shadow.unoccluded[slot] {
-                s.film
+                film
                     .add_splat(conns.pixel[slot] as usize, shadow.contribution[slot]);
                 splats += 1;
             }
         }
-        if s.settings.strategy_images {
-            let size = s.film.width * s.film.height;
+        if *strategy_images {
+            let size = film.width * film.height;
             for slot in 0..total {
                 let value: Vec3 = shadow.contribution[slot];
                 let visible = conns.s[slot] == 0 || shadow.unoccluded[slot];
                 if !visible || value == Vec3::ZERO || !value.is_finite() {
                     continue;
                 }
-                let sums = s
-                    .strategy_sums
+                let sums = strategy_sums
                     .entry((conns.s[slot], conns.t[slot]))
                     .or_insert_with(|| vec![DVec3::ZERO; size]);
                 sums[conns.pixel[slot] as usize] += value.as_dvec3();

@@ -1,29 +1,26 @@
 //! Adds to each pixel's sum what its camera chain saw without photons: the emission it met
 //! and its light sample, when unoccluded. NaN or Inf values are counted and dropped.
 
-use crate::pipeline::{Flow, System};
-use crate::systems::connect::sample_direct_light::VisiblePointLights;
+use crate::integrators::{pm::PmState, sppm::ProgressiveState};
+use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct AddDirectLight;
 
-impl<S: VisiblePointLights + Send> System<S> for AddDirectLight {
-    fn name(&self) -> &'static str {
-        "add_direct_light"
+crate::system! {
+    AddDirectLight = "add_direct_light";
+    on PmState {
+        read visible = camera_walk.visible, shadow;
+        write direct = pass_radiance, nonfinite;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["visible_points.emitted", "shadow_rays"]
+    on ProgressiveState {
+        read visible = camera_walk.visible, shadow;
+        write direct = estimates.direct, nonfinite;
     }
-    fn writes(&self) -> &'static [&'static str] {
-        &["direct"]
-    }
-    fn run(&self, state: &mut S) -> Flow {
-        let q = state.direct_light_queue();
-        let (visible, shadow) = (q.visible, &*q.shadow);
+    run {
         let pixels = visible.capacity();
-        let (lit, nonfinite) = q
-            .direct
+        let (lit, dropped) = direct
             .par_chunks_mut(crate::components::CHUNK)
             .enumerate()
             .map(|(k, sums)| {
@@ -46,7 +43,7 @@ impl<S: VisiblePointLights + Send> System<S> for AddDirectLight {
                 (lit, nonfinite)
             })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        *q.nonfinite += nonfinite;
+        *nonfinite += dropped;
         Flow::new(pixels, lit)
     }
 }

@@ -2,25 +2,20 @@
 //! depends on how work was split between threads.
 
 use crate::integrators::pt::PtState;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 
 pub struct AccumulateFilm;
 
-impl System<PtState> for AccumulateFilm {
-    fn name(&self) -> &'static str {
-        "accumulate_film"
+crate::system! {
+    AccumulateFilm = "accumulate_film";
+    on PtState {
+        read sample_radiance, wave, pixels;
+        write film;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["sample_radiance", "wave"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["film"]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let (first, len, pixels) = (s.wave.first, s.wave.len, s.pixels);
-        for (i, &value) in s.sample_radiance[..len].iter().enumerate() {
-            s.film
-                .add_sample(((first + i as u64) % pixels) as usize, value);
+    run {
+        let (first, len) = (wave.first, wave.len);
+        for (i, &value) in sample_radiance[..len].iter().enumerate() {
+            film.add_sample(((first + i as u64) % pixels) as usize, value);
         }
         Flow::new(len, len)
     }

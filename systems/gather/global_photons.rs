@@ -1,49 +1,65 @@
-//! Indirect light of PM from the global map: with final gathering, a density estimate of all
-//! photons where each pixel's gather ray landed; without, an estimate at the visible point
-//! of the photons that are neither direct nor caustic (light sampling and the caustic map
-//! cover those).
+//! Indirect light of PM from the global map. With final gathering (`gather_global_photons`),
+//! a density estimate of all photons where each pixel's gather ray landed; without
+//! (`gather_indirect_photons`), an estimate at the visible point of the photons that are
+//! neither direct nor caustic (light sampling and the caustic map cover those).
 
-use crate::components::PhotonFlags;
-use crate::integrators::pm::PmState;
-use crate::photons::MapQuery;
-use crate::pipeline::{Flow, System};
+use crate::components::{PhotonFlags, VisiblePoints};
+use crate::integrators::pm::{PmSettings, PmState};
+use crate::photons::{MapQuery, PhotonMaps};
+use crate::pipeline::Flow;
+use crate::scene::SceneData;
+use glam::DVec3;
 
 pub struct GatherGlobalPhotons;
 
-impl System<PmState> for GatherGlobalPhotons {
-    fn name(&self) -> &'static str {
-        "gather_global_photons"
+crate::system! {
+    GatherGlobalPhotons = "gather_global_photons";
+    on PmState {
+        read data, settings, maps, points = gather_walk.visible;
+        write pass_radiance, nonfinite;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["photon_maps", "visible_points", "gather_points"]
+    run {
+        gather(data, settings, maps, points, |_| true, pass_radiance, nonfinite)
     }
-    fn writes(&self) -> &'static [&'static str] {
-        &["pass_radiance"]
+}
+
+pub struct GatherIndirectPhotons;
+
+crate::system! {
+    GatherIndirectPhotons = "gather_indirect_photons";
+    on PmState {
+        read data, settings, maps, points = camera_walk.visible;
+        write pass_radiance, nonfinite;
     }
-    fn run(&self, s: &mut PmState) -> Flow {
-        let Some(maps) = &s.maps else {
-            return Flow::default();
-        };
-        let final_gather = s.settings.final_gather;
-        let points = if final_gather {
-            &s.gather_points
-        } else {
-            &s.visible
-        };
-        let query = MapQuery {
-            tree: &maps.global,
-            index: None,
-            photons: &maps.photons,
-            k: s.settings.k,
-            max_radius: s.settings.max_radius_in(&s.data),
-            scale: 1.0 / maps.emitted.max(1) as f32,
-        };
-        let keep = |f: PhotonFlags| {
-            final_gather || !(f.has(PhotonFlags::DIRECT) || f.has(PhotonFlags::CAUSTIC))
-        };
-        let (made, nonfinite) =
-            query.add_estimates(&s.data.scene, points, keep, &mut s.pass_radiance);
-        s.nonfinite += nonfinite;
-        Flow::new(s.pixels, made)
+    run {
+        let indirect =
+            |f: PhotonFlags| !(f.has(PhotonFlags::DIRECT) || f.has(PhotonFlags::CAUSTIC));
+        gather(data, settings, maps, points, indirect, pass_radiance, nonfinite)
     }
+}
+
+/// Adds the global map's estimate of the photons `keep` accepts at each point to its pixel.
+fn gather(
+    data: &SceneData,
+    settings: &PmSettings,
+    maps: &Option<PhotonMaps>,
+    points: &VisiblePoints,
+    keep: impl Fn(PhotonFlags) -> bool + Sync,
+    pass_radiance: &mut [DVec3],
+    nonfinite: &mut u64,
+) -> Flow {
+    let Some(maps) = maps else {
+        return Flow::default();
+    };
+    let query = MapQuery {
+        tree: &maps.global,
+        index: None,
+        photons: &maps.photons,
+        k: settings.k,
+        max_radius: settings.max_radius_in(data),
+        scale: 1.0 / maps.emitted.max(1) as f32,
+    };
+    let (made, dropped) = query.add_estimates(&data.scene, points, keep, pass_radiance);
+    *nonfinite += dropped;
+    Flow::new(points.capacity(), made)
 }

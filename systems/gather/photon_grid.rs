@@ -4,30 +4,24 @@
 use crate::components::NO_VISIBLE_POINT;
 use crate::integrators::sppm::ProgressiveState;
 use crate::photons::HashGrid;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 
 pub struct BuildPhotonGrid;
 
-impl System<ProgressiveState> for BuildPhotonGrid {
-    fn name(&self) -> &'static str {
-        "build_photon_grid"
+crate::system! {
+    BuildPhotonGrid = "build_photon_grid";
+    on ProgressiveState {
+        read radius = estimates.radius, triangle = camera_walk.visible.triangle, tracing = photon_pass.tracing;
+        write grid;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["photons.p", "pixel_estimates.radius"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["photon_grid"]
-    }
-    fn run(&self, s: &mut ProgressiveState) -> Flow {
-        let radius = s
-            .estimates
-            .radius
+    run {
+        let radius = radius
             .iter()
-            .zip(&s.visible.triangle)
+            .zip(triangle)
             .filter(|(_, t)| **t != NO_VISIBLE_POINT)
             .fold(0.0f32, |m, (r, _)| m.max(*r));
-        let t = &s.photon_pass.tracing;
-        s.grid = (radius > 0.0 && t.stored > 0)
+        let t = tracing;
+        *grid = (radius > 0.0 && t.stored > 0)
             .then(|| HashGrid::build(&t.photons.p[..t.stored], radius));
         Flow::new(t.stored, t.stored)
     }

@@ -4,27 +4,23 @@
 use crate::components::PhotonFlags;
 use crate::integrators::pm::PmState;
 use crate::photons::{KdTree, PhotonMaps};
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 
 pub struct BuildPhotonMaps;
 
-impl System<PmState> for BuildPhotonMaps {
-    fn name(&self) -> &'static str {
-        "build_photon_maps"
+crate::system! {
+    BuildPhotonMaps = "build_photon_maps";
+    on PmState {
+        read caustics;
+        write tracing = photon_pass.tracing, maps;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["photons"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["photon_maps"]
-    }
-    fn run(&self, s: &mut PmState) -> Flow {
-        let t = &mut s.photon_pass.tracing;
+    run {
+        let t = tracing;
         let stored = t.stored;
         let photons = std::mem::take(&mut t.photons);
         t.stored = 0;
         let global = KdTree::build(&photons.p[..stored]);
-        let caustic = s.caustics.then(|| {
+        let caustic = caustics.then(|| {
             let index: Vec<u32> = (0..stored as u32)
                 .filter(|&i| photons.flags[i as usize].has(PhotonFlags::CAUSTIC))
                 .collect();
@@ -32,7 +28,7 @@ impl System<PmState> for BuildPhotonMaps {
             (KdTree::build(&points), index)
         });
         let in_maps = stored + caustic.as_ref().map_or(0, |c| c.1.len());
-        s.maps = Some(PhotonMaps {
+        *maps = Some(PhotonMaps {
             photons,
             global,
             caustic,

@@ -5,7 +5,7 @@
 //! N' = N + alpha M,  R' = R sqrt(N' / (N + M)),  tau' = (tau + tau_M) N' / (N + M)
 
 use crate::integrators::sppm::ProgressiveState;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -35,21 +35,16 @@ pub fn progressive_update(
 
 pub struct UpdatePixelEstimates;
 
-impl System<ProgressiveState> for UpdatePixelEstimates {
-    fn name(&self) -> &'static str {
-        "update_pixel_estimates"
+crate::system! {
+    UpdatePixelEstimates = "update_pixel_estimates";
+    on ProgressiveState {
+        read alpha = settings.alpha, pixels, emitted = photon_pass.tracing.emitted;
+        write estimates, nonfinite, photons_emitted;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["pixel_estimates", "photons.emitted"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["pixel_estimates"]
-    }
-    fn run(&self, s: &mut ProgressiveState) -> Flow {
-        let alpha = s.settings.alpha as f64;
-        let pixels = s.pixels;
-        let (updated, nonfinite) = s
-            .estimates
+    run {
+        let alpha = *alpha as f64;
+        let pixels = *pixels;
+        let (updated, dropped) = estimates
             .chunks_mut(0..pixels)
             .into_par_iter()
             .map(|e| {
@@ -74,9 +69,9 @@ impl System<ProgressiveState> for UpdatePixelEstimates {
                 (updated, nonfinite)
             })
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        s.nonfinite += nonfinite;
+        *nonfinite += dropped;
         // The estimate divides by every photon emitted so far.
-        s.photons_emitted += s.photon_pass.tracing.emitted;
+        *photons_emitted += emitted;
         Flow::new(pixels, updated)
     }
 }

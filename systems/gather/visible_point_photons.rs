@@ -5,36 +5,24 @@
 
 use crate::integrators::sppm::ProgressiveState;
 use crate::photons::GatherPoint;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct GatherPhotons;
 
-impl System<ProgressiveState> for GatherPhotons {
-    fn name(&self) -> &'static str {
-        "gather_photons"
+crate::system! {
+    GatherPhotons = "gather_photons";
+    on ProgressiveState {
+        read scene = data.scene, visible = camera_walk.visible, tracing = photon_pass.tracing, grid, pixels;
+        write estimates;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &[
-            "photon_grid",
-            "photons",
-            "visible_points",
-            "pixel_estimates.radius",
-        ]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["pixel_estimates.pass_photons", "pixel_estimates.pass_flux"]
-    }
-    fn run(&self, s: &mut ProgressiveState) -> Flow {
-        let scene = &s.data.scene;
-        let visible = &s.visible;
-        let photons = &s.photon_pass.tracing.photons;
-        let points = &photons.p[..s.photon_pass.tracing.stored];
-        let grid = s.grid.as_ref();
-        let pixels = s.pixels;
-        let found: usize = s
-            .estimates
+    run {
+        let photons = &tracing.photons;
+        let points = &photons.p[..tracing.stored];
+        let grid = grid.as_ref();
+        let pixels = *pixels;
+        let found: usize = estimates
             .chunks_mut(0..pixels)
             .into_par_iter()
             .map(|e| {

@@ -1,32 +1,27 @@
 //! Starts the photon mappers' camera chains: one camera ray per pixel, uniform inside it
 //! (a one-pixel box filter), keyed by (seed, pixel, pass) so every pass jitters anew.
 
-use crate::pipeline::{Flow, System};
+use crate::integrators::camera_walk::CameraWalk;
+use crate::pipeline::Flow;
 use crate::sampling::SampleKey;
-use crate::systems::shade::extend_camera_chains::{CameraChainQueue, DIM_PIXEL};
+use crate::systems::shade::extend_camera_chains::DIM_PIXEL;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 pub struct GenerateCameraChains;
 
-impl<S: CameraChainQueue + Send> System<S> for GenerateCameraChains {
-    fn name(&self) -> &'static str {
-        "generate_camera_chains"
+crate::system! {
+    GenerateCameraChains = "generate_camera_chains";
+    on CameraWalk {
+        read camera = data.scene.camera, seed, sample_index, starts;
+        write chains, rays, active;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["camera", "pass"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["camera_chains", "rays"]
-    }
-    fn run(&self, state: &mut S) -> Flow {
-        let (seed, sample_index, n) = state.new_chains();
-        let q = state.camera_chain_queue();
-        let cam = q.data.scene.camera.frustum();
+    run {
+        let (seed, sample_index, n) = (*seed, *sample_index, *starts);
+        let cam = camera.frustum();
         let w = cam.width as u64;
-        let rays = q.wave.rays.chunks_mut(0..n);
-        q.wave
-            .chains
+        let rays = rays.chunks_mut(0..n);
+        chains
             .chunks_mut(0..n)
             .into_par_iter()
             .zip(rays)
@@ -46,7 +41,7 @@ impl<S: CameraChainQueue + Send> System<S> for GenerateCameraChains {
                     c.alive[i] = true;
                 }
             });
-        q.wave.active = n;
+        *active = n;
         Flow::new(n, n)
     }
 }

@@ -3,31 +3,27 @@
 
 use crate::components::PathFlags;
 use crate::integrators::pt::{DIM_PIXEL, PtState};
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::sampling::SampleKey;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 pub struct GenerateCameraRays;
 
-impl System<PtState> for GenerateCameraRays {
-    fn name(&self) -> &'static str {
-        "generate_camera_rays"
+crate::system! {
+    GenerateCameraRays = "generate_camera_rays";
+    on PtState {
+        read wave, camera = data.scene.camera, pixels, seed = settings.seed;
+        write rays, paths, sample_radiance, active;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["wave", "camera"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["rays", "paths", "sample_radiance"]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let n = s.wave.len;
-        let cam = s.data.scene.camera.frustum();
+    run {
+        let n = wave.len;
+        let cam = camera.frustum();
         let w = cam.width as u64;
-        let (first, pixels, seed) = (s.wave.first, s.pixels, s.settings.seed);
-        s.sample_radiance[..n].fill(Vec3::ZERO);
-        let rays = s.rays.chunks_mut(0..n);
-        let paths = s.paths.chunks_mut(0..n);
+        let (first, pixels, seed) = (wave.first, *pixels, *seed);
+        sample_radiance[..n].fill(Vec3::ZERO);
+        let rays = rays.chunks_mut(0..n);
+        let paths = paths.chunks_mut(0..n);
         rays.into_par_iter().zip(paths).for_each(|(r, p)| {
             for i in 0..r.len() {
                 let slot = r.start + i;
@@ -47,7 +43,7 @@ impl System<PtState> for GenerateCameraRays {
                 p.flags[i] = PathFlags(PathFlags::SPECULAR);
             }
         });
-        s.active = n;
+        *active = n;
         Flow::new(n, n)
     }
 }

@@ -5,9 +5,9 @@
 
 use crate::bsdf::TransportMode;
 use crate::components::NO_VISIBLE_POINT;
-use crate::integrators::pm::{ChainPhase, PmState};
+use crate::integrators::pm::PmState;
 use crate::math::Frame;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::sampling::SampleKey;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -21,24 +21,16 @@ pub fn gather_key(seed: u64, pixel: u64, pass: u64) -> SampleKey {
 
 pub struct GenerateFinalGatherRays;
 
-impl System<PmState> for GenerateFinalGatherRays {
-    fn name(&self) -> &'static str {
-        "generate_final_gather_rays"
+crate::system! {
+    GenerateFinalGatherRays = "generate_final_gather_rays";
+    on PmState {
+        read scene = data.scene, visible = camera_walk.visible, seed = settings.seed, pass, pixels;
+        write chains = gather_walk.chains, rays = gather_walk.rays, active = gather_walk.active;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["visible_points"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["camera_chains", "rays"]
-    }
-    fn run(&self, s: &mut PmState) -> Flow {
-        s.phase = ChainPhase::FinalGather;
-        let (scene, visible) = (&s.data.scene, &s.visible);
-        let (seed, pass, n) = (s.settings.seed, s.pass, s.pixels);
-        let rays = s.wave.rays.chunks_mut(0..n);
-        let started: usize = s
-            .wave
-            .chains
+    run {
+        let (seed, pass, n) = (*seed, *pass, *pixels);
+        let rays = rays.chunks_mut(0..n);
+        let started: usize = chains
             .chunks_mut(0..n)
             .into_par_iter()
             .zip(rays)
@@ -87,7 +79,7 @@ impl System<PmState> for GenerateFinalGatherRays {
                 started
             })
             .sum();
-        s.wave.active = n;
+        *active = n;
         Flow::new(n, started)
     }
 }

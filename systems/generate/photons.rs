@@ -3,27 +3,24 @@
 
 use crate::accel::offset_ray_origin;
 use crate::math::Frame;
-use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonQueue, photon_key};
-use crate::pipeline::{Flow, System};
+use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonPass, photon_key};
+use crate::pipeline::Flow;
 use crate::sampling::cosine_hemisphere;
+use crate::scene::SceneData;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
 pub struct EmitPhotons;
 
-impl<S: PhotonQueue + Send> System<S> for EmitPhotons {
-    fn name(&self) -> &'static str {
-        "emit_photons"
+crate::system! {
+    EmitPhotons = "emit_photons";
+    on PhotonPass {
+        read data;
+        write tracing;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["emitters", "photon_wave"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["photon_walkers", "rays"]
-    }
-    fn run(&self, state: &mut S) -> Flow {
-        let (data, t) = state.photon_queue();
+    run {
+        let (data, t): (&SceneData, _) = (data, tracing);
         let n = t.remaining().min(t.walkers.capacity() as u64) as usize;
         t.first = t.next;
         t.len = n;

@@ -8,7 +8,7 @@ use crate::integrators::bdpt::{
     BdptState, CAMERA_DIM_PIXEL, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT, light_key,
 };
 use crate::math::Frame;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, cosine_hemisphere};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -16,22 +16,17 @@ use std::f32::consts::FRAC_1_PI;
 
 pub struct StartSubpaths;
 
-impl System<BdptState> for StartSubpaths {
-    fn name(&self) -> &'static str {
-        "start_subpaths"
+crate::system! {
+    StartSubpaths = "start_subpaths";
+    on BdptState {
+        read wave, data, pixels, seed = settings.seed, capacity;
+        write vertices, walkers, rays, subpath_len, active, depth;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["wave", "camera", "emitters"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["path_vertices", "walkers", "rays", "subpath_len"]
-    }
-    fn run(&self, s: &mut BdptState) -> Flow {
-        let n = s.wave.len;
-        let cap = s.capacity;
-        let data = &*s.data;
+    run {
+        let n = wave.len;
+        let cap = *capacity;
         let cam = data.scene.camera.frustum();
-        let (first, pixels, seed) = (s.wave.first, s.pixels, s.settings.seed);
+        let (first, pixels, seed) = (wave.first, *pixels, *seed);
         let w = cam.width as u64;
         let emitters = &data.scene.emitters;
 
@@ -42,14 +37,13 @@ impl System<BdptState> for StartSubpaths {
         };
 
         // Camera subpaths: subpath k, walker slot k.
-        let vertices = &mut s.vertices[0];
-        let views = vertices.chunks_mut(0..n);
-        let walkers = s.walkers.chunks_mut(0..n);
-        let rays = s.rays.chunks_mut(0..n);
+        let views = vertices[0].chunks_mut(0..n);
+        let camera_walkers = walkers.chunks_mut(0..n);
+        let camera_rays = rays.chunks_mut(0..n);
         views
             .into_par_iter()
-            .zip(walkers)
-            .zip(rays)
+            .zip(camera_walkers)
+            .zip(camera_rays)
             .for_each(|((v, wk), r)| {
                 for i in 0..v.len() {
                     let k = v.start + i;
@@ -77,18 +71,18 @@ impl System<BdptState> for StartSubpaths {
                     r.dir[i] = dir;
                 }
             });
-        s.subpath_len[..n].fill(1);
-        s.subpath_len[cap..cap + n].fill(if has_light { 1 } else { 0 });
+        subpath_len[..n].fill(1);
+        subpath_len[cap..cap + n].fill(if has_light { 1 } else { 0 });
         if !has_light {
-            s.active = n;
-            s.depth = 1;
+            *active = n;
+            *depth = 1;
             return Flow::new(n, n);
         }
 
         // Light subpaths: subpath cap + k, walker slot n + k (slots stay in subpath order).
-        let views = s.vertices[0].chunks_mut(cap..cap + n);
-        let walkers = s.walkers.chunks_mut(n..2 * n);
-        let rays = s.rays.chunks_mut(n..2 * n);
+        let views = vertices[0].chunks_mut(cap..cap + n);
+        let walkers = walkers.chunks_mut(n..2 * n);
+        let rays = rays.chunks_mut(n..2 * n);
         views
             .into_par_iter()
             .zip(walkers)
@@ -132,8 +126,8 @@ impl System<BdptState> for StartSubpaths {
                     r.dir[i] = if pdf_dir > 0.0 { dir } else { Vec3::ZERO };
                 }
             });
-        s.active = 2 * n;
-        s.depth = 1;
+        *active = 2 * n;
+        *depth = 1;
         Flow::new(n, 2 * n)
     }
 }

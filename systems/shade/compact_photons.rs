@@ -1,24 +1,19 @@
 //! Drops the photons that ended, keeping the rest in slot order.
 
 use crate::components::{gather_column, live_slots};
-use crate::photons::PhotonQueue;
-use crate::pipeline::{Flow, System};
+use crate::photons::PhotonPass;
+use crate::pipeline::Flow;
 
 pub struct CompactPhotons;
 
-impl<S: PhotonQueue + Send> System<S> for CompactPhotons {
-    fn name(&self) -> &'static str {
-        "compact_photons"
+crate::system! {
+    CompactPhotons = "compact_photons";
+    on PhotonPass {
+        write tracing;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["photon_walkers.alive"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["photon_walkers", "rays"]
-    }
-    fn run(&self, state: &mut S) -> Flow {
+    run {
         use std::mem::swap;
-        let (_, t) = state.photon_queue();
+        let t = tracing;
         let n = t.active;
         let mut order = std::mem::take(&mut t.order);
         live_slots(&t.walkers.alive[..n], &mut order);

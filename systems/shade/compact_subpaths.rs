@@ -4,34 +4,28 @@
 
 use crate::components::{gather_column, live_slots};
 use crate::integrators::bdpt::BdptState;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 
 pub struct CompactSubpaths;
 
-impl System<BdptState> for CompactSubpaths {
-    fn name(&self) -> &'static str {
-        "compact_subpaths"
+crate::system! {
+    CompactSubpaths = "compact_subpaths";
+    on BdptState {
+        write walkers, rays, active, depth, scratch;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["walkers.alive"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["walkers", "rays"]
-    }
-    fn run(&self, s: &mut BdptState) -> Flow {
+    run {
         use std::mem::swap;
-        let n = s.active;
-        let mut order = std::mem::take(&mut s.scratch.order);
-        live_slots(&s.walkers.alive[..n], &mut order);
-        let scratch = &mut s.scratch;
-        scratch.walkers.gather_from(&s.walkers, &order);
-        gather_column(&mut scratch.rays.origin, &s.rays.origin, &order);
-        gather_column(&mut scratch.rays.dir, &s.rays.dir, &order);
-        swap(&mut s.walkers, &mut scratch.walkers);
-        swap(&mut s.rays, &mut scratch.rays);
-        s.active = order.len();
-        s.scratch.order = order;
-        s.depth += 1;
-        Flow::new(n, s.active)
+        let n = *active;
+        let mut order = std::mem::take(&mut scratch.order);
+        live_slots(&walkers.alive[..n], &mut order);
+        scratch.walkers.gather_from(walkers, &order);
+        gather_column(&mut scratch.rays.origin, &rays.origin, &order);
+        gather_column(&mut scratch.rays.dir, &rays.dir, &order);
+        swap(walkers, &mut scratch.walkers);
+        swap(rays, &mut scratch.rays);
+        *active = order.len();
+        scratch.order = order;
+        *depth += 1;
+        Flow::new(n, *active)
     }
 }

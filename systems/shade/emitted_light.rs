@@ -4,37 +4,24 @@
 use crate::accel::surface_point;
 use crate::components::{MISS, PathFlags};
 use crate::integrators::pt::PtState;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::sampling::power_heuristic;
 use crate::scene::NO_EMITTER;
 use rayon::prelude::*;
 
 pub struct AddEmittedLight;
 
-impl System<PtState> for AddEmittedLight {
-    fn name(&self) -> &'static str {
-        "add_emitted_light"
+crate::system! {
+    AddEmittedLight = "add_emitted_light";
+    on PtState {
+        read data, hits, rays, live = active;
+        write paths;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &[
-            "hits",
-            "rays",
-            "paths.throughput",
-            "paths.bsdf_pdf",
-            "paths.flags",
-        ]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["paths.radiance"]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let data = &*s.data;
-        let (hits, rays) = (&s.hits, &s.rays);
+    run {
         let emitters = &data.scene.emitters;
         let tris = &data.scene.triangles;
-        let found: usize = s
-            .paths
-            .chunks_mut(0..s.active)
+        let found: usize = paths
+            .chunks_mut(0..*live)
             .into_par_iter()
             .map(|p| {
                 let mut found = 0;
@@ -70,6 +57,6 @@ impl System<PtState> for AddEmittedLight {
                 found
             })
             .sum();
-        Flow::new(s.active, found)
+        Flow::new(*live, found)
     }
 }

@@ -6,11 +6,11 @@
 
 use crate::accel::{offset_ray_origin, surface_point};
 use crate::bsdf::{Material, TransportMode};
-use crate::components::{CameraChains, Hits, MISS, NO_VISIBLE_POINT, Rays, VisiblePoints};
-use crate::integrators::SceneData;
+use crate::components::{MISS, NO_VISIBLE_POINT};
+use crate::integrators::camera_walk::CameraWalk;
 use crate::integrators::pt::{ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL};
 use crate::math::Frame;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use crate::scene::NO_EMITTER;
 use rayon::prelude::*;
 
@@ -24,92 +24,18 @@ pub fn bounce_dim(depth: u32) -> u32 {
     2 + depth * DIMS_PER_BOUNCE
 }
 
-/// Camera chains in flight (slots `0..active`) with their rays and hits, and the scratch
-/// stores compaction swaps them with: one slot per pixel, allocated once.
-pub struct ChainWavefront {
-    pub chains: CameraChains,
-    pub rays: Rays,
-    pub hits: Hits,
-    pub active: usize,
-    pub scratch_chains: CameraChains,
-    pub scratch_rays: Rays,
-    pub order: Vec<u32>,
-}
-
-impl ChainWavefront {
-    pub fn new(slots: usize) -> ChainWavefront {
-        ChainWavefront {
-            chains: CameraChains::new(slots),
-            rays: Rays::new(slots),
-            hits: Hits::new(slots),
-            active: 0,
-            scratch_chains: CameraChains::new(slots),
-            scratch_rays: Rays::new(slots),
-            order: Vec::with_capacity(slots),
-        }
-    }
-
-    /// Bytes per slot: chains and rays (double buffered), hits, compaction order.
-    pub fn bytes_per_slot() -> usize {
-        2 * (CameraChains::bytes_per_item() + Rays::bytes_per_item())
-            + Hits::bytes_per_item()
-            + std::mem::size_of::<u32>()
-    }
-
-    /// The queue of the chain systems, ending chains into `visible`.
-    pub fn queue<'a>(
-        &'a mut self,
-        data: &'a SceneData,
-        max_depth: u32,
-        visible: &'a mut VisiblePoints,
-    ) -> ChainQueue<'a> {
-        ChainQueue {
-            data,
-            max_depth,
-            wave: self,
-            visible,
-        }
-    }
-}
-
-/// What the chain systems work on.
-pub struct ChainQueue<'a> {
-    pub data: &'a SceneData,
-    pub max_depth: u32,
-    pub wave: &'a mut ChainWavefront,
-    /// Where ended chains go, at their pixel's slot.
-    pub visible: &'a mut VisiblePoints,
-}
-
-/// A state with camera chains.
-pub trait CameraChainQueue {
-    fn camera_chain_queue(&mut self) -> ChainQueue<'_>;
-    /// (seed, sample index, chains to start) for `generate_camera_chains`: pixel k starts
-    /// chain k; a count of zero starts none.
-    fn new_chains(&self) -> (u64, u64, usize);
-}
-
 pub struct ExtendCameraChains;
 
-impl<S: CameraChainQueue + Send> System<S> for ExtendCameraChains {
-    fn name(&self) -> &'static str {
-        "extend_camera_chains"
+crate::system! {
+    ExtendCameraChains = "extend_camera_chains";
+    on CameraWalk {
+        read scene = data.scene, max_depth, hits, live = active;
+        write chains, rays;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["hits", "rays.dir", "camera_chains"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["camera_chains", "rays"]
-    }
-    fn run(&self, state: &mut S) -> Flow {
-        let q = state.camera_chain_queue();
-        let w = q.wave;
-        let n = w.active;
-        let (data, hits, max_depth) = (q.data, &w.hits, q.max_depth);
-        let scene = &data.scene;
-        let rays = w.rays.chunks_mut(0..n);
-        let live: usize = w
-            .chains
+    run {
+        let (n, max_depth) = (*live, *max_depth);
+        let rays = rays.chunks_mut(0..n);
+        let live: usize = chains
             .chunks_mut(0..n)
             .into_par_iter()
             .zip(rays)

@@ -6,50 +6,48 @@
 
 use crate::accel::{offset_ray_origin, surface_point};
 use crate::bsdf::TransportMode;
-use crate::components::{MISS, split_ranges};
+use crate::components::{MISS, PathVertices, split_ranges};
 use crate::integrators::bdpt::{
     BdptState, DIM_BSDF, DIM_ROULETTE, camera_vertex_dim, light_vertex_dim, roulette_applies,
     survival,
 };
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction, to_area};
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct ExtendSubpaths;
 
-impl System<BdptState> for ExtendSubpaths {
-    fn name(&self) -> &'static str {
-        "extend_subpaths"
+crate::system! {
+    ExtendSubpaths = "extend_subpaths";
+    on BdptState {
+        read scene = data.scene, settings, capacity, hits, active, depth;
+        write vertices, subpath_len, walkers, rays;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["hits", "rays.dir", "walkers", "path_vertices"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["path_vertices", "subpath_len", "walkers", "rays"]
-    }
-    fn run(&self, s: &mut BdptState) -> Flow {
-        let d = s.depth;
-        s.ensure_depth(d);
-        let n = s.active;
-        let cap = s.capacity;
+    run {
+        let d = *depth;
+        while vertices.len() <= d {
+            vertices.push(PathVertices::new(2 * *capacity));
+        }
+        let n = *active;
+        let cap = *capacity;
         let end = 2 * cap;
-        let settings = s.settings;
-        let scene = &s.data.scene;
+        let settings = *settings;
+        let scene = &scene;
         let tris = &scene.triangles;
         // Each chunk of walkers owns the subpath slots from its first walker's subpath on
         // (walkers stay in increasing subpath order), so the vertex stores split along them.
         let first_subpath: Vec<usize> = (0..n)
             .step_by(crate::components::CHUNK)
-            .map(|slot| s.walkers.subpath[slot] as usize)
+            .map(|slot| walkers.subpath[slot] as usize)
             .collect();
-        let (before, from_d) = s.vertices.split_at_mut(d);
+        let (before, from_d) = vertices.split_at_mut(d);
         let prev_views = before[d - 1].split_mut(&first_subpath, end);
         let views = from_d[0].split_mut(&first_subpath, end);
-        let lens = split_ranges(&mut s.subpath_len, &first_subpath, end);
-        let hits = &s.hits;
-        let walkers = s.walkers.chunks_mut(0..n);
-        let rays = s.rays.chunks_mut(0..n);
+        let lens = split_ranges(subpath_len, &first_subpath, end);
+        let hits = &hits;
+        let walkers = walkers.chunks_mut(0..n);
+        let rays = rays.chunks_mut(0..n);
         let alive: usize = walkers
             .into_par_iter()
             .zip(rays)

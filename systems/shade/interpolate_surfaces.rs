@@ -3,26 +3,20 @@
 
 use crate::accel::surface_point;
 use crate::integrators::pt::PtState;
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use rayon::prelude::*;
 
 pub struct InterpolateSurfaces;
 
-impl System<PtState> for InterpolateSurfaces {
-    fn name(&self) -> &'static str {
-        "interpolate_surfaces"
+crate::system! {
+    InterpolateSurfaces = "interpolate_surfaces";
+    on PtState {
+        read tris = data.scene.triangles, hits, live = active;
+        write surfaces;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["hits"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["surfaces"]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let tris = &s.data.scene.triangles;
-        let hits = &s.hits;
-        let n = s.active;
-        s.surfaces.chunks_mut(0..n).into_par_iter().for_each(|c| {
+    run {
+        let n = *live;
+        surfaces.chunks_mut(0..n).into_par_iter().for_each(|c| {
             let hits = hits.view(c.start..c.start + c.len());
             for i in 0..c.len() {
                 let sp = surface_point(tris, hits.triangle[i], hits.b1[i], hits.b2[i]);

@@ -6,27 +6,22 @@ use crate::components::PathFlags;
 use crate::integrators::pt::{
     DIM_ROULETTE, PtState, ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL, bounce_dim,
 };
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct RussianRoulette;
 
-impl System<PtState> for RussianRoulette {
-    fn name(&self) -> &'static str {
-        "russian_roulette"
+crate::system! {
+    RussianRoulette = "russian_roulette";
+    on PtState {
+        read live = active;
+        write paths, rays;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["paths"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["paths.throughput", "paths.flags", "rays.dir"]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let taken = s.active;
-        let rays = s.rays.chunks_mut(0..taken);
-        let survivors: usize = s
-            .paths
+    run {
+        let taken = *live;
+        let rays = rays.chunks_mut(0..taken);
+        let survivors: usize = paths
             .chunks_mut(0..taken)
             .into_par_iter()
             .zip(rays)

@@ -7,25 +7,22 @@ use crate::bsdf::{Material, TransportMode};
 use crate::components::{CHUNK, MISS, PhotonFlags};
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction};
 use crate::photons::{
-    DIM_BSDF, DIM_ROULETTE, PhotonQueue, ROULETTE_MAX_SURVIVAL, StoredPhoton, bounce_dim,
+    DIM_BSDF, DIM_ROULETTE, PhotonPass, ROULETTE_MAX_SURVIVAL, StoredPhoton, bounce_dim,
 };
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
+use crate::scene::SceneData;
 use rayon::prelude::*;
 
 pub struct ScatterPhotons;
 
-impl<S: PhotonQueue + Send> System<S> for ScatterPhotons {
-    fn name(&self) -> &'static str {
-        "scatter_photons"
+crate::system! {
+    ScatterPhotons = "scatter_photons";
+    on PhotonPass {
+        read data;
+        write tracing;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["hits", "rays.dir", "photon_walkers"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &["photons", "photon_walkers", "rays"]
-    }
-    fn run(&self, state: &mut S) -> Flow {
-        let (data, t) = state.photon_queue();
+    run {
+        let (data, t): (&SceneData, _) = (data, tracing);
         let n = t.active;
         let scene = &data.scene;
         let (max_depth, store_direct) = (t.max_depth, t.store_direct);

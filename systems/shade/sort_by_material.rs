@@ -6,7 +6,7 @@
 use crate::bsdf::MaterialKind;
 use crate::components::{CHUNK, MISS};
 use crate::integrators::pt::{MaterialRanges, PtState};
-use crate::pipeline::{Flow, System};
+use crate::pipeline::Flow;
 use rayon::prelude::*;
 
 pub struct SortByMaterial;
@@ -24,51 +24,39 @@ const DROPPED: u8 = 3;
 /// The three material queues and the dropped paths.
 pub const QUEUES: usize = 4;
 
-impl System<PtState> for SortByMaterial {
-    fn name(&self) -> &'static str {
-        "sort_by_material"
+crate::system! {
+    SortByMaterial = "sort_by_material";
+    on PtState {
+        read scene = data.scene, max_depth = settings.max_depth;
+        write hits, paths, rays, sample_radiance, ranges, active, scratch;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["hits", "paths.depth"]
-    }
-    fn writes(&self) -> &'static [&'static str] {
-        &[
-            "rays.dir",
-            "hits.triangle",
-            "hits.b1",
-            "hits.b2",
-            "paths",
-            "sample_radiance",
-            "material_ranges",
-        ]
-    }
-    fn run(&self, s: &mut PtState) -> Flow {
-        let taken = s.active;
-        let max_depth = s.settings.max_depth;
-        let scene = &s.data.scene;
-        let (hits, depth) = (&s.hits, &s.paths.depth);
-        let scratch = &mut s.scratch;
+    run {
+        let taken = *active;
+        let max_depth = *max_depth;
         let chunks = taken.div_ceil(CHUNK);
         scratch.chunk_counts.clear();
         scratch.chunk_counts.resize(chunks, [0; QUEUES]);
         // Pass 1, per chunk in parallel: each slot's queue and the chunk's count per queue.
-        scratch.queue[..taken]
-            .par_chunks_mut(CHUNK)
-            .zip(scratch.chunk_counts.par_iter_mut())
-            .enumerate()
-            .for_each(|(c, (queue, counts))| {
-                for (i, q) in queue.iter_mut().enumerate() {
-                    let slot = c * CHUNK + i;
-                    let tri = hits.triangle[slot];
-                    *q = if tri == MISS || depth[slot] >= max_depth {
-                        DROPPED
-                    } else {
-                        let material = scene.triangles.material[tri as usize];
-                        queue_of(scene.materials[material as usize].kind())
-                    };
-                    counts[*q as usize] += 1;
-                }
-            });
+        {
+            let (hits, depth) = (&*hits, &paths.depth);
+            scratch.queue[..taken]
+                .par_chunks_mut(CHUNK)
+                .zip(scratch.chunk_counts.par_iter_mut())
+                .enumerate()
+                .for_each(|(c, (queue, counts))| {
+                    for (i, q) in queue.iter_mut().enumerate() {
+                        let slot = c * CHUNK + i;
+                        let tri = hits.triangle[slot];
+                        *q = if tri == MISS || depth[slot] >= max_depth {
+                            DROPPED
+                        } else {
+                            let material = scene.triangles.material[tri as usize];
+                            queue_of(scene.materials[material as usize].kind())
+                        };
+                        counts[*q as usize] += 1;
+                    }
+                });
+        }
         let mut counts = [0usize; QUEUES];
         for chunk in &scratch.chunk_counts {
             for (total, n) in counts.iter_mut().zip(chunk) {
@@ -113,12 +101,31 @@ impl System<PtState> for SortByMaterial {
             });
         // Ended paths hand their radiance to their samples (a scatter by sample index).
         for &slot in &order[kept..] {
-            s.finish_path(slot as usize);
+            let slot = slot as usize;
+            sample_radiance[paths.sample[slot] as usize] = paths.radiance[slot];
         }
         order.truncate(kept);
-        s.scratch.order = order;
-        s.reorder();
-        s.ranges = MaterialRanges {
+        // Moves the kept paths to slots 0..kept. Only what later systems of the bounce read
+        // moves: the path state, the ray direction (wo) and the hit's triangle and
+        // barycentrics. The ray origins and hit distances left behind are stale until shading
+        // and tracing write them again.
+        {
+            use crate::components::gather_column;
+            use std::mem::swap;
+            scratch.paths.gather_from(paths, &order);
+            gather_column(&mut scratch.rays.dir, &rays.dir, &order);
+            gather_column(&mut scratch.hits.triangle, &hits.triangle, &order);
+            gather_column(&mut scratch.hits.b1, &hits.b1, &order);
+            gather_column(&mut scratch.hits.b2, &hits.b2, &order);
+            swap(paths, &mut scratch.paths);
+            swap(&mut rays.dir, &mut scratch.rays.dir);
+            swap(&mut hits.triangle, &mut scratch.hits.triangle);
+            swap(&mut hits.b1, &mut scratch.hits.b1);
+            swap(&mut hits.b2, &mut scratch.hits.b2);
+        }
+        *active = kept;
+        scratch.order = order;
+        *ranges = MaterialRanges {
             diffuse: 0..counts[0],
             conductor: counts[0]..counts[0] + counts[1],
             dielectric: counts[0] + counts[1]..kept,

@@ -3,9 +3,11 @@
 
 use crate::accel::offset_ray_origin;
 use crate::bsdf::{BsdfSample, Material};
-use crate::components::{Hits, PathFlags, PathsChunk, RaysChunk, Surfaces, SurfacesView};
+use crate::components::{
+    Hits, PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView,
+};
 use crate::integrators::SceneData;
-use crate::integrators::pt::{DIM_BSDF, PtState, bounce_dim};
+use crate::integrators::pt::{DIM_BSDF, bounce_dim};
 use crate::math::Frame;
 use crate::pipeline::Flow;
 use glam::{Vec2, Vec3};
@@ -78,15 +80,17 @@ impl Surface {
 /// surface. Returns the flow (paths taken, paths that scatter on).
 #[inline]
 pub fn scatter_paths(
-    s: &mut PtState,
+    data: &SceneData,
+    hits: &Hits,
+    surfaces: &Surfaces,
+    rays: &mut Rays,
+    paths: &mut Paths,
     range: Range<usize>,
     sample: impl Fn(&Surface, Vec2) -> Option<BsdfSample> + Sync,
 ) -> Flow {
-    let data = &*s.data;
-    let (hits, surfaces) = (&s.hits, &s.surfaces);
     let taken = range.len();
-    let rays = s.rays.chunks_mut(range.clone());
-    let paths = s.paths.chunks_mut(range);
+    let rays = rays.chunks_mut(range.clone());
+    let paths = paths.chunks_mut(range);
     let scattered: usize = rays
         .into_par_iter()
         .zip(paths)

@@ -1,33 +1,39 @@
 //! Finds the closest hit of every live ray.
 
 use crate::accel::{Accel, Hit};
-use crate::components::{Hits, HitsChunk, MISS, Rays};
-use crate::pipeline::{Flow, System};
+use crate::components::{HitsChunk, MISS, Rays};
+use crate::integrators::{bdpt::BdptState, camera_walk::CameraWalk, pt::PtState};
+use crate::photons::PhotonPass;
+use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
 
-/// A state with a queue of rays to trace for closest hits (slots `0..len`). A ray whose
-/// direction is zero is absent (its path has ended): it is not traced and finds nothing.
-pub trait ClosestHitQueue {
-    fn closest_hit_queue(&mut self) -> (&Accel, &Rays, &mut Hits, usize);
-}
-
+/// Traces rays `0..live` of a state's ray queue. A ray whose direction is zero is absent (its
+/// path has ended): it is not traced and finds nothing.
 pub struct TraceClosest;
 
-impl<S: ClosestHitQueue + Send> System<S> for TraceClosest {
-    fn name(&self) -> &'static str {
-        "trace_closest"
+crate::system! {
+    TraceClosest = "trace_closest";
+    on PtState {
+        read accel = data.accel, rays, live = active;
+        write hits;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["rays"]
+    on BdptState {
+        read accel = data.accel, rays, live = active;
+        write hits;
     }
-    fn writes(&self) -> &'static [&'static str] {
-        &["hits"]
+    on PhotonPass {
+        read accel = data.accel, rays = tracing.rays, live = tracing.active;
+        write hits = tracing.hits;
     }
-    fn run(&self, state: &mut S) -> Flow {
-        let (accel, rays, hits, len) = state.closest_hit_queue();
+    on CameraWalk {
+        read accel = data.accel, rays, live = active;
+        write hits;
+    }
+    run {
+        let accel: &Accel = accel;
         let (traced, found) = hits
-            .chunks_mut(0..len)
+            .chunks_mut(0..*live)
             .into_par_iter()
             .map(|h| {
                 #[cfg(target_arch = "x86_64")]

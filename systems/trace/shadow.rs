@@ -1,33 +1,37 @@
 //! Tests every shadow ray for occlusion (any hit before its end).
 
 use crate::accel::Accel;
-use crate::components::{ShadowRays, ShadowRaysChunk};
-use crate::pipeline::{Flow, System};
+use crate::components::ShadowRaysChunk;
+use crate::integrators::{bdpt::BdptState, pm::PmState, pt::PtState, sppm::ProgressiveState};
+use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
-use std::ops::Range;
 
-/// A state with a queue of shadow rays; a ray with `t_max == 0` is absent.
-pub trait ShadowQueue {
-    fn shadow_queue(&mut self) -> (&Accel, &mut ShadowRays, Range<usize>);
-}
-
+/// Tests shadow rays `0..len` of a state; a ray with `t_max == 0` is absent.
 pub struct TraceShadow;
 
-impl<S: ShadowQueue + Send> System<S> for TraceShadow {
-    fn name(&self) -> &'static str {
-        "trace_shadow"
+crate::system! {
+    TraceShadow = "trace_shadow";
+    on PtState {
+        read accel = data.accel, len = shadow_len;
+        write shadow;
     }
-    fn reads(&self) -> &'static [&'static str] {
-        &["shadow_rays"]
+    on BdptState {
+        read accel = data.accel, len = connections_len;
+        write shadow;
     }
-    fn writes(&self) -> &'static [&'static str] {
-        &["shadow_rays.unoccluded"]
+    on PmState {
+        read accel = data.accel, len = pixels;
+        write shadow;
     }
-    fn run(&self, state: &mut S) -> Flow {
-        let (accel, shadow, range) = state.shadow_queue();
+    on ProgressiveState {
+        read accel = data.accel, len = pixels;
+        write shadow;
+    }
+    run {
+        let accel: &Accel = accel;
         let (taken, unoccluded) = shadow
-            .chunks_mut(range)
+            .chunks_mut(0..*len)
             .into_par_iter()
             .map(|c| {
                 #[cfg(target_arch = "x86_64")]

@@ -1,0 +1,35 @@
+//! Scatters the paths on one material kind: a BSDF sample per path (cosine-weighted at
+//! Lambertian surfaces, visible normals at GGX conductors, Fresnel choice at glass). The graph
+//! holds one of these per material kind its scene uses, each over its kind's contiguous queue.
+
+use super::surface::scatter_paths;
+use crate::bsdf::{MaterialKind, TransportMode};
+use crate::integrators::pt::PtState;
+
+pub struct ShadeMaterial(pub MaterialKind);
+
+impl MaterialKind {
+    /// The name of the shading system of this kind.
+    pub fn shading_system(self) -> &'static str {
+        match self {
+            MaterialKind::Diffuse => "shade_diffuse",
+            MaterialKind::Conductor => "shade_conductor",
+            MaterialKind::Dielectric => "shade_dielectric",
+        }
+    }
+}
+
+crate::system! {
+    ShadeMaterial;
+    name(this) = this.0.shading_system();
+    on PtState {
+        read data, hits, surfaces, ranges;
+        write rays, paths;
+    }
+    run(this) {
+        let range = ranges.of(this.0);
+        scatter_paths(data, hits, surfaces, rays, paths, range, |surf, u| {
+            surf.material.sample(surf.wo_local, u, TransportMode::Radiance)
+        })
+    }
+}
