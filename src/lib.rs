@@ -16,6 +16,7 @@ pub mod film;
 pub mod integrators;
 pub mod math;
 pub mod metrics;
+pub mod mlt;
 pub mod path;
 pub mod photons;
 pub mod pipeline;

@@ -1,0 +1,230 @@
+//! Acceptance with Veach's expected values: the systems `accept_or_reject`,
+//! `splat_expected_values` and `commit_accepted`.
+
+use super::chains::{ChainStates, Contributions, MltCounters};
+use super::mutate::LANE_ACCEPT;
+use crate::components::CHUNK;
+use glam::Vec3;
+use rayon::prelude::*;
+
+/// a = min(1, c_prop / c_cur) for a symmetric proposal. A proposal whose target is zero,
+/// negative, NaN or infinite has a = 0 (never accepted); a current state with no positive
+/// target (an unseeded chain) accepts any valid proposal.
+#[inline]
+pub fn acceptance_probability(current: f32, proposal: f32) -> f32 {
+    if !(proposal.is_finite() && proposal > 0.0) {
+        0.0
+    } else if !(current.is_finite() && current > 0.0) {
+        1.0
+    } else {
+        (proposal / current).min(1.0)
+    }
+}
+
+/// System `accept_or_reject`: per chain a and the decision u < a, u drawn from the step's key
+/// (keyed by chain). Writes `acceptance` and `accepted`; the current state is left as it is
+/// until `splat_expected_values` has used it. Returns the step's counters.
+pub fn accept_or_reject(chains: &mut ChainStates) -> MltCounters {
+    let keys = &chains.step_key;
+    let large = &chains.large_step;
+    let current = &chains.current_contributions.target;
+    let proposal = &chains.proposal_contributions.target;
+    chains
+        .acceptance
+        .par_chunks_mut(CHUNK)
+        .zip(chains.accepted.par_chunks_mut(CHUNK))
+        .enumerate()
+        .map(|(c, (acceptance, accepted))| {
+            let mut counts = MltCounters::default();
+            for (local, (a_out, accepted_out)) in acceptance.iter_mut().zip(accepted).enumerate() {
+                let i = c * CHUNK + local;
+                let c_prop = proposal[i];
+                let a = acceptance_probability(current[i], c_prop);
+                let accept = keys[i].get(LANE_ACCEPT) < a;
+                *a_out = a;
+                *accepted_out = accept;
+                counts.steps += 1;
+                counts.accepted += accept as u64;
+                if large[i] {
+                    counts.large_proposed += 1;
+                    counts.large_accepted += accept as u64;
+                } else {
+                    counts.small_proposed += 1;
+                    counts.small_accepted += accept as u64;
+                }
+                if c_prop == 0.0 {
+                    counts.rejected_zero += 1;
+                } else if !(c_prop.is_finite() && c_prop > 0.0) {
+                    counts.rejected_invalid += 1;
+                }
+            }
+            counts
+        })
+        .reduce(MltCounters::default, |a, b| a + b)
+}
+
+/// One weighted contribution for the film's splat sums.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Splat {
+    pub pixel: u32,
+    pub value: Vec3,
+}
+
+/// The splats of one step, one list per `CHUNK` of chains; each list in chain order, so
+/// reading the lists in chunk order is chain order, and an f64 film sum over them does not
+/// depend on the thread count. The lists keep their capacity from step to step.
+#[derive(Clone, Debug, Default)]
+pub struct ChainSplats {
+    chunks: Vec<Vec<Splat>>,
+}
+
+impl ChainSplats {
+    pub fn new() -> ChainSplats {
+        ChainSplats::default()
+    }
+
+    /// Every splat of the step, in chain order.
+    pub fn iter(&self) -> impl Iterator<Item = &Splat> + '_ {
+        self.chunks.iter().flatten()
+    }
+
+    pub fn len(&self) -> usize {
+        self.chunks.iter().map(Vec::len).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.chunks.iter().all(Vec::is_empty)
+    }
+}
+
+/// System `splat_expected_values`: per chain, the proposal's contributions with weight
+/// a / c_prop and the current state's with (1 - a) / c_cur, both times the chain's
+/// `splat_scale` (Veach's expected values: every step deposits `splat_scale` units of target
+/// whatever it decides, and rejected proposals still count). Zero weights emit nothing.
+/// Replaces `splats`' lists; per chain the proposal's splats come first.
+pub fn splat_expected_values(chains: &ChainStates, splats: &mut ChainSplats) {
+    let n_chunks = chains.chains().div_ceil(CHUNK);
+    splats.chunks.resize_with(n_chunks, Vec::new);
+    let (current, proposal) = (
+        &chains.current_contributions,
+        &chains.proposal_contributions,
+    );
+    let (acceptance, scale) = (&chains.acceptance, &chains.splat_scale);
+    splats
+        .chunks
+        .par_iter_mut()
+        .enumerate()
+        .for_each(|(c, out)| {
+            out.clear();
+            let end = ((c + 1) * CHUNK).min(chains.chains());
+            for i in c * CHUNK..end {
+                let a = acceptance[i];
+                if a > 0.0 {
+                    emit(out, proposal, i, scale[i] * a / proposal.target[i]);
+                }
+                let c_cur = current.target[i];
+                if a < 1.0 && c_cur.is_finite() && c_cur > 0.0 {
+                    emit(out, current, i, scale[i] * (1.0 - a) / c_cur);
+                }
+            }
+        });
+}
+
+#[inline]
+fn emit(out: &mut Vec<Splat>, state: &Contributions, chain: usize, weight: f32) {
+    for (pixel, value) in state.entries(chain) {
+        if value != Vec3::ZERO {
+            out.push(Splat {
+                pixel,
+                value: value * weight,
+            });
+        }
+    }
+}
+
+/// System `commit_accepted`: accepted chains take their proposal (vector and contributions)
+/// as their current state. One column at a time, parallel over fixed chunks.
+pub fn commit_accepted(chains: &mut ChainStates) {
+    let accepted = &chains.accepted;
+    for dim in 0..chains.current.dims() {
+        chains
+            .current
+            .column_mut(dim)
+            .par_chunks_mut(CHUNK)
+            .zip(chains.proposal.column(dim).par_chunks(CHUNK))
+            .zip(accepted.par_chunks(CHUNK))
+            .for_each(|((current, proposal), accepted)| {
+                for ((x, &p), &accept) in current.iter_mut().zip(proposal).zip(accepted) {
+                    if accept {
+                        *x = p;
+                    }
+                }
+            });
+    }
+    let proposal = &chains.proposal_contributions;
+    let stride = proposal.stride();
+    chains
+        .current_contributions
+        .par_chunks_mut()
+        .for_each(|chunk| {
+            for local in 0..chunk.len() {
+                let i = chunk.first_chain + local;
+                if !accepted[i] {
+                    continue;
+                }
+                let n = proposal.count[i] as usize;
+                let (from, to) = (i * stride, local * stride);
+                chunk.pixel[to..to + n].copy_from_slice(&proposal.pixel[from..from + n]);
+                chunk.value[to..to + n].copy_from_slice(&proposal.value[from..from + n]);
+                chunk.count[local] = n as u32;
+                chunk.target[local] = proposal.target[i];
+            }
+        });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mlt::mutate::{MutationSettings, propose_mutations};
+
+    #[test]
+    fn zero_and_non_finite_proposals_are_never_accepted_and_are_counted() {
+        let bad = [0.0, -1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
+        let chains = 4000;
+        let mut s = ChainStates::new(chains, 2, 1);
+        for i in 0..chains {
+            s.current_contributions.set_single(i, 7, Vec3::splat(2.0));
+            let t = bad[i % bad.len()];
+            s.proposal_contributions.set_single(i, 9, Vec3::splat(t));
+            s.proposal_contributions.target[i] = t;
+        }
+        propose_mutations(&mut s, &MutationSettings::PSSMLT, 1, 0);
+        let counts = accept_or_reject(&mut s);
+        assert_eq!(counts.steps, chains as u64);
+        assert_eq!(counts.accepted, 0);
+        assert_eq!(counts.rejected_zero, (chains / bad.len()) as u64);
+        assert_eq!(
+            counts.rejected_invalid,
+            (chains - chains / bad.len()) as u64
+        );
+        assert!(s.acceptance.iter().all(|&a| a == 0.0));
+        // Only the current states are splatted, each with its whole unit of target.
+        let mut splats = ChainSplats::new();
+        splat_expected_values(&s, &mut splats);
+        assert_eq!(splats.len(), chains);
+        assert!(splats.iter().all(|s| s.pixel == 7));
+        let before = s.current_contributions.target.clone();
+        commit_accepted(&mut s);
+        assert_eq!(s.current_contributions.target, before);
+    }
+
+    #[test]
+    fn acceptance_follows_the_ratio_and_an_empty_current_state_accepts() {
+        assert_eq!(acceptance_probability(2.0, 1.0), 0.5);
+        assert_eq!(acceptance_probability(1.0, 3.0), 1.0);
+        assert_eq!(acceptance_probability(0.0, 3.0), 1.0);
+        assert_eq!(acceptance_probability(0.0, 0.0), 0.0);
+        assert_eq!(acceptance_probability(f32::NAN, 1.0), 1.0);
+        assert_eq!(acceptance_probability(1e-30, f32::MAX), 1.0);
+    }
+}

@@ -1,0 +1,58 @@
+//! Metropolis light transport in primary sample space: the engine-independent kernel of
+//! `pssmlt` (Kelemen over full BDPT) and `mmlt` (multiplexed MLT, as pbrt-v4).
+//!
+//! Many chains run in lock step, one chain per wavefront slot, their state in
+//! structure-of-arrays columns (`ChainStates`, sized once and reused every step). Every random
+//! number is a pure function of (seed, chain, step, lane) and all parallel work is split into
+//! fixed `CHUNK`s of chains, so results are bit-identical for any thread count.
+//!
+//! # How the renderer's graphs use these pieces
+//!
+//! Graph `bootstrap` (once, or at each reseeding):
+//! 1. the BDPT graph with its own sample keys; per bootstrap sample and group (MMLT: depth k,
+//!    PSSMLT: one group) the weight = luminance of its (MIS-weighted) contribution, zeros kept;
+//! 2. `needs_more_bootstrap(groups, mutations_per_pixel)`: draw more bootstrap samples until
+//!    false (b's relative error under half the image's; formula in `seeds`);
+//! 3. `select_seeds(groups, chains, seed)` -> `SeedSelection` (b_k, chains per group by largest
+//!    remainder, each chain's candidate by stratified resampling), then
+//!    `SeedSelection::apply(&mut chains)` (group = depth and splat scale per chain);
+//! 4. the renderer replays each chain's candidate into `chains.current` (the numbers its sample
+//!    key gave) and evaluates it into `chains.current_contributions`.
+//!
+//! Graph `mutations`, per step `step` (one step = one mutation of every chain):
+//! 1. `propose_mutations(&mut chains, &settings, seed, step)`: `chains.proposal`, a whole
+//!    dimension column for all chains at a time (large step: fresh uniforms; small step:
+//!    `SmallStep` on every dimension);
+//! 2. the evaluation systems (BDPT at the chain's `group` depth for MMLT) read their numbers
+//!    from `chains.proposal` instead of the hash, and write per chain the target c (luminance)
+//!    and the (pixel, RGB) contributions into `chains.proposal_contributions`
+//!    (`Contributions::par_chunks_mut` for parallel writers);
+//! 3. `accept_or_reject(&mut chains)` -> the step's `MltCounters`: a = min(1, c_prop / c_cur)
+//!    and the decision u < a, per chain;
+//! 4. `splat_expected_values(&chains, &mut splats)`: proposal x a / c_prop and current x
+//!    (1 - a) / c_cur, times the chain's splat scale; the renderer adds `splats.iter()` (chain
+//!    order) to the f64 splat film;
+//! 5. `commit_accepted(&mut chains)`: accepted chains take their proposal.
+//!
+//! The image is the film's splat sums x (pixel count) / (steps per chain): each step deposits
+//! b_k / chains_k units of luminance per chain of group k, so the image's mean luminance is b.
+
+mod accept;
+mod chains;
+mod mutate;
+mod seeds;
+
+pub use accept::{
+    ChainSplats, Splat, accept_or_reject, acceptance_probability, commit_accepted,
+    splat_expected_values,
+};
+pub use chains::{ChainStates, Contributions, ContributionsChunk, MltCounters};
+pub use mutate::{MutationSettings, SmallStep, propose_mutations, step_key, wrap_unit};
+pub use seeds::{
+    BOOTSTRAP_NOISE_FRACTION, BootstrapError, MIN_BOOTSTRAP_SAMPLES, SeedSelection,
+    allocate_largest_remainder, bootstrap_error, bootstrap_samples_needed, group_normalisation,
+    needs_more_bootstrap, resample_stratified, select_seeds, usable_weight,
+};
+
+#[cfg(test)]
+mod tests;
