@@ -402,7 +402,13 @@ fn render_command(args: &RenderArgs) -> Result<i32> {
         stop: &stop,
         progress: &progress,
     };
-    if args.strategy_images.is_some() && args.integrator != IntegratorKind::Bdpt {
+    if args.strategy_images.is_some()
+        && !args
+            .integrator
+            .info()
+            .options
+            .contains(&"--strategy-images")
+    {
         bail!("--strategy-images needs --integrator bdpt");
     }
     let settings = RenderSettings {
@@ -886,7 +892,7 @@ fn compare_plan(args: &CompareArgs) -> Result<ComparePlan> {
         integrators.push(k);
     }
     if integrators.is_empty() {
-        integrators = IntegratorKind::BUILT.to_vec();
+        integrators = IntegratorKind::all();
     }
     Ok(ComparePlan {
         integrators,
@@ -992,7 +998,7 @@ fn compare_scene(
             let job = ReferenceJob {
                 scene_path: scene,
                 data: data.clone(),
-                integrator: IntegratorKind::Pt,
+                integrator: IntegratorKind::named("pt"),
                 settings: RenderSettings {
                     seed: DEFAULT_REFERENCE_SEED,
                     max_depth: plan.settings.max_depth,

@@ -3,7 +3,7 @@
 
 mod common;
 use common::*;
-use stagelight::integrators::{SceneData, bdpt, pm, pt, sppm};
+use stagelight::integrators::{IntegratorKind, IntegratorState, RenderSettings, SceneData, pt};
 
 const SCENES: [&str; 4] = [
     "cornell_box.ron",
@@ -21,19 +21,19 @@ fn pt_systems(scene: &str) -> Vec<&'static str> {
 fn every_graph_of_every_integrator_reads_only_what_was_written_before() {
     for scene in SCENES {
         let data = SceneData::new(load_small(scene, 8));
-        let caustics = pt::used_kinds(&data).contains(&stagelight::bsdf::MaterialKind::Dielectric);
-        let mut problems = Vec::new();
-        problems.extend(pt::graph(&data).check(pt::INPUTS));
-        problems.extend(bdpt::graph().check(bdpt::INPUTS));
-        problems.extend(sppm::graph().check(sppm::INPUTS));
-        for final_gather in [true, false] {
-            let settings = pm::PmSettings {
-                final_gather,
-                ..pm::PmSettings::new(0)
-            };
-            problems.extend(pm::graph(&settings, caustics).check(pm::INPUTS));
+        for kind in IntegratorKind::all() {
+            for final_gather in [true, false] {
+                let mut settings = RenderSettings::default();
+                settings.photons.final_gather = final_gather;
+                let report = (kind.info().graph)(&data, &settings);
+                assert!(
+                    report.problems.is_empty(),
+                    "{scene}, {kind}:\n{}{:#?}",
+                    report.description,
+                    report.problems
+                );
+            }
         }
-        assert!(problems.is_empty(), "{scene}: {problems:#?}");
     }
 }
 
@@ -42,7 +42,7 @@ fn the_check_finds_a_read_before_its_write() {
     let data = SceneData::new(load_small("cornell_box.ron", 8));
     let graph = pt::graph(&data);
     // Without the wave set by the driver, the camera rays read what nobody wrote.
-    let inputs: Vec<&str> = pt::INPUTS
+    let inputs: Vec<&str> = <pt::PtState as IntegratorState>::INPUTS
         .iter()
         .copied()
         .filter(|c| *c != "wave")

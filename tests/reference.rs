@@ -37,7 +37,7 @@ fn reference(
     checkpoint_every: Duration,
 ) -> Result<stagelight::reference::ReferenceOutcome, stagelight::reference::ReferenceError> {
     reference_with(
-        IntegratorKind::Pt,
+        IntegratorKind::named("pt"),
         data,
         seed,
         spp,
@@ -125,11 +125,27 @@ fn a_bdpt_reference_resumes_with_its_splats() {
     let dir = temp_dir("bdpt");
     let data = small("cornell_box.ron", 12);
     let resumed = dir.join("resumed.exr");
-    reference_with(IntegratorKind::Bdpt, &data, 5, 2, &resumed, Duration::ZERO).unwrap();
-    reference_with(IntegratorKind::Bdpt, &data, 5, 5, &resumed, Duration::ZERO).unwrap();
+    reference_with(
+        IntegratorKind::named("bdpt"),
+        &data,
+        5,
+        2,
+        &resumed,
+        Duration::ZERO,
+    )
+    .unwrap();
+    reference_with(
+        IntegratorKind::named("bdpt"),
+        &data,
+        5,
+        5,
+        &resumed,
+        Duration::ZERO,
+    )
+    .unwrap();
     let whole = dir.join("whole.exr");
     reference_with(
-        IntegratorKind::Bdpt,
+        IntegratorKind::named("bdpt"),
         &data,
         5,
         5,

@@ -7,7 +7,7 @@
 use super::Comparison;
 use super::report::{ReportError, report_error, sci, secs, slope_of};
 use crate::film::{Image, srgb8};
-use crate::integrators::KNOWN_INTEGRATORS;
+use crate::integrators::known_integrators;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::FontStyle;
@@ -35,7 +35,7 @@ pub fn integrator_colour(name: &str) -> RGBColor {
         RGBColor(148, 103, 189),
         RGBColor(140, 86, 75),
     ];
-    let i = KNOWN_INTEGRATORS
+    let i = known_integrators()
         .iter()
         .position(|&n| n == name)
         .unwrap_or(0);

@@ -22,8 +22,11 @@
 
 use crate::components::{Connections, Hits, PathVertices, Rays, ShadowRays, Walkers};
 use crate::film::{Film, Image};
-use crate::integrators::pt::{ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL, Wave};
-use crate::integrators::{Budget, Control, RenderOutcome, Resume, SceneData, WavePlan};
+use crate::integrators::driver::render_waves;
+use crate::integrators::pt::{ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL};
+use crate::integrators::{
+    Budget, Control, IntegratorState, RenderOutcome, RenderSettings, SceneData, Wave, WaveState,
+};
 use crate::path::MisHeuristic;
 use crate::pipeline::{Graph, Node, Stats};
 use crate::sampling::SampleKey;
@@ -108,6 +111,16 @@ pub struct BdptSettings {
     pub strategies: StrategyFilter,
     /// Keep each strategy's weighted contribution as its own image.
     pub strategy_images: bool,
+}
+
+impl From<&RenderSettings> for BdptSettings {
+    fn from(s: &RenderSettings) -> BdptSettings {
+        BdptSettings {
+            mis: s.mis,
+            strategy_images: s.strategy_images,
+            ..BdptSettings::new(s.seed, s.max_depth)
+        }
+    }
 }
 
 impl BdptSettings {
@@ -226,18 +239,6 @@ impl BdptState {
     }
 }
 
-/// Columns the driver sets before the graph runs (for `Graph::check`).
-pub const INPUTS: &[&str] = &[
-    "data",
-    "settings",
-    "pixels",
-    "wave",
-    "capacity",
-    "film",
-    "strategy_sums",
-    "scratch",
-];
-
 /// The BDPT graph (the same for every scene: material code runs only for materials present).
 pub fn graph() -> Graph<BdptState> {
     let mut nodes = subpath_nodes();
@@ -277,6 +278,55 @@ pub fn roulette_applies(d: usize) -> bool {
     d >= ROULETTE_DEPTH as usize
 }
 
+impl IntegratorState for BdptState {
+    type Settings = BdptSettings;
+    const INPUTS: &'static [&'static str] = &[
+        "data",
+        "settings",
+        "pixels",
+        "wave",
+        "capacity",
+        "film",
+        "strategy_sums",
+        "scratch",
+    ];
+    fn graph(_: &SceneData, _: &BdptSettings) -> Graph<BdptState> {
+        graph()
+    }
+}
+
+impl WaveState for BdptState {
+    const WAVEFRONT: usize = WAVEFRONT;
+    fn new(data: Arc<SceneData>, settings: BdptSettings, capacity: usize) -> BdptState {
+        BdptState::new(data, settings, capacity)
+    }
+    fn begin_wave(&mut self, wave: Wave) {
+        self.wave = wave;
+    }
+    fn film_mut(&mut self) -> &mut Film {
+        &mut self.film
+    }
+    /// The strategy images (`s{s}_t{t}`) cover the passes of this run only.
+    fn finish(self, new_passes: u64) -> (Film, Vec<(String, Image)>, usize) {
+        let (width, height) = (self.film.width, self.film.height);
+        let new_passes = new_passes.max(1) as f64;
+        let bytes_per_path = self.bytes_per_sample();
+        let layers = self
+            .strategy_sums
+            .iter()
+            .map(|(&(s, t), sums)| {
+                let image = Image {
+                    width,
+                    height,
+                    pixels: sums.iter().map(|v| (*v / new_passes).as_vec3()).collect(),
+                };
+                (format!("s{s}_t{t}"), image)
+            })
+            .collect();
+        (self.film, layers, bytes_per_path)
+    }
+}
+
 /// Renders with BDPT until the budget is spent or a stop is asked for; with
 /// `settings.strategy_images`, the outcome's layers hold each strategy's image (`s{s}_t{t}`).
 pub fn render(
@@ -285,66 +335,7 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    render_from(data, settings, budget, control, None)
-}
-
-/// As `render`, continuing from the finished passes of `from` when given (see
-/// `integrators::resume`; strategy images cover the new passes only).
-pub fn render_from(
-    data: Arc<SceneData>,
-    settings: BdptSettings,
-    budget: Budget,
-    control: &Control,
-    from: Option<Resume>,
-) -> RenderOutcome {
-    let cam = data.scene.camera;
-    let pixels = cam.width as u64 * cam.height as u64;
-    let graph = graph();
-    let first_pass = from.as_ref().map_or(0, |r| r.passes);
-    let mut plan = WavePlan::starting_at(pixels, budget, WAVEFRONT, first_pass);
-    let mut state = BdptState::new(data, settings, plan.capacity());
-    if let Some(from) = from {
-        assert!(
-            from.film.width == cam.width as usize
-                && from.film.height == cam.height as usize
-                && from.film.total_samples() == from.passes * pixels,
-            "a resumed film must hold whole passes of this camera's image"
-        );
-        state.film = from.film;
-    }
-    let mut stats = Stats::default();
-    while let Some((first, len)) = plan.next_wave(control) {
-        state.wave = Wave { first, len };
-        graph.run(&mut state, &mut stats);
-        (control.progress)(plan.passes_done(), plan.total_passes());
-    }
-    let interrupted = control.stopped() && !plan.budget_spent();
-    let new_passes = (plan.passes_done() - first_pass).max(1) as f64;
-    let bytes_per_path = state.bytes_per_sample();
-    let layers = state
-        .strategy_sums
-        .iter()
-        .map(|(&(s, t), sums)| {
-            let image = Image {
-                width: cam.width as usize,
-                height: cam.height as usize,
-                pixels: sums.iter().map(|v| (*v / new_passes).as_vec3()).collect(),
-            };
-            (format!("s{s}_t{t}"), image)
-        })
-        .collect();
-    RenderOutcome {
-        samples: plan.next,
-        passes: plan.passes_done(),
-        wall: plan.elapsed(),
-        film: state.film,
-        stats,
-        interrupted,
-        systems: graph.system_names(),
-        bytes_per_path,
-        wavefront: plan.capacity(),
-        layers,
-    }
+    render_waves::<BdptState>(data, settings, budget, control, None)
 }
 
 /// The subpaths of samples `first..first + len` (global sample ids), camera and light, as the

@@ -6,33 +6,160 @@ pub mod pt;
 pub mod sppm;
 
 pub mod camera_walk;
+pub mod driver;
 
 pub use crate::scene::SceneData;
+pub use driver::{IntegratorState, PassState, Wave, WaveState};
 
 use crate::film::Film;
 use crate::pipeline::Stats;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-/// The integrators built into this binary. Adding one takes a variant, its name in `as_str`
-/// and `description`, its entry in `BUILT`, and a match arm in `run`.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum IntegratorKind {
-    /// Path tracing with next-event estimation and MIS.
-    Pt,
-    /// Bidirectional path tracing: every strategy (s, t), MIS-weighted.
-    Bdpt,
-    /// Photon mapping: photon maps traced once, final gathering.
-    Pm,
-    /// Progressive photon mapping: visible points found once, passes of photons.
-    Ppm,
-    /// Stochastic progressive photon mapping: new visible points every pass.
-    Sppm,
+/// One integrator as the CLI, `compare`, `reference` and the thesis preset see it. Adding an
+/// integrator takes its file (state, settings and graph), its systems, and one entry in
+/// `REGISTRY`.
+pub struct IntegratorInfo {
+    pub name: &'static str,
+    pub description: &'static str,
+    /// Unbiased integrators can make references and resume from a checkpoint; the photon
+    /// mappers are consistent but biased.
+    pub unbiased: bool,
+    /// The `render` options that concern it, besides the common ones.
+    pub options: &'static [&'static str],
+    /// Renders (from `Resume` when given: only unbiased integrators are asked to).
+    pub render:
+        fn(Arc<SceneData>, &RenderSettings, Budget, &Control, Option<Resume>) -> RenderOutcome,
+    /// Its graph for a scene, described (`stagelight graph`), and the graph's data-flow check.
+    pub graph: fn(&SceneData, &RenderSettings) -> GraphReport,
 }
 
+/// An integrator's graph for a scene: its description and its check's problems.
+pub struct GraphReport {
+    pub description: String,
+    pub problems: Vec<String>,
+}
+
+fn graph_report<S: IntegratorState>(data: &SceneData, settings: &S::Settings) -> GraphReport {
+    let graph = S::graph(data, settings);
+    GraphReport {
+        description: graph.describe(),
+        problems: graph.check(S::INPUTS),
+    }
+}
+
+/// Every integrator built into this binary, in the order reports list them.
+pub static REGISTRY: [IntegratorInfo; 5] = [
+    IntegratorInfo {
+        name: "pt",
+        description: "path tracing with next-event estimation and MIS",
+        unbiased: true,
+        options: &[],
+        render: |data, s, budget, control, from| {
+            driver::render_waves::<pt::PtState>(
+                data,
+                pt::PtSettings::from(s),
+                budget,
+                control,
+                from,
+            )
+        },
+        graph: |data, s| graph_report::<pt::PtState>(data, &pt::PtSettings::from(s)),
+    },
+    IntegratorInfo {
+        name: "bdpt",
+        description: "bidirectional path tracing, every strategy MIS-weighted",
+        unbiased: true,
+        options: &["--mis", "--strategy-images"],
+        render: |data, s, budget, control, from| {
+            let settings = bdpt::BdptSettings::from(s);
+            driver::render_waves::<bdpt::BdptState>(data, settings, budget, control, from)
+        },
+        graph: |data, s| graph_report::<bdpt::BdptState>(data, &bdpt::BdptSettings::from(s)),
+    },
+    IntegratorInfo {
+        name: "pm",
+        description: "photon mapping: global and caustic maps, final gathering",
+        unbiased: false,
+        options: &["--photons", "--k", "--max-radius", "--no-final-gather"],
+        render: |data, s, budget, control, _| {
+            driver::render_passes::<pm::PmState>(data, pm::PmSettings::from(s), budget, control)
+        },
+        graph: |data, s| graph_report::<pm::PmState>(data, &pm::PmSettings::from(s)),
+    },
+    IntegratorInfo {
+        name: "ppm",
+        description: "progressive photon mapping (visible points found once)",
+        unbiased: false,
+        options: &["--photons-per-pass", "--alpha", "--radius"],
+        render: |data, s, budget, control, _| {
+            let settings = sppm::ProgressiveSettings::from_render(s, false);
+            driver::render_passes::<sppm::ProgressiveState>(data, settings, budget, control)
+        },
+        graph: |data, s| {
+            let settings = sppm::ProgressiveSettings::from_render(s, false);
+            graph_report::<sppm::ProgressiveState>(data, &settings)
+        },
+    },
+    IntegratorInfo {
+        name: "sppm",
+        description: "stochastic progressive photon mapping",
+        unbiased: false,
+        options: &["--photons-per-pass", "--alpha", "--radius"],
+        render: |data, s, budget, control, _| {
+            let settings = sppm::ProgressiveSettings::from_render(s, true);
+            driver::render_passes::<sppm::ProgressiveState>(data, settings, budget, control)
+        },
+        graph: |data, s| {
+            let settings = sppm::ProgressiveSettings::from_render(s, true);
+            graph_report::<sppm::ProgressiveState>(data, &settings)
+        },
+    },
+];
+
+/// Integrators the study names that this binary does not build yet.
+pub const PLANNED: &[&str] = &["mlt"];
+
 /// Every integrator name the project knows, built or planned, in the order reports list them.
-pub const KNOWN_INTEGRATORS: [&str; 6] = ["pt", "bdpt", "pm", "ppm", "sppm", "mlt"];
+pub fn known_integrators() -> Vec<&'static str> {
+    REGISTRY
+        .iter()
+        .map(|i| i.name)
+        .chain(PLANNED.iter().copied())
+        .collect()
+}
+
+/// An integrator of `REGISTRY`: a copyable handle that compares by registry position.
+#[derive(Clone, Copy)]
+pub struct IntegratorKind(&'static IntegratorInfo);
+
+impl PartialEq for IntegratorKind {
+    fn eq(&self, other: &Self) -> bool {
+        std::ptr::eq(self.0, other.0)
+    }
+}
+impl Eq for IntegratorKind {}
+impl std::hash::Hash for IntegratorKind {
+    fn hash<H: std::hash::Hasher>(&self, state: &mut H) {
+        self.index().hash(state)
+    }
+}
+impl PartialOrd for IntegratorKind {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for IntegratorKind {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.index().cmp(&other.index())
+    }
+}
+impl std::fmt::Debug for IntegratorKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.0.name)
+    }
+}
 
 /// A name that is not an integrator of this binary.
 #[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
@@ -41,63 +168,63 @@ pub enum IntegratorNameError {
     NotBuilt(String),
     #[error(
         "unknown integrator \"{0}\" (known: {known}; built: {built})",
-        known = KNOWN_INTEGRATORS.join(", "),
+        known = known_integrators().join(", "),
         built = built_names()
     )]
     Unknown(String),
 }
 
 fn built_names() -> String {
-    IntegratorKind::BUILT
+    REGISTRY
         .iter()
-        .map(|k| k.as_str())
+        .map(|i| i.name)
         .collect::<Vec<_>>()
         .join(", ")
 }
 
 impl IntegratorKind {
-    /// The integrators this binary can run, in the order of `KNOWN_INTEGRATORS`.
-    pub const BUILT: &'static [IntegratorKind] = &[
-        IntegratorKind::Pt,
-        IntegratorKind::Bdpt,
-        IntegratorKind::Pm,
-        IntegratorKind::Ppm,
-        IntegratorKind::Sppm,
-    ];
+    /// Every integrator this binary can run, in registry order.
+    pub fn all() -> Vec<IntegratorKind> {
+        REGISTRY.iter().map(IntegratorKind).collect()
+    }
+
+    /// The integrator of a name the code itself uses (panics on a name not in the registry).
+    pub fn named(name: &str) -> IntegratorKind {
+        Self::from_name(name).unwrap_or_else(|e| panic!("{e}"))
+    }
+
+    pub fn info(self) -> &'static IntegratorInfo {
+        self.0
+    }
+
+    fn index(self) -> usize {
+        REGISTRY
+            .iter()
+            .position(|i| std::ptr::eq(i, self.0))
+            .expect("a kind points into the registry")
+    }
 
     pub fn as_str(self) -> &'static str {
-        match self {
-            IntegratorKind::Pt => "pt",
-            IntegratorKind::Bdpt => "bdpt",
-            IntegratorKind::Pm => "pm",
-            IntegratorKind::Ppm => "ppm",
-            IntegratorKind::Sppm => "sppm",
-        }
+        self.0.name
     }
 
     pub fn description(self) -> &'static str {
-        match self {
-            IntegratorKind::Pt => "path tracing with next-event estimation and MIS",
-            IntegratorKind::Bdpt => "bidirectional path tracing, every strategy MIS-weighted",
-            IntegratorKind::Pm => "photon mapping: global and caustic maps, final gathering",
-            IntegratorKind::Ppm => "progressive photon mapping (visible points found once)",
-            IntegratorKind::Sppm => "stochastic progressive photon mapping",
-        }
+        self.0.description
     }
 
     /// Whether the integrator is unbiased (its renders can serve as references and resume
     /// from a checkpoint); the photon mappers are consistent but biased.
     pub fn is_unbiased(self) -> bool {
-        matches!(self, IntegratorKind::Pt | IntegratorKind::Bdpt)
+        self.0.unbiased
     }
 
     /// Parses an integrator name (case-insensitive). A planned but unbuilt name is
     /// `NotBuilt`, anything else unknown is `Unknown`.
     pub fn from_name(name: &str) -> Result<IntegratorKind, IntegratorNameError> {
         let lower = name.trim().to_ascii_lowercase();
-        if let Some(&kind) = Self::BUILT.iter().find(|k| k.as_str() == lower) {
-            Ok(kind)
-        } else if KNOWN_INTEGRATORS.contains(&lower.as_str()) {
+        if let Some(info) = REGISTRY.iter().find(|i| i.name == lower) {
+            Ok(IntegratorKind(info))
+        } else if PLANNED.contains(&lower.as_str()) {
             Err(IntegratorNameError::NotBuilt(lower))
         } else {
             Err(IntegratorNameError::Unknown(name.to_string()))
@@ -193,12 +320,11 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    run(kind, data, settings, budget, control, None)
+    (kind.0.render)(data, settings, budget, control, None)
 }
 
-/// Continues a render from its finished passes: a sample budget counts the passes already
-/// done (`SamplesPerPixel(n)` ends at pass n), a time budget counts from now. The outcome's
-/// film, passes and samples are totals, resumed passes included.
+/// Continues a render from its finished passes (see `driver::render_waves`). Only unbiased
+/// integrators resume: callers check `is_unbiased` first (`reference` refuses the others).
 pub fn resume(
     kind: IntegratorKind,
     data: Arc<SceneData>,
@@ -207,104 +333,11 @@ pub fn resume(
     control: &Control,
     from: Resume,
 ) -> RenderOutcome {
-    run(kind, data, settings, budget, control, Some(from))
-}
-
-/// The one dispatch: each integrator's arm renders from `from` when given (the passes it
-/// holds, then on), as `reference` needs to resume; see `pt::render_from`.
-fn run(
-    kind: IntegratorKind,
-    data: Arc<SceneData>,
-    settings: &RenderSettings,
-    budget: Budget,
-    control: &Control,
-    from: Option<Resume>,
-) -> RenderOutcome {
-    match kind {
-        IntegratorKind::Pt => {
-            let pt_settings = pt::PtSettings {
-                seed: settings.seed,
-                max_depth: settings.max_depth,
-            };
-            pt::render_from(data, pt_settings, budget, control, from)
-        }
-        IntegratorKind::Bdpt => {
-            let bdpt_settings = bdpt::BdptSettings {
-                mis: settings.mis,
-                strategy_images: settings.strategy_images,
-                ..bdpt::BdptSettings::new(settings.seed, settings.max_depth)
-            };
-            bdpt::render_from(data, bdpt_settings, budget, control, from)
-        }
-        IntegratorKind::Pm => {
-            refuse_resume(kind, from);
-            let p = settings.photons;
-            let pm_settings = pm::PmSettings {
-                max_depth: settings.max_depth,
-                photons: p.photons,
-                k: p.k,
-                max_radius: p.max_radius,
-                final_gather: p.final_gather,
-                ..pm::PmSettings::new(settings.seed)
-            };
-            pm::render(data, pm_settings, budget, control)
-        }
-        IntegratorKind::Ppm | IntegratorKind::Sppm => {
-            refuse_resume(kind, from);
-            let p = settings.photons;
-            let progressive = sppm::ProgressiveSettings {
-                max_depth: settings.max_depth,
-                photons_per_pass: p.photons_per_pass,
-                alpha: p.alpha,
-                initial_radius: p.radius,
-                ..sppm::ProgressiveSettings::new(settings.seed, kind == IntegratorKind::Sppm)
-            };
-            sppm::render(data, progressive, budget, control)
-        }
-    }
-}
-
-/// Passes of an integrator that renders pass by pass (the photon mappers): calls `pass(i)`
-/// for i = 0, 1, ... until the budget is spent (a sample budget counts passes; a time budget
-/// ends at the first pass boundary past it, after at least one pass) or a stop is asked for,
-/// reporting progress after each. Returns (passes done, whether a stop cut a sample budget
-/// short).
-pub(crate) fn pass_by_pass(
-    budget: Budget,
-    control: &Control,
-    mut pass: impl FnMut(u64),
-) -> (u64, bool) {
-    let start = Instant::now();
-    let total = match budget {
-        Budget::SamplesPerPixel(n) => Some(n),
-        Budget::Seconds(_) => None,
-    };
-    let mut passes = 0;
-    loop {
-        let over = match budget {
-            Budget::SamplesPerPixel(n) => passes >= n,
-            Budget::Seconds(s) => passes > 0 && start.elapsed().as_secs_f64() >= s,
-        };
-        if over || control.stopped() {
-            break;
-        }
-        pass(passes);
-        passes += 1;
-        (control.progress)(passes, total);
-    }
-    (
-        passes,
-        control.stopped() && total.is_some_and(|t| passes < t),
-    )
-}
-
-/// The biased integrators keep per-pixel statistics a film checkpoint does not hold, so they
-/// cannot resume; callers check `is_unbiased` first (`reference` refuses them).
-fn refuse_resume(kind: IntegratorKind, from: Option<Resume>) {
     assert!(
-        from.is_none(),
+        kind.is_unbiased(),
         "{kind} is biased and does not resume (callers check is_unbiased)"
     );
+    (kind.0.render)(data, settings, budget, control, Some(from))
 }
 
 /// How long a render runs: samples per pixel, or wall seconds (whole passes).
@@ -351,116 +384,5 @@ pub struct Control<'a> {
 impl Control<'_> {
     pub fn stopped(&self) -> bool {
         self.stop.load(Ordering::Relaxed)
-    }
-}
-
-/// Paths per wave under a time budget (rounded up to whole passes, at most the wavefront):
-/// enough to keep the cores busy, small enough that the time is checked often.
-pub const TIMED_WAVE_PATHS: u64 = 1 << 16;
-
-/// Plans waves over the global sample ids: whole passes per wave when a pass fits in the
-/// wavefront, else a pass split into wavefront-sized waves. Stops only at pass boundaries.
-pub(crate) struct WavePlan {
-    pub pixels: u64,
-    pub wave_len: u64,
-    pub total: Option<u64>,
-    pub next: u64,
-    /// The first sample id of this render (pass 0, or where a resumed render starts).
-    first: u64,
-    start: Instant,
-    budget: Budget,
-}
-
-impl WavePlan {
-    /// A plan from pass 0 (every integrator that does not resume).
-    #[allow(dead_code)]
-    pub fn new(pixels: u64, budget: Budget, wavefront: usize) -> WavePlan {
-        WavePlan::starting_at(pixels, budget, wavefront, 0)
-    }
-
-    /// A plan whose first wave starts at pass `first_pass` (a resumed render); a sample
-    /// budget still counts from pass 0.
-    pub fn starting_at(pixels: u64, budget: Budget, wavefront: usize, first_pass: u64) -> WavePlan {
-        let next = first_pass * pixels;
-        let wave_len = if pixels <= wavefront as u64 {
-            (wavefront as u64 / pixels) * pixels
-        } else {
-            wavefront as u64
-        };
-        let total = match budget {
-            Budget::SamplesPerPixel(spp) => Some(spp * pixels),
-            Budget::Seconds(_) => None,
-        };
-        let wave_len = match total {
-            Some(t) => wave_len.min(t.saturating_sub(next)),
-            // The clock is read between waves: a time budget takes waves of about
-            // TIMED_WAVE_PATHS paths (whole passes), so it overshoots by a fraction of the
-            // full wavefront's time at most.
-            None => wave_len.min(TIMED_WAVE_PATHS.div_ceil(pixels) * pixels),
-        };
-        WavePlan {
-            pixels,
-            wave_len,
-            total,
-            next,
-            first: next,
-            start: Instant::now(),
-            budget,
-        }
-    }
-
-    /// Slots the state needs.
-    pub fn capacity(&self) -> usize {
-        self.wave_len as usize
-    }
-
-    /// The next wave (first sample id, length), or None when the budget is spent or a stop
-    /// was asked for at a pass boundary.
-    pub fn next_wave(&mut self, control: &Control) -> Option<(u64, usize)> {
-        let at_pass_boundary = self.next.is_multiple_of(self.pixels);
-        if at_pass_boundary {
-            if control.stopped() {
-                return None;
-            }
-            // A time budget renders at least one wave, however long the setup took.
-            if let Budget::Seconds(s) = self.budget
-                && self.next > self.first
-                && self.start.elapsed().as_secs_f64() >= s
-            {
-                return None;
-            }
-        }
-        let mut len = self.wave_len;
-        if let Some(total) = self.total {
-            if self.next >= total {
-                return None;
-            }
-            len = len.min(total - self.next);
-        }
-        // A wave never crosses a pass boundary in the middle of a split pass.
-        if self.wave_len < self.pixels {
-            len = len.min(self.pixels - self.next % self.pixels);
-        }
-        let first = self.next;
-        self.next += len;
-        Some((first, len as usize))
-    }
-
-    /// True when a sample budget has been rendered in full (a time budget never is: it ends
-    /// when the time is up).
-    pub fn budget_spent(&self) -> bool {
-        self.total.is_some_and(|t| self.next >= t)
-    }
-
-    pub fn passes_done(&self) -> u64 {
-        self.next / self.pixels
-    }
-
-    pub fn total_passes(&self) -> Option<u64> {
-        self.total.map(|t| t / self.pixels)
-    }
-
-    pub fn elapsed(&self) -> Duration {
-        self.start.elapsed()
     }
 }

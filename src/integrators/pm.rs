@@ -35,13 +35,15 @@ use crate::bsdf::MaterialKind;
 use crate::components::ShadowRays;
 use crate::film::Film;
 use crate::integrators::camera_walk::{self, CameraWalk};
-use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
+use crate::integrators::driver::render_passes;
+use crate::integrators::{
+    Budget, Control, IntegratorState, PassState, RenderOutcome, RenderSettings, SceneData,
+};
 use crate::photons::{PhotonMaps, PhotonPass};
-use crate::pipeline::{Graph, Node, Stats};
+use crate::pipeline::{Graph, Node};
 use crate::systems::{connect, gather, generate, trace};
 use glam::DVec3;
 use std::sync::Arc;
-use std::time::Instant;
 
 /// Default photons traced.
 pub const DEFAULT_PHOTONS: u64 = 250_000;
@@ -61,6 +63,20 @@ pub struct PmSettings {
     /// scene diagonal).
     pub max_radius: Option<f32>,
     pub final_gather: bool,
+}
+
+impl From<&RenderSettings> for PmSettings {
+    fn from(s: &RenderSettings) -> PmSettings {
+        let p = s.photons;
+        PmSettings {
+            max_depth: s.max_depth,
+            photons: p.photons,
+            k: p.k,
+            max_radius: p.max_radius,
+            final_gather: p.final_gather,
+            ..PmSettings::new(s.seed)
+        }
+    }
 }
 
 impl PmSettings {
@@ -110,8 +126,7 @@ impl PmState {
         let pixels = cam.width as usize * cam.height as usize;
         let mut photon_pass = PhotonPass::new(data.clone(), settings.seed, settings.max_depth);
         photon_pass.tracing.begin_pass(0, settings.photons);
-        let caustics =
-            crate::integrators::pt::used_kinds(&data).contains(&MaterialKind::Dielectric);
+        let caustics = has_caustics(&data);
         PmState {
             settings,
             pixels,
@@ -137,21 +152,6 @@ impl PmState {
             + std::mem::size_of::<DVec3>()
     }
 }
-
-/// Columns the driver sets before each pass (for `Graph::check`); the walks, the maps and
-/// the photon pass persist across passes.
-pub const INPUTS: &[&str] = &[
-    "data",
-    "settings",
-    "pixels",
-    "pass",
-    "caustics",
-    "film",
-    "maps",
-    "photon_pass",
-    "camera_walk",
-    "gather_walk",
-];
 
 /// The graph of one pass, for a scene with (`caustics`) or without specular surfaces.
 pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
@@ -200,6 +200,48 @@ pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
     Graph::new("pm", nodes)
 }
 
+impl IntegratorState for PmState {
+    type Settings = PmSettings;
+    /// The walks, the maps and the photon pass persist across passes.
+    const INPUTS: &'static [&'static str] = &[
+        "data",
+        "settings",
+        "pixels",
+        "pass",
+        "caustics",
+        "film",
+        "maps",
+        "photon_pass",
+        "camera_walk",
+        "gather_walk",
+    ];
+    fn graph(data: &SceneData, settings: &PmSettings) -> Graph<PmState> {
+        graph(settings, has_caustics(data))
+    }
+}
+
+impl PassState for PmState {
+    fn new(data: Arc<SceneData>, settings: PmSettings) -> PmState {
+        assert!(settings.k >= 2, "PM needs k >= 2 (the CLI refuses less)");
+        PmState::new(data, settings)
+    }
+    fn begin_pass(&mut self, pass: u64) {
+        self.pass = pass;
+        self.camera_walk.sample_index = pass;
+        self.camera_walk.starts = self.pixels;
+    }
+    fn finish(mut self, _: u64) -> (Film, usize, usize) {
+        self.film.nonfinite += self.nonfinite;
+        let bytes = self.bytes_per_pixel();
+        (self.film, bytes, self.pixels)
+    }
+}
+
+/// Whether the scene has specular surfaces, and so a caustic map.
+fn has_caustics(data: &SceneData) -> bool {
+    crate::integrators::pt::used_kinds(data).contains(&MaterialKind::Dielectric)
+}
+
 /// Renders with PM: the photon maps once, then passes of one camera sample per pixel until
 /// the budget (passes, or seconds at a pass boundary) is spent or a stop is asked for.
 pub fn render(
@@ -208,28 +250,5 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    assert!(settings.k >= 2, "PM needs k >= 2 (the CLI refuses less)");
-    let start = Instant::now();
-    let mut state = PmState::new(data, settings);
-    let graph = graph(&settings, state.caustics);
-    let mut stats = Stats::default();
-    let (passes, interrupted) = pass_by_pass(budget, control, |pass| {
-        state.pass = pass;
-        state.camera_walk.sample_index = pass;
-        state.camera_walk.starts = state.pixels;
-        graph.run(&mut state, &mut stats);
-    });
-    state.film.nonfinite += state.nonfinite;
-    RenderOutcome {
-        bytes_per_path: state.bytes_per_pixel(),
-        wavefront: state.pixels,
-        film: state.film,
-        stats,
-        passes,
-        samples: passes * state.pixels as u64,
-        wall: start.elapsed(),
-        interrupted,
-        systems: graph.system_names(),
-        layers: Vec::new(),
-    }
+    render_passes::<PmState>(data, settings, budget, control)
 }

@@ -16,8 +16,11 @@
 
 use crate::bsdf::MaterialKind;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};
-use crate::film::Film;
-use crate::integrators::SceneData;
+use crate::film::{Film, Image};
+use crate::integrators::driver::render_waves;
+use crate::integrators::{
+    Budget, Control, IntegratorState, RenderOutcome, RenderSettings, SceneData, Wave, WaveState,
+};
 use crate::pipeline::{Graph, Node};
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::Vec3;
@@ -57,12 +60,13 @@ pub struct PtSettings {
     pub max_depth: u32,
 }
 
-/// The samples a wave renders: global sample ids `first..first + len`, where global sample id
-/// g is pixel `g % pixels` at sample index `g / pixels`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Wave {
-    pub first: u64,
-    pub len: usize,
+impl From<&RenderSettings> for PtSettings {
+    fn from(s: &RenderSettings) -> PtSettings {
+        PtSettings {
+            seed: s.seed,
+            max_depth: s.max_depth,
+        }
+    }
 }
 
 /// Slots of each material kind after `sort_by_material`: non-delta kinds first, so light
@@ -178,9 +182,6 @@ pub fn used_kinds(data: &SceneData) -> Vec<MaterialKind> {
     used
 }
 
-/// Columns the driver sets before the graph runs (for `Graph::check`).
-pub const INPUTS: &[&str] = &["data", "settings", "pixels", "wave", "film", "scratch"];
-
 /// The path tracer's graph for a scene: one shading system per material kind in use, light
 /// sampling only where a non-delta surface and an emitter exist.
 pub fn graph(data: &SceneData) -> Graph<PtState> {
@@ -227,63 +228,37 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
     )
 }
 
-/// Renders with the path tracer until the budget is spent or a stop is asked for; the film
-/// holds every completed wave.
+impl IntegratorState for PtState {
+    type Settings = PtSettings;
+    const INPUTS: &'static [&'static str] =
+        &["data", "settings", "pixels", "wave", "film", "scratch"];
+    fn graph(data: &SceneData, _: &PtSettings) -> Graph<PtState> {
+        graph(data)
+    }
+}
+
+impl WaveState for PtState {
+    const WAVEFRONT: usize = WAVEFRONT;
+    fn new(data: Arc<SceneData>, settings: PtSettings, capacity: usize) -> PtState {
+        PtState::new(data, settings, capacity)
+    }
+    fn begin_wave(&mut self, wave: Wave) {
+        self.wave = wave;
+    }
+    fn film_mut(&mut self) -> &mut Film {
+        &mut self.film
+    }
+    fn finish(self, _: u64) -> (Film, Vec<(String, Image)>, usize) {
+        (self.film, Vec::new(), PtState::bytes_per_path())
+    }
+}
+
+/// Renders with the path tracer until the budget is spent or a stop is asked for.
 pub fn render(
     data: Arc<SceneData>,
     settings: PtSettings,
-    budget: crate::integrators::Budget,
-    control: &crate::integrators::Control,
-) -> crate::integrators::RenderOutcome {
-    render_from(data, settings, budget, control, None)
-}
-
-/// As `render`, but continuing from the finished passes of `from` when given (see
-/// `integrators::resume`).
-pub fn render_from(
-    data: Arc<SceneData>,
-    settings: PtSettings,
-    budget: crate::integrators::Budget,
-    control: &crate::integrators::Control,
-    from: Option<crate::integrators::Resume>,
-) -> crate::integrators::RenderOutcome {
-    use crate::integrators::{RenderOutcome, WavePlan};
-    let cam = data.scene.camera;
-    let pixels = cam.width as u64 * cam.height as u64;
-    let graph = graph(&data);
-    let first_pass = from.as_ref().map_or(0, |r| r.passes);
-    let mut plan = WavePlan::starting_at(pixels, budget, WAVEFRONT, first_pass);
-    let mut state = PtState::new(data, settings, plan.capacity());
-    if let Some(from) = from {
-        assert!(
-            from.film.width == cam.width as usize
-                && from.film.height == cam.height as usize
-                && from.film.total_samples() == from.passes * pixels,
-            "a resumed film must hold whole passes of this camera's image"
-        );
-        state.film = from.film;
-    }
-    let mut stats = crate::pipeline::Stats::default();
-    let mut interrupted = false;
-    while let Some((first, len)) = plan.next_wave(control) {
-        state.wave = Wave { first, len };
-        graph.run(&mut state, &mut stats);
-        (control.progress)(plan.passes_done(), plan.total_passes());
-    }
-    // A stop that arrives after the last wave interrupts nothing.
-    if control.stopped() && !plan.budget_spent() {
-        interrupted = true;
-    }
-    RenderOutcome {
-        samples: plan.next,
-        passes: plan.passes_done(),
-        wall: plan.elapsed(),
-        film: state.film,
-        stats,
-        interrupted,
-        systems: graph.system_names(),
-        bytes_per_path: PtState::bytes_per_path(),
-        wavefront: plan.capacity(),
-        layers: Vec::new(),
-    }
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    render_waves::<PtState>(data, settings, budget, control, None)
 }

@@ -44,13 +44,15 @@
 use crate::components::{PixelEstimates, ShadowRays};
 use crate::film::Film;
 use crate::integrators::camera_walk::{self, CameraWalk};
-use crate::integrators::{Budget, Control, RenderOutcome, SceneData, pass_by_pass};
+use crate::integrators::driver::render_passes;
+use crate::integrators::{
+    Budget, Control, IntegratorState, PassState, RenderOutcome, RenderSettings, SceneData,
+};
 use crate::photons::{HashGrid, PhotonPass};
-use crate::pipeline::{Graph, Node, Stats};
+use crate::pipeline::{Graph, Node};
 use crate::systems::{connect, gather, trace};
 use glam::DVec3;
 use std::sync::Arc;
-use std::time::Instant;
 
 /// Default photons per pass.
 pub const DEFAULT_PHOTONS_PER_PASS: u64 = 250_000;
@@ -76,6 +78,18 @@ pub struct ProgressiveSettings {
 }
 
 impl ProgressiveSettings {
+    /// The settings of PPM (`stochastic` false) or SPPM from a render's settings.
+    pub fn from_render(s: &RenderSettings, stochastic: bool) -> ProgressiveSettings {
+        let p = s.photons;
+        ProgressiveSettings {
+            max_depth: s.max_depth,
+            photons_per_pass: p.photons_per_pass,
+            alpha: p.alpha,
+            initial_radius: p.radius,
+            ..ProgressiveSettings::new(s.seed, stochastic)
+        }
+    }
+
     pub fn new(seed: u64, stochastic: bool) -> ProgressiveSettings {
         ProgressiveSettings {
             seed,
@@ -191,20 +205,6 @@ impl ProgressiveState {
     }
 }
 
-/// Columns set before each pass (for `Graph::check`); the walk, the estimates and the photon
-/// pass persist across passes.
-pub const INPUTS: &[&str] = &[
-    "data",
-    "settings",
-    "pixels",
-    "pass",
-    "camera_walk",
-    "estimates",
-    "photon_pass",
-    "photons_emitted",
-    "nonfinite",
-];
-
 /// The graph of one pass (the same for PPM and SPPM; see the module's documentation).
 pub fn graph() -> Graph<ProgressiveState> {
     Graph::new(
@@ -232,35 +232,46 @@ pub fn graph() -> Graph<ProgressiveState> {
     )
 }
 
+impl IntegratorState for ProgressiveState {
+    type Settings = ProgressiveSettings;
+    /// The walk, the estimates and the photon pass persist across passes.
+    const INPUTS: &'static [&'static str] = &[
+        "data",
+        "settings",
+        "pixels",
+        "pass",
+        "camera_walk",
+        "estimates",
+        "photon_pass",
+        "photons_emitted",
+        "nonfinite",
+    ];
+    fn graph(_: &SceneData, _: &ProgressiveSettings) -> Graph<ProgressiveState> {
+        graph()
+    }
+}
+
+impl PassState for ProgressiveState {
+    fn new(data: Arc<SceneData>, settings: ProgressiveSettings) -> ProgressiveState {
+        ProgressiveState::new(data, settings)
+    }
+    fn begin_pass(&mut self, pass: u64) {
+        ProgressiveState::begin_pass(self, pass)
+    }
+    fn finish(self, passes: u64) -> (Film, usize, usize) {
+        (self.film(passes), self.bytes_per_pixel(), self.pixels)
+    }
+}
+
 /// Renders with PPM or SPPM: a sample budget is a number of passes, a time budget ends at
-/// the first pass boundary past it (at least one pass). A stop request ends the render at a
-/// pass boundary, keeping every finished pass.
+/// the first pass boundary past it (at least one pass).
 pub fn render(
     data: Arc<SceneData>,
     settings: ProgressiveSettings,
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    let start = Instant::now();
-    let graph = graph();
-    let mut state = ProgressiveState::new(data, settings);
-    let mut stats = Stats::default();
-    let (passes, interrupted) = pass_by_pass(budget, control, |pass| {
-        state.begin_pass(pass);
-        graph.run(&mut state, &mut stats);
-    });
-    RenderOutcome {
-        film: state.film(passes),
-        stats,
-        passes,
-        samples: passes * state.pixels as u64,
-        wall: start.elapsed(),
-        interrupted,
-        systems: graph.system_names(),
-        bytes_per_path: state.bytes_per_pixel(),
-        wavefront: state.pixels,
-        layers: Vec::new(),
-    }
+    render_passes::<ProgressiveState>(data, settings, budget, control)
 }
 
 /// Runs `passes` passes and returns the state (for tests of the statistics).
@@ -269,12 +280,5 @@ pub fn run_passes(
     settings: ProgressiveSettings,
     passes: u64,
 ) -> ProgressiveState {
-    let graph = graph();
-    let mut state = ProgressiveState::new(data, settings);
-    let mut stats = Stats::default();
-    for pass in 0..passes {
-        state.begin_pass(pass);
-        graph.run(&mut state, &mut stats);
-    }
-    state
+    crate::integrators::driver::run_passes(data, settings, passes)
 }

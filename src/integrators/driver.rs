@@ -1,0 +1,273 @@
+//! The two drivers every integrator runs under. An integrator is a state type with a graph;
+//! what a step means is the driver's business:
+//!
+//! - `render_waves` drives sample-based integrators (PT, BDPT): global sample ids in waves of
+//!   up to the state's wavefront, whole passes per wave where they fit. Samples are a pure
+//!   function of (seed, pixel, sample index, dimension) and the film adds them in sample
+//!   order, so a render can resume from the film of its finished passes, bit for bit.
+//! - `render_passes` drives pass-based integrators (the photon mappers, MLT): one graph run
+//!   per pass, the image made from the state at the end.
+
+use super::{Budget, Control, RenderOutcome, Resume};
+use crate::film::{Film, Image};
+use crate::pipeline::{Graph, Stats};
+use crate::scene::SceneData;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// The state of an integrator and the graph that runs over it.
+pub trait IntegratorState: Sized + Send + 'static {
+    /// The integrator's own settings.
+    type Settings: Copy;
+    /// Columns the driver sets before the graph runs (for `Graph::check`).
+    const INPUTS: &'static [&'static str];
+    /// The graph for a scene: only the systems the scene needs.
+    fn graph(data: &SceneData, settings: &Self::Settings) -> Graph<Self>;
+}
+
+/// A sample-based integrator: renders the samples of a wave, adding them to its film.
+pub trait WaveState: IntegratorState {
+    /// Samples in flight at most.
+    const WAVEFRONT: usize;
+    fn new(data: Arc<SceneData>, settings: Self::Settings, capacity: usize) -> Self;
+    /// Sets the wave the next graph run renders.
+    fn begin_wave(&mut self, wave: Wave);
+    fn film_mut(&mut self) -> &mut Film;
+    /// The film and any further images (`new_passes` rendered by this run), and the bytes of
+    /// wavefront state per sample.
+    fn finish(self, new_passes: u64) -> (Film, Vec<(String, Image)>, usize);
+}
+
+/// A pass-based integrator: the graph runs once per pass.
+pub trait PassState: IntegratorState {
+    fn new(data: Arc<SceneData>, settings: Self::Settings) -> Self;
+    /// Prepares pass `pass` (0, 1, ...).
+    fn begin_pass(&mut self, pass: u64);
+    /// The image of `passes` finished passes, the bytes of state per pixel and the slots in
+    /// flight.
+    fn finish(self, passes: u64) -> (Film, usize, usize);
+}
+
+/// The samples a wave renders: global sample ids `first..first + len`, where global sample id
+/// g is pixel `g % pixels` at sample index `g / pixels`.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Wave {
+    pub first: u64,
+    pub len: usize,
+}
+
+/// Renders with a sample-based integrator until the budget is spent or a stop is asked for,
+/// continuing from `from` when given: a sample budget counts the passes already done
+/// (`SamplesPerPixel(n)` ends at pass n), a time budget counts from now. The outcome's film,
+/// passes and samples are totals, resumed passes included.
+pub fn render_waves<S: WaveState>(
+    data: Arc<SceneData>,
+    settings: S::Settings,
+    budget: Budget,
+    control: &Control,
+    from: Option<Resume>,
+) -> RenderOutcome {
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let graph = S::graph(&data, &settings);
+    let first_pass = from.as_ref().map_or(0, |r| r.passes);
+    let mut plan = WavePlan::starting_at(pixels, budget, S::WAVEFRONT, first_pass);
+    let mut state = S::new(data, settings, plan.capacity());
+    if let Some(from) = from {
+        assert!(
+            from.film.width == cam.width as usize
+                && from.film.height == cam.height as usize
+                && from.film.total_samples() == from.passes * pixels,
+            "a resumed film must hold whole passes of this camera's image"
+        );
+        *state.film_mut() = from.film;
+    }
+    let mut stats = Stats::default();
+    while let Some((first, len)) = plan.next_wave(control) {
+        state.begin_wave(Wave { first, len });
+        graph.run(&mut state, &mut stats);
+        (control.progress)(plan.passes_done(), plan.total_passes());
+    }
+    // A stop that arrives after the last wave interrupts nothing.
+    let interrupted = control.stopped() && !plan.budget_spent();
+    let new_passes = plan.passes_done() - first_pass;
+    let (film, layers, bytes_per_path) = state.finish(new_passes);
+    RenderOutcome {
+        samples: plan.next,
+        passes: plan.passes_done(),
+        wall: plan.elapsed(),
+        film,
+        stats,
+        interrupted,
+        systems: graph.system_names(),
+        bytes_per_path,
+        wavefront: plan.capacity(),
+        layers,
+    }
+}
+
+/// Renders with a pass-based integrator: a sample budget is a number of passes, a time budget
+/// ends at the first pass boundary past it (at least one pass). A stop request ends the render
+/// at a pass boundary, keeping every finished pass.
+pub fn render_passes<S: PassState>(
+    data: Arc<SceneData>,
+    settings: S::Settings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    let start = Instant::now();
+    let graph = S::graph(&data, &settings);
+    let mut state = S::new(data, settings);
+    let mut stats = Stats::default();
+    let total = match budget {
+        Budget::SamplesPerPixel(n) => Some(n),
+        Budget::Seconds(_) => None,
+    };
+    let mut passes = 0;
+    loop {
+        let over = match budget {
+            Budget::SamplesPerPixel(n) => passes >= n,
+            Budget::Seconds(s) => passes > 0 && start.elapsed().as_secs_f64() >= s,
+        };
+        if over || control.stopped() {
+            break;
+        }
+        state.begin_pass(passes);
+        graph.run(&mut state, &mut stats);
+        passes += 1;
+        (control.progress)(passes, total);
+    }
+    let interrupted = control.stopped() && total.is_some_and(|t| passes < t);
+    let (film, bytes_per_path, wavefront) = state.finish(passes);
+    let pixels = film.width as u64 * film.height as u64;
+    RenderOutcome {
+        film,
+        stats,
+        passes,
+        samples: passes * pixels,
+        wall: start.elapsed(),
+        interrupted,
+        systems: graph.system_names(),
+        bytes_per_path,
+        wavefront,
+        layers: Vec::new(),
+    }
+}
+
+/// Runs `passes` passes of a pass-based integrator and returns its state (for tests of the
+/// statistics).
+pub fn run_passes<S: PassState>(data: Arc<SceneData>, settings: S::Settings, passes: u64) -> S {
+    let graph = S::graph(&data, &settings);
+    let mut state = S::new(data, settings);
+    let mut stats = Stats::default();
+    for pass in 0..passes {
+        state.begin_pass(pass);
+        graph.run(&mut state, &mut stats);
+    }
+    state
+}
+
+/// Paths per wave under a time budget (rounded up to whole passes, at most the wavefront):
+/// enough to keep the cores busy, small enough that the time is checked often.
+pub const TIMED_WAVE_PATHS: u64 = 1 << 16;
+
+/// Plans waves over the global sample ids: whole passes per wave when a pass fits in the
+/// wavefront, else a pass split into wavefront-sized waves. Stops only at pass boundaries.
+struct WavePlan {
+    pixels: u64,
+    wave_len: u64,
+    total: Option<u64>,
+    next: u64,
+    /// The first sample id of this render (pass 0, or where a resumed render starts).
+    first: u64,
+    start: Instant,
+    budget: Budget,
+}
+
+impl WavePlan {
+    /// A plan whose first wave starts at pass `first_pass` (a resumed render); a sample
+    /// budget still counts from pass 0.
+    fn starting_at(pixels: u64, budget: Budget, wavefront: usize, first_pass: u64) -> WavePlan {
+        let next = first_pass * pixels;
+        let wave_len = if pixels <= wavefront as u64 {
+            (wavefront as u64 / pixels) * pixels
+        } else {
+            wavefront as u64
+        };
+        let total = match budget {
+            Budget::SamplesPerPixel(spp) => Some(spp * pixels),
+            Budget::Seconds(_) => None,
+        };
+        let wave_len = match total {
+            Some(t) => wave_len.min(t.saturating_sub(next)),
+            // The clock is read between waves: a time budget takes waves of about
+            // TIMED_WAVE_PATHS paths (whole passes), so it overshoots by a fraction of the
+            // full wavefront's time at most.
+            None => wave_len.min(TIMED_WAVE_PATHS.div_ceil(pixels) * pixels),
+        };
+        WavePlan {
+            pixels,
+            wave_len,
+            total,
+            next,
+            first: next,
+            start: Instant::now(),
+            budget,
+        }
+    }
+
+    /// Slots the state needs.
+    fn capacity(&self) -> usize {
+        self.wave_len as usize
+    }
+
+    /// The next wave (first sample id, length), or None when the budget is spent or a stop
+    /// was asked for at a pass boundary.
+    fn next_wave(&mut self, control: &Control) -> Option<(u64, usize)> {
+        let at_pass_boundary = self.next.is_multiple_of(self.pixels);
+        if at_pass_boundary {
+            if control.stopped() {
+                return None;
+            }
+            // A time budget renders at least one wave, however long the setup took.
+            if let Budget::Seconds(s) = self.budget
+                && self.next > self.first
+                && self.start.elapsed().as_secs_f64() >= s
+            {
+                return None;
+            }
+        }
+        let mut len = self.wave_len;
+        if let Some(total) = self.total {
+            if self.next >= total {
+                return None;
+            }
+            len = len.min(total - self.next);
+        }
+        // A wave never crosses a pass boundary in the middle of a split pass.
+        if self.wave_len < self.pixels {
+            len = len.min(self.pixels - self.next % self.pixels);
+        }
+        let first = self.next;
+        self.next += len;
+        Some((first, len as usize))
+    }
+
+    /// True when a sample budget has been rendered in full (a time budget never is: it ends
+    /// when the time is up).
+    fn budget_spent(&self) -> bool {
+        self.total.is_some_and(|t| self.next >= t)
+    }
+
+    fn passes_done(&self) -> u64 {
+        self.next / self.pixels
+    }
+
+    fn total_passes(&self) -> Option<u64> {
+        self.total.map(|t| t / self.pixels)
+    }
+
+    fn elapsed(&self) -> Duration {
+        self.start.elapsed()
+    }
+}
