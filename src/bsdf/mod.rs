@@ -61,6 +61,34 @@ pub struct BsdfSample {
     pub delta: bool,
 }
 
+/// Samples `material` at a surface and turns the sample into a world direction `wi`: `frame`
+/// is the shading frame, `ng` the geometric normal (both on the side the caller shades), `wo`
+/// the direction back along the incoming ray and `wo_local` the same in `frame`. `None` when
+/// the sample carries nothing (no sample, `pdf <= 0`) or leaves through the wrong geometric
+/// side: reflection must leave on wo's side of the geometric surface and refraction on the
+/// other, which shading normals alone would not ensure (light would leak through surfaces).
+#[inline]
+pub fn sample_direction(
+    material: &Material,
+    frame: &crate::math::Frame,
+    ng: Vec3,
+    wo: Vec3,
+    wo_local: Vec3,
+    u: Vec2,
+    mode: TransportMode,
+) -> Option<(BsdfSample, Vec3)> {
+    let bs = material.sample(wo_local, u, mode)?;
+    if bs.pdf <= 0.0 {
+        return None;
+    }
+    let wi = frame.to_world(bs.wi).normalize();
+    let reflected = bs.wi.z * wo_local.z > 0.0;
+    if (wi.dot(ng) * wo.dot(ng) > 0.0) != reflected {
+        return None;
+    }
+    Some((bs, wi))
+}
+
 impl Material {
     /// f(wo, wi) without the cosine; zero for delta materials.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {

@@ -13,22 +13,13 @@ mod surfaces;
 mod vertices;
 mod visible_points;
 
-pub use paths::{PathFlags, Paths, PathsChunk, PathsView};
-pub use photons::{
-    PhotonFlags, PhotonWalkers, PhotonWalkersChunk, PhotonWalkersView, Photons, PhotonsChunk,
-    PhotonsView,
-};
-pub use rays::{Hits, HitsChunk, HitsView, MISS, Rays, RaysChunk, RaysView};
-pub use shadow::{ShadowRays, ShadowRaysChunk, ShadowRaysView};
-pub use surfaces::{Surfaces, SurfacesChunk, SurfacesView};
-pub use vertices::{
-    CAMERA_VERTEX, Connections, ConnectionsChunk, ConnectionsView, PathVertices, PathVerticesChunk,
-    PathVerticesView, Walkers, WalkersChunk, WalkersView,
-};
-pub use visible_points::{
-    CameraChains, CameraChainsChunk, CameraChainsView, NO_VISIBLE_POINT, PixelEstimates,
-    PixelEstimatesChunk, PixelEstimatesView, VisiblePoints, VisiblePointsChunk, VisiblePointsView,
-};
+pub use paths::*;
+pub use photons::*;
+pub use rays::*;
+pub use shadow::*;
+pub use surfaces::*;
+pub use vertices::*;
+pub use visible_points::*;
 
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
 pub const CHUNK: usize = 1024;
@@ -76,18 +67,24 @@ pub fn split_ranges<'a, T>(slice: &'a mut [T], starts: &[usize], end: usize) -> 
 
 /// Declares a structure-of-arrays store and its chunk view.
 ///
-/// `soa! { pub struct Rays, RaysChunk, RaysView { origin: Vec3, dir: Vec3 } }` makes `Rays` with
+/// `soa! { pub struct Rays, RaysChunk, RaysView, Ray { origin: Vec3, dir: Vec3 } }` makes `Rays` with
 /// one `Vec` per field, `RaysChunk<'a>` with one `&'a mut [T]` per field plus the chunk's first
 /// slot, `RaysView<'a>` with one `&'a [T]` per field, and the methods: `view(range)`, `new(capacity)`, `capacity()`, `chunks_mut(range)` (views over
 /// the slots of `range` in `CHUNK`-sized pieces), `gather_from(source, order)` (slot i takes
 /// source's slot `order[i]`, in parallel per column), and `bytes_per_item()`.
 #[macro_export]
 macro_rules! soa {
-    ($(#[$meta:meta])* pub struct $name:ident, $chunk:ident, $view:ident { $($(#[$fmeta:meta])* $field:ident : $ty:ty),+ $(,)? }) => {
+    ($(#[$meta:meta])* pub struct $name:ident, $chunk:ident, $view:ident, $item:ident { $($(#[$fmeta:meta])* $field:ident : $ty:ty),+ $(,)? }) => {
         $(#[$meta])*
         #[derive(Clone, Debug, Default)]
         pub struct $name {
             $($(#[$fmeta])* pub $field: Vec<$ty>,)+
+        }
+
+        /// One item of the store, every field.
+        #[derive(Clone, Copy, Debug)]
+        pub struct $item {
+            $($(#[$fmeta])* pub $field: $ty,)+
         }
 
         /// A mutable view of one chunk of slots.
@@ -116,6 +113,24 @@ macro_rules! soa {
             pub fn view(&self) -> $view<'_> {
                 $view { $($field: &*self.$field,)+ }
             }
+            /// Item `i` of the chunk.
+            #[inline]
+            pub fn get(&self, i: usize) -> $item {
+                $item { $($field: self.$field[i],)+ }
+            }
+            /// Writes every field of item `i` of the chunk.
+            #[inline]
+            pub fn set(&mut self, i: usize, item: $item) {
+                $(self.$field[i] = item.$field;)+
+            }
+        }
+
+        impl $view<'_> {
+            /// Item `i` of the view.
+            #[inline]
+            pub fn get(&self, i: usize) -> $item {
+                $item { $($field: self.$field[i],)+ }
+            }
         }
 
         impl $name {
@@ -130,6 +145,18 @@ macro_rules! soa {
 
             pub fn bytes_per_item() -> usize {
                 0 $(+ std::mem::size_of::<$ty>())+
+            }
+
+            /// The item in `slot`.
+            #[inline]
+            pub fn get(&self, slot: usize) -> $item {
+                $item { $($field: self.$field[slot],)+ }
+            }
+
+            /// Writes every field of the item in `slot`.
+            #[inline]
+            pub fn set(&mut self, slot: usize, item: $item) {
+                $(self.$field[slot] = item.$field;)+
             }
 
             /// Views of the slots in `range`, `CHUNK` slots each.

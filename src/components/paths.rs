@@ -28,7 +28,7 @@ impl PathFlags {
 
 crate::soa! {
     /// The state of camera paths in flight.
-    pub struct Paths, PathsChunk, PathsView {
+    pub struct Paths, PathsChunk, PathsView, Path {
         /// Index of the path's sample in the wave (film position follows from it).
         sample: u32,
         /// Random numbers of this (seed, pixel, sample index).

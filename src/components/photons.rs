@@ -19,7 +19,7 @@ impl PhotonFlags {
 
 crate::soa! {
     /// Photons stored on non-specular surfaces: what density estimation reads.
-    pub struct Photons, PhotonsChunk, PhotonsView {
+    pub struct Photons, PhotonsChunk, PhotonsView, Photon {
         p: Vec3,
         /// Unit direction the photon came from (pointing away from the surface).
         wi: Vec3,
@@ -36,7 +36,7 @@ crate::soa! {
 
 crate::soa! {
     /// Photons in flight, one per slot, compacted as they end.
-    pub struct PhotonWalkers, PhotonWalkersChunk, PhotonWalkersView {
+    pub struct PhotonWalkers, PhotonWalkersChunk, PhotonWalkersView, PhotonWalker {
         key: SampleKey,
         power: Vec3,
         /// Scattering events so far.

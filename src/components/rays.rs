@@ -5,7 +5,7 @@ pub const MISS: u32 = u32::MAX;
 
 crate::soa! {
     /// Rays to trace for closest hits, one per path slot. Directions are unit length.
-    pub struct Rays, RaysChunk, RaysView {
+    pub struct Rays, RaysChunk, RaysView, Ray {
         origin: Vec3,
         dir: Vec3,
     }
@@ -13,7 +13,7 @@ crate::soa! {
 
 crate::soa! {
     /// Closest hits of `Rays`, slot for slot: distance, triangle (or `MISS`) and barycentrics.
-    pub struct Hits, HitsChunk, HitsView {
+    pub struct Hits, HitsChunk, HitsView, Hit {
         t: f32,
         triangle: u32,
         b1: f32,

@@ -3,7 +3,7 @@ use glam::Vec3;
 crate::soa! {
     /// Shadow rays of next-event estimation, slot for slot with the paths that cast them.
     /// A ray with `t_max == 0` is absent (no light sample was taken).
-    pub struct ShadowRays, ShadowRaysChunk, ShadowRaysView {
+    pub struct ShadowRays, ShadowRaysChunk, ShadowRaysView, ShadowRay {
         origin: Vec3,
         dir: Vec3,
         t_max: f32,

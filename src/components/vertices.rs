@@ -5,7 +5,7 @@ crate::soa! {
     /// Vertices of bidirectional subpaths at one depth: slot `k` is vertex `depth` of subpath
     /// `k` (camera subpaths first, then light subpaths). Stored depth by depth, so a bounce of
     /// the subpath walk writes one contiguous store.
-    pub struct PathVertices, PathVerticesChunk, PathVerticesView {
+    pub struct PathVertices, PathVerticesChunk, PathVerticesView, PathVertex {
         p: Vec3,
         /// Per-axis bound on the floating-point error of `p` (for spawning rays).
         p_error: Vec3,
@@ -34,7 +34,7 @@ pub const CAMERA_VERTEX: u32 = u32::MAX;
 
 crate::soa! {
     /// Subpaths being extended, one per slot, compacted as they end.
-    pub struct Walkers, WalkersChunk, WalkersView {
+    pub struct Walkers, WalkersChunk, WalkersView, Walker {
         /// The subpath this walker extends (index into the vertex stores).
         subpath: u32,
         key: SampleKey,
@@ -51,7 +51,7 @@ crate::soa! {
 
 crate::soa! {
     /// Which film position each connection of a wave feeds, slot for slot with its shadow ray.
-    pub struct Connections, ConnectionsChunk, ConnectionsView {
+    pub struct Connections, ConnectionsChunk, ConnectionsView, Connection {
         /// The sample (index in the wave) whose subpaths the connection joins.
         sample: u32,
         /// Pixel the contribution lands in: the sample's own, or for light tracing (t = 1)

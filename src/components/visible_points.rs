@@ -8,7 +8,7 @@ crate::soa! {
     /// Camera chains of the photon mappers in flight: a camera ray that follows specular
     /// (delta) bounces until it meets a surface where photons are gathered. Compacted as
     /// they end; each carries its pixel.
-    pub struct CameraChains, CameraChainsChunk, CameraChainsView {
+    pub struct CameraChains, CameraChainsChunk, CameraChainsView, CameraChain {
         pixel: u32,
         key: SampleKey,
         /// Product of the specular weights since the camera.
@@ -32,7 +32,7 @@ crate::soa! {
 crate::soa! {
     /// One visible point per pixel (slot = pixel): where the pixel's camera chain met a
     /// surface that is not specular, and what the chain carried there.
-    pub struct VisiblePoints, VisiblePointsChunk, VisiblePointsView {
+    pub struct VisiblePoints, VisiblePointsChunk, VisiblePointsView, VisiblePoint {
         p: Vec3,
         p_error: Vec3,
         ng: Vec3,
@@ -50,7 +50,7 @@ crate::soa! {
     /// Per-pixel statistics of progressive photon mapping (slot = pixel): the gather
     /// radius, the photon count N and flux tau of the progressive estimate, and the sum over
     /// passes of the light found without photons (emission seen and direct light sampled).
-    pub struct PixelEstimates, PixelEstimatesChunk, PixelEstimatesView {
+    pub struct PixelEstimates, PixelEstimatesChunk, PixelEstimatesView, PixelEstimate {
         radius: f32,
         photons: f64,
         flux: DVec3,

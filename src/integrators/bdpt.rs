@@ -16,14 +16,13 @@
 //!
 //! Subpath vertices are stored depth by depth (`PathVertices`, one store per depth, slot =
 //! subpath), so a bounce writes one store and a store is allocated only the first time any
-//! wave reaches its depth. Russian roulette (after `ROULETTE_DEPTH` vertices) ends subpaths;
+//! wave reaches its depth. Russian roulette (after `roulette::ROULETTE_DEPTH` vertices) ends subpaths;
 //! it is left out of the MIS densities, which keeps every estimator unbiased (its weights still
 //! sum to one) at a small cost in weighting quality.
 
 use crate::components::{Connections, Hits, PathVertices, Rays, ShadowRays, Walkers};
 use crate::film::{Film, Image};
 use crate::integrators::driver::render_waves;
-use crate::integrators::pt::{ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL};
 use crate::integrators::{
     Budget, Control, IntegratorState, RenderOutcome, RenderSettings, SceneData, Wave, WaveState,
 };
@@ -264,18 +263,6 @@ fn subpath_nodes() -> Vec<Node<BdptState>> {
             ],
         },
     ]
-}
-
-/// Roulette survival probability of a subpath with throughput `beta`, started at `scale`.
-#[inline]
-pub fn survival(beta: Vec3, scale: f32) -> f32 {
-    (beta.max_element() / scale).min(ROULETTE_MAX_SURVIVAL)
-}
-
-/// Whether vertex `d` is deep enough for Russian roulette.
-#[inline]
-pub fn roulette_applies(d: usize) -> bool {
-    d >= ROULETTE_DEPTH as usize
 }
 
 impl IntegratorState for BdptState {

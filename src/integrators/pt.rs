@@ -46,13 +46,6 @@ pub fn bounce_dim(depth: u32) -> u32 {
 /// small enough to stay in a few tens of megabytes.
 pub const WAVEFRONT: usize = 1 << 18;
 
-/// Russian roulette starts after this many bounces.
-pub const ROULETTE_DEPTH: u32 = 3;
-/// Highest survival probability of Russian roulette: even a path whose throughput stays at 1
-/// (a closed scene of reflectance 1) ends after about 1 / (1 - 0.95) = 20 more bounces on
-/// average, so every wave terminates.
-pub const ROULETTE_MAX_SURVIVAL: f32 = 0.95;
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PtSettings {
     pub seed: u64,

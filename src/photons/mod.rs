@@ -43,10 +43,6 @@ pub fn photon_key(seed: u64, pass: u64, index: u64) -> SampleKey {
     SampleKey::new(seed, index | 3 << 62, pass)
 }
 
-/// Highest survival probability of photon roulette: even a photon in a lossless glass cube
-/// ends after about twenty bounces on average.
-pub const ROULETTE_MAX_SURVIVAL: f32 = 0.95;
-
 /// A photon as `scatter_photons` stores it, before it joins the pass's columns.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StoredPhoton {

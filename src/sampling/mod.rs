@@ -5,6 +5,7 @@
 //! carries state between threads, so the image does not depend on which thread ran which path.
 
 mod primary;
+pub mod roulette;
 pub use primary::PrimarySamples;
 
 use glam::{Vec2, Vec3};

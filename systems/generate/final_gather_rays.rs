@@ -3,7 +3,7 @@
 //! read. Pixels with no visible point, or whose sample carries nothing, start a dead chain,
 //! which the compaction that follows ends with no gather point.
 
-use crate::bsdf::TransportMode;
+use crate::bsdf::{TransportMode, sample_direction};
 use crate::components::NO_VISIBLE_POINT;
 use crate::integrators::pm::PmState;
 use crate::math::Frame;
@@ -53,14 +53,18 @@ crate::system! {
                     let (ng, wo) = (visible.ng[pixel], visible.wo[pixel]);
                     let frame = Frame::from_normal(visible.ns[pixel]);
                     let wo_local = frame.to_local(wo);
-                    let Some(bs) = material.sample(wo_local, key.get2(0), TransportMode::Radiance)
-                    else {
+                    // Visible points lie on surfaces that only reflect.
+                    let Some((bs, wi)) = sample_direction(
+                        &material,
+                        &frame,
+                        ng,
+                        wo,
+                        wo_local,
+                        key.get2(0),
+                        TransportMode::Radiance,
+                    ) else {
                         continue;
                     };
-                    let wi = frame.to_world(bs.wi).normalize();
-                    if bs.pdf <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
-                        continue;
-                    }
                     let beta = visible.beta[pixel] * bs.value * (bs.wi.z.abs() / bs.pdf);
                     if beta.max_element() <= 0.0 {
                         continue;

@@ -5,12 +5,12 @@
 //! gather point.
 
 use crate::accel::{offset_ray_origin, surface_point};
-use crate::bsdf::{Material, TransportMode};
+use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{MISS, NO_VISIBLE_POINT};
 use crate::integrators::camera_walk::CameraWalk;
-use crate::integrators::pt::{ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL};
 use crate::math::Frame;
 use crate::pipeline::Flow;
+use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::scene::NO_EMITTER;
 use rayon::prelude::*;
 
@@ -81,20 +81,21 @@ crate::system! {
                     let frame = Frame::from_normal(ns);
                     let wo_local = frame.to_local(wo);
                     let dim = bounce_dim(depth);
-                    let Some(bs) =
-                        material.sample(wo_local, c.key[i].get2(dim), TransportMode::Radiance)
-                    else {
+                    let Some((bs, wi)) = sample_direction(
+                        &material,
+                        &frame,
+                        ng,
+                        wo,
+                        wo_local,
+                        c.key[i].get2(dim),
+                        TransportMode::Radiance,
+                    ) else {
                         continue;
                     };
-                    let wi = frame.to_world(bs.wi).normalize();
-                    let reflected = bs.wi.z * wo_local.z > 0.0;
-                    if bs.pdf <= 0.0 || (wi.dot(ng) * wo.dot(ng) > 0.0) != reflected {
-                        continue;
-                    }
                     let mut beta = c.beta[i] * bs.value * (bs.wi.z.abs() / bs.pdf);
                     if depth + 1 >= ROULETTE_DEPTH {
-                        let q = beta.max_element().min(ROULETTE_MAX_SURVIVAL);
-                        if q.is_nan() || q <= 0.0 || c.key[i].get(dim + 2) >= q {
+                        let q = survival(beta, 1.0);
+                        if !survives(q, c.key[i].get(dim + 2)) {
                             continue;
                         }
                         beta /= q;

@@ -5,14 +5,14 @@
 //! sample carries nothing, or by roulette.
 
 use crate::accel::{offset_ray_origin, surface_point};
-use crate::bsdf::TransportMode;
+use crate::bsdf::{TransportMode, sample_direction};
 use crate::components::{MISS, PathVertices, split_ranges};
 use crate::integrators::bdpt::{
-    BdptState, DIM_BSDF, DIM_ROULETTE, camera_vertex_dim, light_vertex_dim, roulette_applies,
-    survival,
+    BdptState, DIM_BSDF, DIM_ROULETTE, camera_vertex_dim, light_vertex_dim,
 };
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction, to_area};
 use crate::pipeline::Flow;
+use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -104,7 +104,7 @@ crate::system! {
                     let Some(next) = next else { continue };
                     pv.pdf_rev[j] = next.pdf_rev_prev;
                     let mut beta = wk.beta[i] * next.weight;
-                    if roulette_applies(d) {
+                    if d >= ROULETTE_DEPTH as usize {
                         let q = survival(beta, wk.roulette_scale[i]);
                         let u = wk.key[i].get(
                             if light {
@@ -113,8 +113,7 @@ crate::system! {
                                 camera_vertex_dim(d)
                             } + DIM_ROULETTE,
                         );
-                        // NaN-safe: a NaN survival probability ends the subpath.
-                        if u >= q || q.is_nan() {
+                        if !survives(q, u) {
                             continue;
                         }
                         beta /= q;
@@ -164,16 +163,15 @@ fn scatter(
     } else {
         (camera_vertex_dim(d), TransportMode::Radiance)
     };
-    let bs = material.sample(wo_local, key.get2(dim + DIM_BSDF), mode)?;
-    if bs.pdf <= 0.0 {
-        return None;
-    }
-    let wi = frame.to_world(bs.wi).normalize();
-    // Reflection must leave on wo's geometric side, refraction on the other.
-    let reflected = bs.wi.z * wo_local.z > 0.0;
-    if (wi.dot(ng) * wo.dot(ng) > 0.0) != reflected {
-        return None;
-    }
+    let (bs, wi) = sample_direction(
+        &material,
+        &frame,
+        ng,
+        wo,
+        wo_local,
+        key.get2(dim + DIM_BSDF),
+        mode,
+    )?;
     let mut weight = bs.value * (bs.wi.z.abs() / bs.pdf);
     if light {
         weight *= shading_correction(here, wo, wi);

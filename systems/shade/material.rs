@@ -3,7 +3,7 @@
 //! holds one of these per material kind its scene uses, each over its kind's contiguous queue.
 
 use super::surface::scatter_paths;
-use crate::bsdf::{MaterialKind, TransportMode};
+use crate::bsdf::MaterialKind;
 use crate::integrators::pt::PtState;
 
 pub struct ShadeMaterial(pub MaterialKind);
@@ -28,8 +28,6 @@ crate::system! {
     }
     run(this) {
         let range = ranges.of(this.0);
-        scatter_paths(data, hits, surfaces, rays, paths, range, |surf, u| {
-            surf.material.sample(surf.wo_local, u, TransportMode::Radiance)
-        })
+        scatter_paths(data, hits, surfaces, rays, paths, range)
     }
 }

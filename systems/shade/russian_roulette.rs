@@ -3,10 +3,9 @@
 //! that left the scene. So the wavefront is compacted once per bounce, not twice.
 
 use crate::components::PathFlags;
-use crate::integrators::pt::{
-    DIM_ROULETTE, PtState, ROULETTE_DEPTH, ROULETTE_MAX_SURVIVAL, bounce_dim,
-};
+use crate::integrators::pt::{DIM_ROULETTE, PtState, bounce_dim};
 use crate::pipeline::Flow;
+use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -29,12 +28,12 @@ crate::system! {
                 let mut survivors = 0;
                 for i in 0..p.len() {
                     if !p.flags[i].has(PathFlags::DEAD) && p.depth[i] >= ROULETTE_DEPTH {
-                        let survive = p.throughput[i].max_element().min(ROULETTE_MAX_SURVIVAL);
+                        let q = survival(p.throughput[i], 1.0);
                         let u = p.key[i].get(bounce_dim(p.depth[i] - 1) + DIM_ROULETTE);
-                        if u >= survive {
-                            p.flags[i].set(PathFlags::DEAD, true);
+                        if survives(q, u) {
+                            p.throughput[i] /= q;
                         } else {
-                            p.throughput[i] /= survive;
+                            p.flags[i].set(PathFlags::DEAD, true);
                         }
                     }
                     if p.flags[i].has(PathFlags::DEAD) {

@@ -3,13 +3,12 @@
 //! that its power stays constant in expectation. Stored photons join the pass in photon order.
 
 use crate::accel::{offset_ray_origin, surface_point};
-use crate::bsdf::{Material, TransportMode};
+use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{CHUNK, MISS, PhotonFlags};
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction};
-use crate::photons::{
-    DIM_BSDF, DIM_ROULETTE, PhotonPass, ROULETTE_MAX_SURVIVAL, StoredPhoton, bounce_dim,
-};
+use crate::photons::{DIM_BSDF, DIM_ROULETTE, PhotonPass, StoredPhoton, bounce_dim};
 use crate::pipeline::Flow;
+use crate::sampling::roulette::{survival, survives};
 use crate::scene::SceneData;
 use rayon::prelude::*;
 
@@ -93,21 +92,17 @@ crate::system! {
                     let wo_local = frame.to_local(wo);
                     let key = w.key[i];
                     let dim = bounce_dim(depth);
-                    let Some(bs) = material.sample(
+                    let Some((bs, wi)) = sample_direction(
+                        &material,
+                        &frame,
+                        ng,
+                        wo,
                         wo_local,
                         key.get2(dim + DIM_BSDF),
                         TransportMode::Importance,
                     ) else {
                         continue;
                     };
-                    if bs.pdf <= 0.0 {
-                        continue;
-                    }
-                    let wi = frame.to_world(bs.wi).normalize();
-                    let reflected = bs.wi.z * wo_local.z > 0.0;
-                    if (wi.dot(ng) * wo.dot(ng) > 0.0) != reflected {
-                        continue;
-                    }
                     let weight =
                         bs.value * (bs.wi.z.abs() / bs.pdf) * shading_correction(&here, wo, wi);
                     if !weight.is_finite() {
@@ -116,8 +111,8 @@ crate::system! {
                     // Roulette by the weight: survivors carry power / q x weight, which keeps
                     // a Lambertian photon's power unchanged (weight = albedo = q per channel
                     // when grey).
-                    let q = weight.max_element().min(ROULETTE_MAX_SURVIVAL);
-                    if q.is_nan() || q <= 0.0 || key.get(dim + DIM_ROULETTE) >= q {
+                    let q = survival(weight, 1.0);
+                    if !survives(q, key.get(dim + DIM_ROULETTE)) {
                         continue;
                     }
                     w.power[i] *= weight / q;

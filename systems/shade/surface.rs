@@ -2,7 +2,7 @@
 //! emission: position with its error bound, normals, the shading frame and wo.
 
 use crate::accel::offset_ray_origin;
-use crate::bsdf::{BsdfSample, Material};
+use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{
     Hits, PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView,
 };
@@ -10,7 +10,7 @@ use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_BSDF, bounce_dim};
 use crate::math::Frame;
 use crate::pipeline::Flow;
-use glam::{Vec2, Vec3};
+use glam::Vec3;
 use rayon::prelude::*;
 use std::ops::Range;
 
@@ -86,7 +86,6 @@ pub fn scatter_paths(
     rays: &mut Rays,
     paths: &mut Paths,
     range: Range<usize>,
-    sample: impl Fn(&Surface, Vec2) -> Option<BsdfSample> + Sync,
 ) -> Flow {
     let taken = range.len();
     let rays = rays.chunks_mut(range.clone());
@@ -98,9 +97,9 @@ pub fn scatter_paths(
             #[cfg(target_arch = "x86_64")]
             if crate::cpu::has_avx2_fma() {
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                return unsafe { scatter_chunk_avx2(data, hits, surfaces, r, p, &sample) };
+                return unsafe { scatter_chunk_avx2(data, hits, surfaces, r, p) };
             }
-            scatter_chunk(data, hits, surfaces, r, p, &sample)
+            scatter_chunk(data, hits, surfaces, r, p)
         })
         .sum();
     Flow::new(taken, scattered)
@@ -115,9 +114,8 @@ fn scatter_chunk_avx2(
     surfaces: &Surfaces,
     r: RaysChunk,
     p: PathsChunk,
-    sample: &impl Fn(&Surface, Vec2) -> Option<BsdfSample>,
 ) -> usize {
-    scatter_chunk(data, hits, surfaces, r, p, sample)
+    scatter_chunk(data, hits, surfaces, r, p)
 }
 
 /// The scattering step at the paths of one chunk; returns the number that scatter on.
@@ -128,7 +126,6 @@ fn scatter_chunk(
     surfaces: &Surfaces,
     r: RaysChunk,
     p: PathsChunk,
-    sample: &impl Fn(&Surface, Vec2) -> Option<BsdfSample>,
 ) -> usize {
     let mut scattered = 0;
     let range = p.start..p.start + p.len();
@@ -136,13 +133,16 @@ fn scatter_chunk(
     for i in 0..p.len() {
         let surf = Surface::at(data, &surfaces, hits.triangle[i], i, r.dir[i]);
         let u = p.key[i].get2(bounce_dim(p.depth[i]) + DIM_BSDF);
-        let next = sample(&surf, u).and_then(|bs| {
-            let wi = surf.frame.to_world(bs.wi).normalize();
-            // Reflection must leave on wo's geometric side, refraction on the other.
-            let reflected = bs.wi.z * surf.wo_local.z > 0.0;
-            if surf.reflects_geometrically(wi) != reflected || bs.pdf <= 0.0 {
-                return None;
-            }
+        let next = sample_direction(
+            &surf.material,
+            &surf.frame,
+            surf.ng,
+            surf.wo,
+            surf.wo_local,
+            u,
+            TransportMode::Radiance,
+        )
+        .and_then(|(bs, wi)| {
             let weight = bs.value * bs.wi.z.abs() / bs.pdf;
             (weight.max_element() > 0.0).then_some((bs, wi, weight))
         });
