@@ -6,6 +6,7 @@ use crate::integrators::{
     Budget, Control, IntegratorKind, RenderOutcome, RenderSettings, SceneData,
 };
 use crate::path::MisHeuristic;
+use crate::sysinfo::{cpu_seconds, peak_memory_bytes};
 use crate::reference::{
     DEFAULT_REFERENCE_SEED, ReferenceBudget, ReferenceJob, checkpoint_path, load_reference,
     render_reference,
@@ -468,39 +469,6 @@ fn progress_bar(budget: Budget, quiet: bool) -> indicatif::ProgressBar {
     .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
     bar.set_style(style);
     bar
-}
-
-/// CPU seconds (user + system) this process has used, from /proc (Linux; 0 elsewhere).
-pub fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
-    let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r) else {
-        return 0.0;
-    };
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |i: usize| {
-        fields
-            .get(i)
-            .and_then(|f| f.parse::<f64>().ok())
-            .unwrap_or(0.0)
-    };
-    // Linux reports these in USER_HZ, which is 100 on every mainstream architecture.
-    (ticks(11) + ticks(12)) / 100.0
-}
-
-/// Peak resident memory in bytes (VmHWM), from /proc (Linux; 0 elsewhere).
-pub fn peak_memory_bytes() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1))
-                .and_then(|kb| kb.parse::<u64>().ok())
-        })
-        .map_or(0, |kb| kb * 1024)
 }
 
 fn mega(x: f64) -> String {

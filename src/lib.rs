@@ -22,6 +22,7 @@ pub mod pipeline;
 pub mod reference;
 pub mod sampling;
 pub mod scene;
+pub mod sysinfo;
 
 #[path = "../systems/mod.rs"]
 pub mod systems;

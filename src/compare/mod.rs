@@ -176,7 +176,7 @@ pub fn run_comparison(
                 progress: &on_wave,
             };
             progress(units_before, &label);
-            let cpu_start = crate::cli::cpu_seconds();
+            let cpu_start = crate::sysinfo::cpu_seconds();
             let wall_start = Instant::now();
             let outcome = crate::integrators::render(
                 kind,
@@ -186,7 +186,7 @@ pub fn run_comparison(
                 &control,
             );
             let wall = wall_start.elapsed().as_secs_f64();
-            let cpu = crate::cli::cpu_seconds() - cpu_start;
+            let cpu = crate::sysinfo::cpu_seconds() - cpu_start;
             if outcome.interrupted || outcome.passes == 0 {
                 return Ok((results, true));
             }
