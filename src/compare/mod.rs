@@ -2,6 +2,7 @@
 //! error against a reference, and write a report folder: results.csv, error_vs_time.png and
 //! .svg, grid.png and summary.md.
 
+pub mod format;
 pub mod plot;
 pub mod report;
 pub mod thesis;
@@ -9,7 +10,7 @@ pub mod thesis;
 use crate::film::Image;
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, SceneData};
 use crate::metrics::{ErrorMetrics, compare};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -70,6 +71,21 @@ pub fn validate_budgets(budgets: &[f64], unit: BudgetUnit) -> Result<(), String>
         ));
     }
     Ok(())
+}
+
+/// A report file could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {message}", .path.display())]
+pub struct ReportError {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+pub(crate) fn report_error(path: &Path, message: impl std::fmt::Display) -> ReportError {
+    ReportError {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
 }
 
 /// One integrator rendered at one budget, and its error.

@@ -8,7 +8,7 @@
 //! study (THESIS.md), copied here so the preset needs nothing outside the repository; they keep
 //! the thesis' own inconsistencies (PM on the Cornell box at 500k photons in 4 s).
 
-use super::report::{sci, secs};
+use super::format::{sci, secs};
 use super::{Comparison, RunResult};
 use crate::integrators::IntegratorKind;
 use std::fmt::Write;
