@@ -5,6 +5,7 @@
 pub mod format;
 pub mod plot;
 pub mod report;
+pub mod run;
 pub mod thesis;
 
 use crate::film::Image;
