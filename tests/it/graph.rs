@@ -1,8 +1,7 @@
 //! Each scene's path-tracing graph holds the systems the scene needs and no others, and every
 //! column a system reads is written by an earlier system or is an input of the wave.
 
-mod common;
-use common::*;
+use crate::common::*;
 use stagelight::integrators::{SceneData, pt};
 
 fn graph_systems(scene: &str) -> Vec<&'static str> {
