@@ -1,21 +1,18 @@
 //! The `stagelight` command line: render, reference, compare, diff and bench.
 
-use crate::compare::{BudgetUnit, CompareJob, Comparison, report, thesis};
-use crate::film::Image;
-use crate::integrators::{
-    Budget, Control, IntegratorKind, RenderOutcome, RenderSettings, SceneData,
-};
+use crate::commands::bench::BenchOptions;
+use crate::commands::reference::ReferenceOptions;
+use crate::commands::render::RenderOptions;
+use crate::commands::scene_stem;
+use crate::compare::BudgetUnit;
+use crate::compare::run::CompareOptions;
+use crate::compare::thesis::ThesisOptions;
+use crate::integrators::{Budget, IntegratorKind, RenderSettings};
 use crate::path::MisHeuristic;
-use crate::reference::{
-    DEFAULT_REFERENCE_SEED, ReferenceBudget, ReferenceJob, checkpoint_path, load_reference,
-    render_reference,
-};
-use anyhow::{Context, Result, bail};
+use crate::reference::{DEFAULT_REFERENCE_SEED, ReferenceBudget};
+use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
-use std::path::{Path, PathBuf};
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
+use std::path::PathBuf;
 
 #[derive(Parser, Debug)]
 #[command(
@@ -307,9 +304,6 @@ fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
     }
 }
 
-/// Exit code of an interrupted render that saved its finished passes.
-pub const EXIT_INTERRUPTED: i32 = 130;
-
 /// Runs the command line; returns the process exit code (0 success, 1 error, 130 interrupted).
 pub fn main() -> i32 {
     let cli = match Cli::try_parse() {
@@ -329,13 +323,17 @@ pub fn main() -> i32 {
     }
 }
 
+/// Turns the parsed command line into a command's options and runs it.
 fn run(cli: Cli) -> Result<i32> {
     match cli.command {
-        Command::Render(args) => render_command(&args),
-        Command::Reference(args) => reference_command(&args),
-        Command::Compare(args) => compare_command(&args),
+        Command::Render(args) => crate::commands::render::render(&args.options()),
+        Command::Reference(args) => crate::commands::reference::reference(&args.options()),
+        Command::Compare(args) if args.preset == Some(Preset::Thesis) => {
+            crate::compare::thesis::run(&args.thesis_options())
+        }
+        Command::Compare(args) => crate::compare::run::compare(&args.options()?),
         Command::Diff { image, reference } => {
-            diff_command(&image, &reference)?;
+            crate::commands::diff(&image, &reference)?;
             Ok(0)
         }
         Command::Bench {
@@ -345,900 +343,128 @@ fn run(cli: Cli) -> Result<i32> {
             runs,
             threads,
         } => {
-            bench_command(&scene, integrator, spp, runs, threads.map(|t| t as usize))?;
+            crate::commands::bench::bench(&BenchOptions {
+                scene,
+                integrator,
+                spp,
+                runs,
+                threads: threads.map(|t| t as usize),
+            })?;
             Ok(0)
         }
     }
 }
 
-fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
-    let mut builder = rayon::ThreadPoolBuilder::new();
-    if let Some(n) = threads {
-        builder = builder.num_threads(n);
-    }
-    builder.build().context("cannot start the worker threads")
-}
-
-/// Loads and prepares a scene, printing its warnings.
-pub fn load_scene(path: &Path) -> Result<Arc<SceneData>> {
-    let scene = crate::scene::load(path)?;
-    for w in &scene.warnings {
-        eprintln!("warning: {w}");
-    }
-    Ok(Arc::new(SceneData::new(scene)))
-}
-
-fn render_command(args: &RenderArgs) -> Result<i32> {
-    let data = load_scene(&args.scene)?;
-    let budget = match (args.spp, args.time) {
-        (_, Some(t)) => Budget::Seconds(t),
-        (Some(spp), None) => Budget::SamplesPerPixel(spp),
-        (None, None) => Budget::SamplesPerPixel(64),
-    };
-    let output = args.output.clone().unwrap_or_else(|| {
-        let stem = args
-            .scene
-            .file_stem()
-            .map_or("scene".into(), |s| s.to_string_lossy().into_owned());
-        PathBuf::from("render").join(format!("{stem}_{}.exr", args.integrator.as_str()))
-    });
-    if output
-        .extension()
-        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
-    {
-        bail!("{}: the output must be an .exr file", output.display());
-    }
-    let stop = stop_on_ctrl_c()?;
-    let pool = thread_pool(args.threads.map(|t| t as usize))?;
-    let threads = pool.current_num_threads();
-    let bar = progress_bar(budget, args.quiet);
-    let progress = |done: u64, _total: Option<u64>| match budget {
-        Budget::SamplesPerPixel(_) => bar.set_position(done),
-        Budget::Seconds(_) => {
-            bar.set_position(bar.elapsed().as_secs().min(bar.length().unwrap_or(0)))
-        }
-    };
-    let control = Control {
-        stop: &stop,
-        progress: &progress,
-    };
-    if args.strategy_images.is_some()
-        && !args
-            .integrator
-            .info()
-            .options
-            .contains(&"--strategy-images")
-    {
-        bail!("--strategy-images needs --integrator bdpt");
-    }
-    let settings = RenderSettings {
-        seed: args.seed,
-        max_depth: args.max_depth.unwrap_or(u32::MAX),
-        mis: args.mis.heuristic(),
-        strategy_images: args.strategy_images.is_some(),
-        photons: args.photons.settings(),
-    };
-    let cpu_start = cpu_seconds();
-    let outcome = pool.install(|| {
-        crate::integrators::render(args.integrator, data.clone(), &settings, budget, &control)
-    });
-    let cpu = cpu_seconds() - cpu_start;
-    bar.finish_and_clear();
-
-    let image = outcome.film.image();
-    image.write_exr(&output)?;
-    let png = output.with_extension("png");
-    image.write_png(&png)?;
-    if let Some(dir) = &args.strategy_images {
-        for (name, layer) in &outcome.layers {
-            layer.write_exr(&dir.join(format!("{name}.exr")))?;
-        }
-    }
-    let mut report = render_report(&args.scene, args.integrator, threads, &outcome, cpu, &data);
-    report += &format!("wrote {} and {}\n", output.display(), png.display());
-    if outcome.interrupted {
-        report += &format!(
-            "interrupted: saved the {} finished passes ({} samples)\n",
-            outcome.passes, outcome.samples
-        );
-    }
-    print_out(&report);
-    if outcome.interrupted {
-        return Ok(EXIT_INTERRUPTED);
-    }
-    Ok(0)
-}
-
-/// A flag Ctrl-C sets: renders stop after the passes in flight. A second Ctrl-C while files
-/// are being written has no further effect.
-fn stop_on_ctrl_c() -> Result<Arc<AtomicBool>> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-        .context("cannot install the Ctrl-C handler")?;
-    Ok(stop)
-}
-
-fn progress_bar(budget: Budget, quiet: bool) -> indicatif::ProgressBar {
-    if quiet {
-        return indicatif::ProgressBar::hidden();
-    }
-    let (len, unit) = match budget {
-        Budget::SamplesPerPixel(spp) => (spp, "passes"),
-        Budget::Seconds(s) => (s.ceil() as u64, "s"),
-    };
-    let bar = indicatif::ProgressBar::new(len);
-    let style = indicatif::ProgressStyle::with_template(&format!(
-        "{{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit} (eta {{eta}})"
-    ))
-    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
-    bar.set_style(style);
-    bar
-}
-
-/// CPU seconds (user + system) this process has used, from /proc (Linux; 0 elsewhere).
-pub fn cpu_seconds() -> f64 {
-    let Ok(stat) = std::fs::read_to_string("/proc/self/stat") else {
-        return 0.0;
-    };
-    // Fields after the parenthesised command name; utime and stime are fields 14 and 15.
-    let Some(rest) = stat.rsplit_once(')').map(|(_, r)| r) else {
-        return 0.0;
-    };
-    let fields: Vec<&str> = rest.split_whitespace().collect();
-    let ticks = |i: usize| {
-        fields
-            .get(i)
-            .and_then(|f| f.parse::<f64>().ok())
-            .unwrap_or(0.0)
-    };
-    // Linux reports these in USER_HZ, which is 100 on every mainstream architecture.
-    (ticks(11) + ticks(12)) / 100.0
-}
-
-/// Peak resident memory in bytes (VmHWM), from /proc (Linux; 0 elsewhere).
-pub fn peak_memory_bytes() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1))
-                .and_then(|kb| kb.parse::<u64>().ok())
-        })
-        .map_or(0, |kb| kb * 1024)
-}
-
-fn mega(x: f64) -> String {
-    if x >= 1e6 {
-        format!("{:.3} M", x / 1e6)
-    } else if x >= 1e3 {
-        format!("{:.3} k", x / 1e3)
-    } else {
-        // Small rates (passes/s) keep two decimals.
-        format!("{x:.2}")
-    }
-}
-
-/// Writes to stdout, ignoring a closed pipe (`stagelight render ... | head` is fine).
-fn print_out(text: &str) {
-    use std::io::Write;
-    let mut out = std::io::stdout().lock();
-    let _ = out.write_all(text.as_bytes()).and_then(|_| out.flush());
-}
-
-/// The end-of-render report.
-pub fn render_report(
-    scene: &Path,
-    integrator: IntegratorKind,
-    threads: usize,
-    o: &RenderOutcome,
-    cpu: f64,
-    data: &SceneData,
-) -> String {
-    use std::fmt::Write;
-    let mut r = String::new();
-    let wall = o.wall.as_secs_f64();
-    let cam = data.scene.camera;
-    let _ = writeln!(
-        r,
-        "{} with {} at {}x{}, {} threads",
-        scene.display(),
-        integrator.as_str(),
-        cam.width,
-        cam.height,
-        threads
-    );
-    let _ = writeln!(
-        r,
-        "  passes            {} ({} samples)",
-        o.passes, o.samples
-    );
-    let _ = writeln!(
-        r,
-        "  time              {wall:.3} s wall, {cpu:.2} s CPU ({:.2} cores busy)",
-        cpu / wall.max(1e-9)
-    );
-    let _ = writeln!(r, "  samples/s         {}", mega(o.samples as f64 / wall));
-    let _ = writeln!(
-        r,
-        "  closest-hit rays  {} ({}rays/s)",
-        o.closest_rays(),
-        mega(o.closest_rays() as f64 / wall)
-    );
-    let _ = writeln!(
-        r,
-        "  shadow rays       {} ({}rays/s)",
-        o.shadow_rays(),
-        mega(o.shadow_rays() as f64 / wall)
-    );
-    if let Some(emit) = o.stats.get("emit_photons") {
-        let _ = writeln!(
-            r,
-            "  photons           {} emitted ({}photons/s), {} passes/s",
-            emit.emitted,
-            mega(emit.emitted as f64 / wall),
-            format_args!("{:.2}", o.passes as f64 / wall)
-        );
-    }
-    let _ = writeln!(
-        r,
-        "  NaN/Inf samples   {} (counted, never added)",
-        o.film.nonfinite
-    );
-    let _ = writeln!(
-        r,
-        "  memory            peak {:.1} MiB; {} paths in flight x {} bytes/path = {:.1} MiB",
-        peak_memory_bytes() as f64 / (1 << 20) as f64,
-        o.wavefront,
-        o.bytes_per_path,
-        (o.wavefront * o.bytes_per_path) as f64 / (1 << 20) as f64
-    );
-    let _ = writeln!(
-        r,
-        "  systems           time share   runs   items taken -> emitted"
-    );
-    for (s, share) in o.stats.time_shares() {
-        let (name, runs, taken, emitted) = (s.name, s.runs, s.taken, s.emitted);
-        let _ = writeln!(
-            r,
-            "    {name:<32} {share:>6.1}% {runs:>6} {taken:>14} -> {emitted}"
-        );
-    }
-    r
-}
-
-fn diff_command(image: &Path, reference: &Path) -> Result<()> {
-    let a = Image::read_exr(image)?;
-    let b = Image::read_exr(reference)?;
-    let m = crate::metrics::compare(&a, &b)
-        .with_context(|| format!("{} against {}", image.display(), reference.display()))?;
-    use std::fmt::Write;
-    let mut t = String::new();
-    let _ = writeln!(t, "{} against {}", image.display(), reference.display());
-    let _ = writeln!(t, "  relMSE  {:.6e}", m.relmse);
-    let _ = writeln!(t, "  RMSE    {:.6e}", m.rmse);
-    let _ = writeln!(t, "  MAE     {:.6e}", m.mae);
-    let _ = writeln!(
-        t,
-        "  mean    ({:.6}, {:.6}, {:.6}) against ({:.6}, {:.6}, {:.6})",
-        m.mean.x, m.mean.y, m.mean.z, m.reference_mean.x, m.reference_mean.y, m.reference_mean.z
-    );
-    print_out(&t);
-    Ok(())
-}
-
-fn bench_command(
-    scene: &Path,
-    integrator: IntegratorKind,
-    spp: u64,
-    runs: u32,
-    threads: Option<usize>,
-) -> Result<()> {
-    let data = load_scene(scene)?;
-    let pool = thread_pool(threads)?;
-    let stop = AtomicBool::new(false);
-    let control = Control {
-        stop: &stop,
-        progress: &|_, _| {},
-    };
-    let run_once = |seed: u64| {
-        let cpu0 = cpu_seconds();
-        let t = Instant::now();
-        let settings = RenderSettings {
-            seed,
-            ..RenderSettings::default()
+impl RenderArgs {
+    fn options(&self) -> RenderOptions {
+        let budget = match (self.spp, self.time) {
+            (_, Some(t)) => Budget::Seconds(t),
+            (Some(spp), None) => Budget::SamplesPerPixel(spp),
+            (None, None) => Budget::SamplesPerPixel(64),
         };
-        let o = pool.install(|| {
-            crate::integrators::render(
-                integrator,
-                data.clone(),
-                &settings,
-                Budget::SamplesPerPixel(spp),
-                &control,
-            )
+        let output = self.output.clone().unwrap_or_else(|| {
+            PathBuf::from("render").join(format!(
+                "{}_{}.exr",
+                scene_stem(&self.scene),
+                self.integrator.as_str()
+            ))
         });
-        let wall = t.elapsed().as_secs_f64();
-        (o, wall, cpu_seconds() - cpu0)
-    };
-    run_once(1_000_000); // warm-up
-    let mut samples_per_s = Vec::new();
-    let mut closest_per_s = Vec::new();
-    let mut shadow_per_s = Vec::new();
-    let mut photons_per_s = Vec::new();
-    let mut passes_per_s = Vec::new();
-    let mut last = None;
-    for r in 0..runs {
-        let (o, wall, cpu) = run_once(r as u64);
-        samples_per_s.push(o.samples as f64 / wall);
-        closest_per_s.push(o.closest_rays() as f64 / wall);
-        shadow_per_s.push(o.shadow_rays() as f64 / wall);
-        if let Some(emit) = o.stats.get("emit_photons") {
-            photons_per_s.push(emit.emitted as f64 / wall);
-            passes_per_s.push(o.passes as f64 / wall);
-        }
-        last = Some((o, cpu));
-    }
-    use std::fmt::Write;
-    let (o, cpu) = last.expect("at least one run");
-    let mut t = String::new();
-    let _ = writeln!(
-        t,
-        "bench {} ({}, {} spp, {} runs after a warm-up, {} threads)",
-        scene.display(),
-        integrator.as_str(),
-        spp,
-        runs,
-        pool.current_num_threads()
-    );
-    let _ = writeln!(t, "| measure | median | min | max |");
-    let _ = writeln!(t, "|---|---|---|---|");
-    for (name, v) in [
-        ("samples/s", &mut samples_per_s),
-        ("closest-hit rays/s", &mut closest_per_s),
-        ("shadow rays/s", &mut shadow_per_s),
-        ("photons/s", &mut photons_per_s),
-        ("passes/s", &mut passes_per_s),
-    ] {
-        if v.is_empty() {
-            continue; // no photons
-        }
-        v.sort_by(f64::total_cmp);
-        let _ = writeln!(
-            t,
-            "| {name} | {} | {} | {} |",
-            mega(v[v.len() / 2]),
-            mega(v[0]),
-            mega(v[v.len() - 1])
-        );
-    }
-    let _ = writeln!(t, "| bytes per path in flight | {} | | |", o.bytes_per_path);
-    let _ = writeln!(t, "| paths in flight | {} | | |", o.wavefront);
-    let _ = writeln!(
-        t,
-        "| peak memory | {:.1} MiB | | |",
-        peak_memory_bytes() as f64 / (1 << 20) as f64
-    );
-    let _ = writeln!(
-        t,
-        "| CPU s / wall s (last run) | {:.2} | | |",
-        cpu / o.wall.as_secs_f64()
-    );
-    let _ = writeln!(
-        t,
-        "| NaN/Inf samples (last run) | {} | | |",
-        o.film.nonfinite
-    );
-    let _ = writeln!(t);
-    let _ = writeln!(
-        t,
-        "| system (last run) | time share | runs | taken | emitted |"
-    );
-    let _ = writeln!(t, "|---|---|---|---|---|");
-    for (s, share) in o.stats.time_shares() {
-        let (name, runs, taken, emitted) = (s.name, s.runs, s.taken, s.emitted);
-        let _ = writeln!(t, "| {name} | {share:.1}% | {runs} | {taken} | {emitted} |");
-    }
-    print_out(&t);
-    Ok(())
-}
-
-fn scene_stem(scene: &Path) -> String {
-    scene
-        .file_stem()
-        .map_or("scene".into(), |s| s.to_string_lossy().into_owned())
-}
-
-/// A bar over `len` units whose position the caller sets; hidden when quiet.
-fn unit_bar(len: u64, template: &str, quiet: bool) -> indicatif::ProgressBar {
-    if quiet {
-        return indicatif::ProgressBar::hidden();
-    }
-    let bar = indicatif::ProgressBar::new(len.max(1));
-    let style = indicatif::ProgressStyle::with_template(template)
-        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
-    bar.set_style(style);
-    bar
-}
-
-/// Makes or continues a reference, with a progress bar in its budget's unit; prints what it
-/// did. Returns the outcome (interrupted or not).
-fn make_reference(
-    job: &ReferenceJob,
-    stop: &AtomicBool,
-    pool: &rayon::ThreadPool,
-    quiet: bool,
-) -> Result<crate::reference::ReferenceOutcome> {
-    let (len, unit) = match job.budget {
-        ReferenceBudget::SamplesPerPixel(spp) => (spp, "spp"),
-        ReferenceBudget::Seconds(s) => (s.ceil() as u64, "s"),
-    };
-    let bar = unit_bar(
-        len,
-        &format!("reference {{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit} (eta {{eta}})"),
-        quiet,
-    );
-    let progress = |done: f64, _target: f64| bar.set_position(done as u64);
-    let outcome = pool.install(|| render_reference(job, stop, &progress))?;
-    bar.finish_and_clear();
-    Ok(outcome)
-}
-
-fn describe_reference(job: &ReferenceJob, o: &crate::reference::ReferenceOutcome) -> String {
-    let file = job.output.display();
-    let what = format!(
-        "{} at {} spp ({:.1} s of rendering), seed {}, {}",
-        job.integrator,
-        o.passes,
-        o.seconds,
-        job.settings.seed,
-        job.scene_path.display()
-    );
-    if o.already_complete {
-        format!("{file}: already complete with {what}; nothing rendered")
-    } else if o.passes_before > 0 {
-        format!("{file}: resumed from {} spp to {what}", o.passes_before)
-    } else {
-        format!("{file}: made with {what}")
-    }
-}
-
-fn reference_command(args: &ReferenceArgs) -> Result<i32> {
-    if !args.integrator.is_unbiased() {
-        bail!(
-            "--integrator {}: a reference needs an unbiased integrator (pt or bdpt)",
-            args.integrator
-        );
-    }
-    let data = load_scene(&args.scene)?;
-    let output = args.output.clone().unwrap_or_else(|| {
-        PathBuf::from("reference").join(format!(
-            "{}_{}.exr",
-            scene_stem(&args.scene),
-            args.integrator
-        ))
-    });
-    if output
-        .extension()
-        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
-    {
-        bail!("{}: the output must be an .exr file", output.display());
-    }
-    let budget = match (args.spp, args.time) {
-        (_, Some(t)) => ReferenceBudget::Seconds(t),
-        (Some(spp), None) => ReferenceBudget::SamplesPerPixel(spp),
-        (None, None) => ReferenceBudget::SamplesPerPixel(DEFAULT_REFERENCE_SPP),
-    };
-    let stop = stop_on_ctrl_c()?;
-    let pool = thread_pool(args.threads.map(|t| t as usize))?;
-    let job = ReferenceJob {
-        scene_path: &args.scene,
-        data,
-        integrator: args.integrator,
-        settings: RenderSettings {
-            seed: args.seed,
-            max_depth: args.max_depth.unwrap_or(u32::MAX),
-            ..RenderSettings::default()
-        },
-        budget,
-        output: &output,
-        checkpoint_every: std::time::Duration::from_secs_f64(args.checkpoint_every),
-    };
-    let outcome = make_reference(&job, &stop, &pool, args.quiet)?;
-    let mut report = describe_reference(&job, &outcome) + "\n";
-    report += &format!(
-        "  {} threads, {:.1} s this run, {} NaN/Inf samples; checkpoint {}\n",
-        pool.current_num_threads(),
-        outcome.seconds_this_run,
-        outcome.nonfinite,
-        checkpoint_path(&output).display()
-    );
-    if outcome.interrupted {
-        report += &format!(
-            "interrupted: {} holds the {} finished passes; run the same command again to \
-             continue\n",
-            output.display(),
-            outcome.passes
-        );
-    }
-    print_out(&report);
-    Ok(if outcome.interrupted {
-        EXIT_INTERRUPTED
-    } else {
-        0
-    })
-}
-
-/// The checked settings of a comparison.
-struct ComparePlan {
-    integrators: Vec<IntegratorKind>,
-    unit: BudgetUnit,
-    budgets: Vec<f64>,
-    settings: RenderSettings,
-}
-
-fn compare_plan(args: &CompareArgs) -> Result<ComparePlan> {
-    let unit = match args.budget_unit {
-        BudgetUnitArg::Seconds => BudgetUnit::Seconds,
-        BudgetUnitArg::Spp => BudgetUnit::Spp,
-    };
-    crate::compare::validate_budgets(&args.budgets, unit)
-        .map_err(|e| anyhow::anyhow!("--budgets: {e}"))?;
-    let mut integrators: Vec<IntegratorKind> = Vec::new();
-    for &k in &args.integrators {
-        if integrators.contains(&k) {
-            bail!("--integrators: {k} is listed twice");
-        }
-        integrators.push(k);
-    }
-    if integrators.is_empty() {
-        integrators = IntegratorKind::all();
-    }
-    Ok(ComparePlan {
-        integrators,
-        unit,
-        budgets: args.budgets.clone(),
-        settings: RenderSettings {
-            seed: args.seed,
-            max_depth: args.max_depth.unwrap_or(u32::MAX),
-            photons: args.photons.settings(),
-            ..RenderSettings::default()
-        },
-    })
-}
-
-fn compare_command(args: &CompareArgs) -> Result<i32> {
-    if args.preset == Some(Preset::Thesis) {
-        return thesis_command(args);
-    }
-    let plan = compare_plan(args)?;
-    let scene = args
-        .scene
-        .clone()
-        .context("a scene file is needed (or --preset thesis)")?;
-    let out_dir = args
-        .output
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("compare").join(scene_stem(&scene)));
-    let stop = stop_on_ctrl_c()?;
-    let pool = thread_pool(args.threads.map(|t| t as usize))?;
-    let data = load_scene(&scene)?;
-    let (comparison, interrupted) = match compare_scene(
-        &scene,
-        data,
-        args.reference.as_deref(),
-        &out_dir,
-        &plan,
-        args.reference_spp,
-        &stop,
-        &pool,
-        args.quiet,
-    )? {
-        SceneRun::Done(c) => {
-            let interrupted = c.interrupted;
-            (*c, interrupted)
-        }
-        SceneRun::ReferenceInterrupted(note) => {
-            print_out(&format!("{note}\n"));
-            return Ok(EXIT_INTERRUPTED);
-        }
-    };
-    report::write_report(&comparison, &out_dir)?;
-    let mut text = format!(
-        "{} runs of {} on {}; reference {} ({})\nwrote {}/{{{}, {}, {}, {}, {}}}\n",
-        comparison.results.len(),
-        comparison
-            .integrators
-            .iter()
-            .map(|k| k.as_str())
-            .collect::<Vec<_>>()
-            .join(", "),
-        scene.display(),
-        comparison.reference_path.display(),
-        comparison.reference_note,
-        out_dir.display(),
-        report::RESULTS_CSV,
-        report::PLOT_PNG,
-        report::PLOT_SVG,
-        report::GRID_PNG,
-        report::SUMMARY_MD
-    );
-    if interrupted {
-        text += "interrupted: the report holds the runs finished before the stop\n";
-    }
-    print_out(&text);
-    Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
-}
-
-enum SceneRun {
-    Done(Box<Comparison>),
-    /// The reference was being made when a stop came: its checkpoint holds the passes done.
-    ReferenceInterrupted(String),
-}
-
-/// The reference of a scene (given, or made or resumed in `out_dir`), then every run.
-#[allow(clippy::too_many_arguments)]
-fn compare_scene(
-    scene: &Path,
-    data: Arc<SceneData>,
-    given_reference: Option<&Path>,
-    out_dir: &Path,
-    plan: &ComparePlan,
-    reference_spp: u64,
-    stop: &AtomicBool,
-    pool: &rayon::ThreadPool,
-    quiet: bool,
-) -> Result<SceneRun> {
-    let cam = data.scene.camera;
-    let (width, height) = (cam.width as usize, cam.height as usize);
-    let (reference_path, reference_note) = match given_reference {
-        Some(path) => (path.to_path_buf(), "given with --reference".to_string()),
-        None => {
-            let path = out_dir.join("reference.exr");
-            let job = ReferenceJob {
-                scene_path: scene,
-                data: data.clone(),
-                integrator: IntegratorKind::named("pt"),
-                settings: RenderSettings {
-                    seed: DEFAULT_REFERENCE_SEED,
-                    max_depth: plan.settings.max_depth,
-                    ..RenderSettings::default()
-                },
-                budget: ReferenceBudget::SamplesPerPixel(reference_spp),
-                output: &path,
-                checkpoint_every: std::time::Duration::from_secs(30),
-            };
-            if !quiet {
-                eprintln!(
-                    "no --reference given: using {} (pt, {reference_spp} spp; made or resumed \
-                     now)",
-                    path.display()
-                );
-            }
-            let outcome = make_reference(&job, stop, pool, quiet)?;
-            let note = describe_reference(&job, &outcome);
-            if outcome.interrupted {
-                return Ok(SceneRun::ReferenceInterrupted(format!(
-                    "interrupted while making the reference: {note}; run the same command \
-                     again to continue"
-                )));
-            }
-            if !quiet {
-                eprintln!("{note}");
-            }
-            let how = if outcome.already_complete {
-                "made by an earlier compare run, with pt"
-            } else {
-                "made by this compare run, with pt"
-            };
-            (path, how.to_string())
-        }
-    };
-    let loaded = load_reference(&reference_path, width, height)?;
-    if let (Some(seed), Some(integrator)) = (loaded.seed, loaded.integrator.as_deref())
-        && seed == plan.settings.seed
-        && plan.integrators.iter().any(|k| k.as_str() == integrator)
-    {
-        eprintln!(
-            "warning: {} was made by {integrator} with seed {seed}, the seed of the compared \
-             renders: their errors are correlated with it; use another --seed",
-            reference_path.display()
-        );
-    }
-    let note = match loaded.spp {
-        Some(spp) => format!("{reference_note}, {spp} spp"),
-        None => reference_note,
-    };
-    let job = CompareJob {
-        data,
-        reference: &loaded.image,
-        integrators: &plan.integrators,
-        unit: plan.unit,
-        budgets: &plan.budgets,
-        settings: plan.settings,
-    };
-    // The bar counts milliseconds of time budgets, or passes of sample budgets.
-    let scale = match plan.unit {
-        BudgetUnit::Seconds => 1000.0,
-        BudgetUnit::Spp => 1.0,
-    };
-    let bar = unit_bar(
-        (job.total_units() * scale).ceil() as u64,
-        "compare {elapsed_precise} [{bar:40}] {percent:>3}% {msg} (eta {eta})",
-        quiet,
-    );
-    let progress = |done: f64, label: &str| {
-        bar.set_position((done * scale) as u64);
-        bar.set_message(label.to_string());
-    };
-    let (results, interrupted) = pool
-        .install(|| crate::compare::run_comparison(&job, stop, &progress))
-        .map_err(|e| anyhow::anyhow!("{}: {e}", reference_path.display()))?;
-    bar.finish_and_clear();
-    Ok(SceneRun::Done(Box::new(Comparison {
-        scene_name: scene_stem(scene),
-        scene_path: scene.to_path_buf(),
-        width,
-        height,
-        threads: pool.current_num_threads(),
-        reference: loaded.image,
-        reference_path,
-        reference_note: note,
-        reference_spp: loaded.spp,
-        integrators: plan.integrators.clone(),
-        unit: plan.unit,
-        budgets: plan.budgets.clone(),
-        results,
-        interrupted,
-    })))
-}
-
-/// `compare --preset thesis`: the three scenes of the study, its budgets, its tables.
-fn thesis_command(args: &CompareArgs) -> Result<i32> {
-    let out_dir = args
-        .output
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("compare").join("thesis"));
-    let integrators = thesis::unbiased_built();
-    let plan = ComparePlan {
-        integrators,
-        unit: BudgetUnit::Spp,
-        budgets: thesis::UNBIASED_SPP.iter().map(|&s| s as f64).collect(),
-        settings: RenderSettings {
-            seed: args.seed,
-            max_depth: args.max_depth.unwrap_or(u32::MAX),
-            ..RenderSettings::default()
-        },
-    };
-    let stop = stop_on_ctrl_c()?;
-    let pool = thread_pool(args.threads.map(|t| t as usize))?;
-    let mut comparisons: Vec<(&'static str, Comparison)> = Vec::new();
-    let mut interrupted = false;
-    for (key, _label) in thesis::SCENES {
-        let scene = args.scenes_dir.join(format!("{key}.ron"));
-        let data = load_scene(&scene)?;
-        let scene_dir = out_dir.join(key);
-        if !args.quiet {
-            eprintln!("{key}: {}", scene.display());
-        }
-        match compare_scene(
-            &scene,
-            data,
-            None,
-            &scene_dir,
-            &plan,
-            args.reference_spp,
-            &stop,
-            &pool,
-            args.quiet,
-        )? {
-            SceneRun::Done(mut c) => {
-                if !c.interrupted {
-                    let (runs, stopped) =
-                        thesis_biased_runs(&scene, &c.reference, &plan, args, &stop, &pool)?;
-                    c.results.extend(runs);
-                    c.interrupted |= stopped;
-                }
-                report::write_report(&c, &scene_dir)?;
-                interrupted |= c.interrupted;
-                comparisons.push((key, *c));
-            }
-            SceneRun::ReferenceInterrupted(note) => {
-                eprintln!("{note}");
-                interrupted = true;
-            }
-        }
-        if interrupted {
-            break;
+        RenderOptions {
+            scene: self.scene.clone(),
+            integrator: self.integrator,
+            budget,
+            settings: RenderSettings {
+                seed: self.seed,
+                max_depth: self.max_depth.unwrap_or(u32::MAX),
+                mis: self.mis.heuristic(),
+                strategy_images: self.strategy_images.is_some(),
+                photons: self.photons.settings(),
+            },
+            strategy_images: self.strategy_images.clone(),
+            output,
+            threads: self.threads.map(|t| t as usize),
+            quiet: self.quiet,
         }
     }
-    let scenes: Vec<thesis::SceneResult> = thesis::SCENES
-        .iter()
-        .map(|(key, _)| thesis::SceneResult {
-            key,
-            comparison: comparisons.iter().find(|(k, _)| k == key).map(|(_, c)| c),
+}
+
+impl ReferenceArgs {
+    fn options(&self) -> ReferenceOptions {
+        let output = self.output.clone().unwrap_or_else(|| {
+            PathBuf::from("reference").join(format!(
+                "{}_{}.exr",
+                scene_stem(&self.scene),
+                self.integrator
+            ))
+        });
+        let budget = match (self.spp, self.time) {
+            (_, Some(t)) => ReferenceBudget::Seconds(t),
+            (Some(spp), None) => ReferenceBudget::SamplesPerPixel(spp),
+            (None, None) => ReferenceBudget::SamplesPerPixel(DEFAULT_REFERENCE_SPP),
+        };
+        ReferenceOptions {
+            scene: self.scene.clone(),
+            integrator: self.integrator,
+            budget,
+            settings: RenderSettings {
+                seed: self.seed,
+                max_depth: self.max_depth.unwrap_or(u32::MAX),
+                ..RenderSettings::default()
+            },
+            output,
+            checkpoint_every: std::time::Duration::from_secs_f64(self.checkpoint_every),
+            threads: self.threads.map(|t| t as usize),
+            quiet: self.quiet,
+        }
+    }
+}
+
+impl CompareArgs {
+    fn options(&self) -> Result<CompareOptions> {
+        let scene = self
+            .scene
+            .clone()
+            .context("a scene file is needed (or --preset thesis)")?;
+        let output = self
+            .output
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("compare").join(scene_stem(&scene)));
+        Ok(CompareOptions {
+            scene,
+            reference: self.reference.clone(),
+            integrators: self.integrators.clone(),
+            unit: match self.budget_unit {
+                BudgetUnitArg::Seconds => BudgetUnit::Seconds,
+                BudgetUnitArg::Spp => BudgetUnit::Spp,
+            },
+            budgets: self.budgets.clone(),
+            settings: RenderSettings {
+                seed: self.seed,
+                max_depth: self.max_depth.unwrap_or(u32::MAX),
+                photons: self.photons.settings(),
+                ..RenderSettings::default()
+            },
+            reference_spp: self.reference_spp,
+            output,
+            threads: self.threads.map(|t| t as usize),
+            quiet: self.quiet,
         })
-        .collect();
-    std::fs::create_dir_all(&out_dir).with_context(|| out_dir.display().to_string())?;
-    let summary = out_dir.join(report::SUMMARY_MD);
-    std::fs::write(
-        &summary,
-        thesis::summary_markdown(&scenes, pool.current_num_threads(), &args.thesis_photons),
-    )
-    .with_context(|| summary.display().to_string())?;
-    let csv = out_dir.join(report::RESULTS_CSV);
-    let all: Vec<(&str, &Comparison)> = comparisons.iter().map(|(k, c)| (*k, c)).collect();
-    write_thesis_csv(&all, &csv)?;
-    let mut text = format!(
-        "thesis preset: {} of 3 scenes; wrote {} and {}\n",
-        comparisons.len(),
-        summary.display(),
-        csv.display()
-    );
-    if interrupted {
-        text += "interrupted: the report holds the runs finished before the stop\n";
     }
-    print_out(&text);
-    Ok(if interrupted { EXIT_INTERRUPTED } else { 0 })
-}
 
-/// The thesis preset's biased runs of one scene: each row of `thesis::BIASED` at each of
-/// `--thesis-photons`, against the scene's reference. Returns the runs and whether a stop cut
-/// them short.
-fn thesis_biased_runs(
-    scene: &Path,
-    reference: &Image,
-    plan: &ComparePlan,
-    args: &CompareArgs,
-    stop: &AtomicBool,
-    pool: &rayon::ThreadPool,
-) -> Result<(Vec<crate::compare::RunResult>, bool)> {
-    let data = load_scene(scene)?;
-    let mut runs = Vec::new();
-    for &photons in &args.thesis_photons {
-        for (name, passes, row) in thesis::BIASED {
-            let kind = IntegratorKind::from_name(name).map_err(|e| anyhow::anyhow!("{e}"))?;
-            if !args.quiet {
-                eprintln!("  {row} at {photons} photons");
-            }
-            let settings = RenderSettings {
-                photons: crate::integrators::PhotonSettings {
-                    photons_per_pass: photons,
-                    photons,
-                    ..args.photons.settings()
-                },
-                ..plan.settings
-            };
-            let job = CompareJob {
-                data: data.clone(),
-                reference,
-                integrators: &[kind],
-                unit: BudgetUnit::Spp,
-                budgets: &[passes as f64],
-                settings,
-            };
-            let (results, stopped) = pool
-                .install(|| crate::compare::run_comparison(&job, stop, &|_, _| {}))
-                .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
-            runs.extend(results);
-            if stopped {
-                return Ok((runs, true));
-            }
+    fn thesis_options(&self) -> ThesisOptions {
+        ThesisOptions {
+            scenes_dir: self.scenes_dir.clone(),
+            output: self
+                .output
+                .clone()
+                .unwrap_or_else(|| PathBuf::from("compare").join("thesis")),
+            seed: self.seed,
+            max_depth: self.max_depth.unwrap_or(u32::MAX),
+            photons: self.photons.settings(),
+            photon_budgets: self.thesis_photons.clone(),
+            reference_spp: self.reference_spp,
+            threads: self.threads.map(|t| t as usize),
+            quiet: self.quiet,
         }
     }
-    Ok((runs, false))
-}
-
-/// One CSV of every scene's runs, with a scene column first.
-fn write_thesis_csv(all: &[(&str, &Comparison)], path: &Path) -> Result<()> {
-    let mut rows = Vec::new();
-    let mut scenes = Vec::new();
-    for (key, c) in all {
-        for r in &c.results {
-            rows.push(r.clone());
-            scenes.push(*key);
-        }
-    }
-    report::write_csv_with_scenes(&rows, BudgetUnit::Spp, path, &scenes)?;
-    Ok(())
 }

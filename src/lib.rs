@@ -9,6 +9,7 @@
 pub mod accel;
 pub mod bsdf;
 pub mod cli;
+pub mod commands;
 pub mod compare;
 pub mod components;
 pub mod cpu;
@@ -21,8 +22,10 @@ pub mod path;
 pub mod photons;
 pub mod pipeline;
 pub mod reference;
+pub mod report;
 pub mod sampling;
 pub mod scene;
+pub mod sysinfo;
 
 #[path = "../systems/mod.rs"]
 pub mod systems;

@@ -2,14 +2,16 @@
 //! error against a reference, and write a report folder: results.csv, error_vs_time.png and
 //! .svg, grid.png and summary.md.
 
+pub mod format;
 pub mod plot;
 pub mod report;
+pub mod run;
 pub mod thesis;
 
 use crate::film::Image;
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, SceneData};
 use crate::metrics::{ErrorMetrics, compare};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
@@ -70,6 +72,21 @@ pub fn validate_budgets(budgets: &[f64], unit: BudgetUnit) -> Result<(), String>
         ));
     }
     Ok(())
+}
+
+/// A report file could not be written.
+#[derive(Debug, thiserror::Error)]
+#[error("{}: {message}", .path.display())]
+pub struct ReportError {
+    pub path: PathBuf,
+    pub message: String,
+}
+
+pub(crate) fn report_error(path: &Path, message: impl std::fmt::Display) -> ReportError {
+    ReportError {
+        path: path.to_path_buf(),
+        message: message.to_string(),
+    }
 }
 
 /// One integrator rendered at one budget, and its error.
@@ -176,7 +193,7 @@ pub fn run_comparison(
                 progress: &on_wave,
             };
             progress(units_before, &label);
-            let cpu_start = crate::cli::cpu_seconds();
+            let cpu_start = crate::sysinfo::cpu_seconds();
             let wall_start = Instant::now();
             let outcome = crate::integrators::render(
                 kind,
@@ -186,7 +203,7 @@ pub fn run_comparison(
                 &control,
             );
             let wall = wall_start.elapsed().as_secs_f64();
-            let cpu = crate::cli::cpu_seconds() - cpu_start;
+            let cpu = crate::sysinfo::cpu_seconds() - cpu_start;
             if outcome.interrupted || outcome.passes == 0 {
                 return Ok((results, true));
             }

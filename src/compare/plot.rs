@@ -4,8 +4,8 @@
 //! Text is drawn with DejaVu Sans embedded in the binary (assets/fonts/, under its own free
 //! licence) through plotters' ab_glyph backend, so no system font library is needed.
 
-use super::Comparison;
-use super::report::{ReportError, report_error, sci, secs, slope_of};
+use super::format::{sci, secs, slope_of};
+use super::{Comparison, ReportError, report_error};
 use crate::film::{Image, srgb8};
 use crate::integrators::known_integrators;
 use plotters::coord::Shift;

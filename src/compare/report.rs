@@ -1,10 +1,10 @@
 //! The report folder of a comparison: results.csv, the pictures, and summary.md.
 
-use super::{BudgetUnit, Comparison, Reach, RunResult, error_at_time, fit_log_slope};
-use super::{quality_targets, time_to_reach};
-use crate::integrators::IntegratorKind;
+use super::format::{points, sci, secs, slope_of};
+use super::{BudgetUnit, Comparison, Reach, ReportError, RunResult, error_at_time};
+use super::{quality_targets, report_error, time_to_reach};
 use std::fmt::Write;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// The files a report folder holds.
 pub const RESULTS_CSV: &str = "results.csv";
@@ -33,21 +33,6 @@ pub const CSV_HEADER: [&str; 17] = [
     "mean_g",
     "mean_b",
 ];
-
-/// A report file could not be written.
-#[derive(Debug, thiserror::Error)]
-#[error("{}: {message}", .path.display())]
-pub struct ReportError {
-    pub path: PathBuf,
-    pub message: String,
-}
-
-pub(crate) fn report_error(path: &Path, message: impl std::fmt::Display) -> ReportError {
-    ReportError {
-        path: path.to_path_buf(),
-        message: message.to_string(),
-    }
-}
 
 /// Writes every file of the report into `dir` (created if missing).
 pub fn write_report(c: &Comparison, dir: &Path) -> Result<(), ReportError> {
@@ -113,42 +98,6 @@ fn write_csv_rows(
         w.write_record(&row).map_err(|e| report_error(path, e))?;
     }
     w.flush().map_err(|e| report_error(path, e))
-}
-
-/// A number in three significant digits, scientific when small or large.
-pub fn sci(x: f64) -> String {
-    if !x.is_finite() {
-        return if x > 0.0 { "inf".into() } else { "n/a".into() };
-    }
-    if x != 0.0 && !(1e-2..1e4).contains(&x.abs()) {
-        format!("{x:.2e}")
-    } else {
-        format!("{x:.3}")
-    }
-}
-
-/// Seconds, with fewer decimals as they grow.
-pub fn secs(t: f64) -> String {
-    if t < 0.01 {
-        format!("{t:.1e}")
-    } else if t >= 100.0 {
-        format!("{t:.0}")
-    } else if t >= 10.0 {
-        format!("{t:.1}")
-    } else {
-        format!("{t:.2}")
-    }
-}
-
-fn points(runs: &[&RunResult]) -> Vec<(f64, f64)> {
-    let mut p: Vec<(f64, f64)> = runs.iter().map(|r| (r.wall, r.metrics.relmse)).collect();
-    p.sort_by(|a, b| a.0.total_cmp(&b.0));
-    p
-}
-
-/// An integrator's fitted slope for legends and tables.
-pub fn slope_of(c: &Comparison, kind: IntegratorKind) -> Option<f64> {
-    fit_log_slope(&points(&c.runs_of(kind)))
 }
 
 /// summary.md: what was compared, the pictures, equal-time and equal-quality tables, slopes

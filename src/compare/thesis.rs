@@ -8,10 +8,16 @@
 //! study (THESIS.md), copied here so the preset needs nothing outside the repository; they keep
 //! the thesis' own inconsistencies (PM on the Cornell box at 500k photons in 4 s).
 
-use super::report::{sci, secs};
-use super::{Comparison, RunResult};
-use crate::integrators::IntegratorKind;
+use super::format::{sci, secs};
+use super::run::{ComparePlan, SceneRun, compare_scene};
+use super::{BudgetUnit, CompareJob, Comparison, RunResult, report};
+use crate::commands::{exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool};
+use crate::film::Image;
+use crate::integrators::{IntegratorKind, PhotonSettings, RenderSettings};
+use anyhow::{Context, Result};
 use std::fmt::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::AtomicBool;
 
 /// The scenes: (file stem in scenes/, the thesis' name for it).
 pub const SCENES: [(&str, &str); 3] = [
@@ -291,4 +297,171 @@ fn scene_label(key: &str) -> &'static str {
         .iter()
         .find(|(k, _)| *k == key)
         .map_or("?", |(_, label)| label)
+}
+
+/// What the preset was asked for.
+pub struct ThesisOptions {
+    /// Where the preset finds `SCENES` (as STEM.ron).
+    pub scenes_dir: PathBuf,
+    /// Report folder: summary.md and results.csv of every scene, one folder per scene.
+    pub output: PathBuf,
+    /// Seed of the compared renders (the references have their own).
+    pub seed: u64,
+    pub max_depth: u32,
+    /// Settings of the photon mappers; their photon counts are each of `photon_budgets`.
+    pub photons: PhotonSettings,
+    /// Photons per pass of the biased runs (PM traces this many in all).
+    pub photon_budgets: Vec<u64>,
+    /// Samples per pixel of the references the preset makes.
+    pub reference_spp: u64,
+    /// Worker threads (None: all cores).
+    pub threads: Option<usize>,
+    /// No progress bar.
+    pub quiet: bool,
+}
+
+/// `compare --preset thesis`: the three scenes of the study, its budgets, its tables. Returns
+/// the exit code: 0, or `EXIT_INTERRUPTED` when Ctrl-C stopped it.
+pub fn run(o: &ThesisOptions) -> Result<i32> {
+    let out_dir = &o.output;
+    let plan = ComparePlan {
+        integrators: unbiased_built(),
+        unit: BudgetUnit::Spp,
+        budgets: UNBIASED_SPP.iter().map(|&s| s as f64).collect(),
+        settings: RenderSettings {
+            seed: o.seed,
+            max_depth: o.max_depth,
+            ..RenderSettings::default()
+        },
+    };
+    let stop = stop_on_ctrl_c()?;
+    let pool = thread_pool(o.threads)?;
+    let mut comparisons: Vec<(&'static str, Comparison)> = Vec::new();
+    let mut interrupted = false;
+    for (key, _label) in SCENES {
+        let scene = o.scenes_dir.join(format!("{key}.ron"));
+        let data = load_scene(&scene)?;
+        let scene_dir = out_dir.join(key);
+        if !o.quiet {
+            eprintln!("{key}: {}", scene.display());
+        }
+        match compare_scene(
+            &scene,
+            data,
+            None,
+            &scene_dir,
+            &plan,
+            o.reference_spp,
+            &stop,
+            &pool,
+            o.quiet,
+        )? {
+            SceneRun::Done(mut c) => {
+                if !c.interrupted {
+                    let (runs, stopped) =
+                        biased_runs(&scene, &c.reference, &plan, o, &stop, &pool)?;
+                    c.results.extend(runs);
+                    c.interrupted |= stopped;
+                }
+                report::write_report(&c, &scene_dir)?;
+                interrupted |= c.interrupted;
+                comparisons.push((key, *c));
+            }
+            SceneRun::ReferenceInterrupted(note) => {
+                eprintln!("{note}");
+                interrupted = true;
+            }
+        }
+        if interrupted {
+            break;
+        }
+    }
+    let scenes: Vec<SceneResult> = SCENES
+        .iter()
+        .map(|(key, _)| SceneResult {
+            key,
+            comparison: comparisons.iter().find(|(k, _)| k == key).map(|(_, c)| c),
+        })
+        .collect();
+    std::fs::create_dir_all(out_dir).with_context(|| out_dir.display().to_string())?;
+    let summary = out_dir.join(report::SUMMARY_MD);
+    std::fs::write(
+        &summary,
+        summary_markdown(&scenes, pool.current_num_threads(), &o.photon_budgets),
+    )
+    .with_context(|| summary.display().to_string())?;
+    let csv = out_dir.join(report::RESULTS_CSV);
+    let all: Vec<(&str, &Comparison)> = comparisons.iter().map(|(k, c)| (*k, c)).collect();
+    write_csv(&all, &csv)?;
+    let mut text = format!(
+        "thesis preset: {} of 3 scenes; wrote {} and {}\n",
+        comparisons.len(),
+        summary.display(),
+        csv.display()
+    );
+    if interrupted {
+        text += "interrupted: the report holds the runs finished before the stop\n";
+    }
+    print_out(&text);
+    Ok(exit_code(interrupted))
+}
+
+/// The biased runs of one scene: each row of `BIASED` at each of the photon budgets, against
+/// the scene's reference. Returns the runs and whether a stop cut them short.
+fn biased_runs(
+    scene: &Path,
+    reference: &Image,
+    plan: &ComparePlan,
+    o: &ThesisOptions,
+    stop: &AtomicBool,
+    pool: &rayon::ThreadPool,
+) -> Result<(Vec<RunResult>, bool)> {
+    let data = load_scene(scene)?;
+    let mut runs = Vec::new();
+    for &photons in &o.photon_budgets {
+        for (name, passes, row) in BIASED {
+            let kind = IntegratorKind::from_name(name).map_err(|e| anyhow::anyhow!("{e}"))?;
+            if !o.quiet {
+                eprintln!("  {row} at {photons} photons");
+            }
+            let settings = RenderSettings {
+                photons: PhotonSettings {
+                    photons_per_pass: photons,
+                    photons,
+                    ..o.photons
+                },
+                ..plan.settings
+            };
+            let job = CompareJob {
+                data: data.clone(),
+                reference,
+                integrators: &[kind],
+                unit: BudgetUnit::Spp,
+                budgets: &[passes as f64],
+                settings,
+            };
+            let (results, stopped) = pool
+                .install(|| super::run_comparison(&job, stop, &|_, _| {}))
+                .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
+            runs.extend(results);
+            if stopped {
+                return Ok((runs, true));
+            }
+        }
+    }
+    Ok((runs, false))
+}
+
+/// One CSV of every scene's runs, with a scene column first.
+fn write_csv(all: &[(&str, &Comparison)], path: &Path) -> Result<()> {
+    let mut rows = Vec::new();
+    let mut scenes = Vec::new();
+    for (key, c) in all {
+        for r in &c.results {
+            rows.push(r.clone());
+            scenes.push(*key);
+        }
+    }
+    report::write_csv_with_scenes(&rows, BudgetUnit::Spp, path, &scenes)?;
+    Ok(())
 }

@@ -1,23 +1,22 @@
 //! The same scene, seed and sample count give a bit-identical EXR whatever the thread count.
 
+use crate::common::{stagelight_command, stderr, temp_dir};
 use std::path::Path;
-use std::process::Command;
 
 fn render(threads: u32, seed: u64, out: &Path) {
-    let o = Command::new(env!("CARGO_BIN_EXE_stagelight"))
+    let o = stagelight_command()
         .args(["render", "scenes/cornell_box.ron", "--spp", "3", "--quiet"])
         .args(["--seed", &seed.to_string()])
         .args(["--threads", &threads.to_string(), "-o"])
         .arg(out)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .expect("stagelight runs");
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(o.status.success(), "{}", stderr(&o));
 }
 
 #[test]
 fn exr_is_bit_identical_for_one_two_and_three_threads() {
-    let dir = std::env::temp_dir().join(format!("stagelight-determinism-{}", std::process::id()));
+    let dir = temp_dir("determinism");
     let files: Vec<_> = [1, 2, 3]
         .iter()
         .map(|&t| {
@@ -35,7 +34,7 @@ fn exr_is_bit_identical_for_one_two_and_three_threads() {
 
 #[test]
 fn a_different_seed_gives_a_different_image() {
-    let dir = std::env::temp_dir().join(format!("stagelight-seed-{}", std::process::id()));
+    let dir = temp_dir("seed");
     let (a, b) = (dir.join("a.exr"), dir.join("b.exr"));
     render(2, 11, &a);
     render(2, 12, &b);

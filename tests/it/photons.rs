@@ -2,9 +2,7 @@
 //! expectation, caustic photons exist only where a specular surface does, and the stored
 //! photons do not depend on the thread count.
 
-mod common;
-
-use common::load_small;
+use crate::common::load_small;
 use glam::{DVec3, Vec3};
 use stagelight::components::PhotonFlags;
 use stagelight::integrators::SceneData;

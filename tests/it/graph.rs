@@ -1,8 +1,7 @@
 //! Every integrator's graph on every scene holds the systems the scene needs and no others,
 //! and reads every column only after a system (or the driver) has written it.
 
-mod common;
-use common::*;
+use crate::common::*;
 use stagelight::integrators::{IntegratorKind, IntegratorState, RenderSettings, SceneData, pt};
 
 const SCENES: [&str; 4] = [

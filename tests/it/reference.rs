@@ -1,32 +1,23 @@
 //! References: an interrupted reference and its resumption equal, sample for sample, an
 //! uninterrupted one; a checkpoint continues only the render that made it.
 
-mod common;
-
+use crate::common::{
+    interrupt, load_small, render_bdpt, render_pt, spawn, stagelight, stagelight_command, stderr,
+    stdout, temp_dir, wait_until,
+};
 use stagelight::film::Image;
 use stagelight::integrators::{IntegratorKind, RenderSettings, SceneData};
 use stagelight::reference::{
     Checkpoint, ReferenceBudget, ReferenceJob, checkpoint_path, reference_attributes,
     render_reference,
 };
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!(
-        "stagelight-reference-{name}-{}",
-        std::process::id()
-    ));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
 fn small(name: &str, size: u32) -> Arc<SceneData> {
-    Arc::new(SceneData::new(common::load_small(name, size)))
+    Arc::new(SceneData::new(load_small(name, size)))
 }
 
 fn reference(
@@ -71,7 +62,7 @@ fn reference_with(
 
 #[test]
 fn interrupted_and_resumed_equals_uninterrupted_bit_for_bit() {
-    let dir = temp_dir("resume");
+    let dir = temp_dir("reference-resume");
     let data = small("cornell_box.ron", 16);
     // "Interrupted" after 5 passes, checkpointing after every pass; then resumed to 12.
     let resumed = dir.join("resumed.exr");
@@ -101,7 +92,7 @@ fn interrupted_and_resumed_equals_uninterrupted_bit_for_bit() {
     assert!(std::fs::read(&resumed).unwrap() == std::fs::read(&whole).unwrap());
 
     // And both equal a plain 12-spp render with the same seed.
-    let plain = common::render_pt(common::load_small("cornell_box.ron", 16), 12, 7, u32::MAX);
+    let plain = render_pt(load_small("cornell_box.ron", 16), 12, 7, u32::MAX);
     assert!(plain.film.image() == Image::read_exr(&whole).unwrap());
 
     let attributes = reference_attributes(&resumed).unwrap();
@@ -122,7 +113,7 @@ fn interrupted_and_resumed_equals_uninterrupted_bit_for_bit() {
 #[test]
 fn a_bdpt_reference_resumes_with_its_splats() {
     // Light tracing splats into any pixel: the checkpoint must keep them to resume exactly.
-    let dir = temp_dir("bdpt");
+    let dir = temp_dir("reference-bdpt");
     let data = small("cornell_box.ron", 12);
     let resumed = dir.join("resumed.exr");
     reference_with(
@@ -155,14 +146,14 @@ fn a_bdpt_reference_resumes_with_its_splats() {
     .unwrap();
     assert!(std::fs::read(&resumed).unwrap() == std::fs::read(&whole).unwrap());
     let settings = stagelight::integrators::bdpt::BdptSettings::new(5, u32::MAX);
-    let plain = common::render_bdpt(common::load_small("cornell_box.ron", 12), 5, settings);
+    let plain = render_bdpt(load_small("cornell_box.ron", 12), 5, settings);
     assert!(plain.0.film.image() == Image::read_exr(&whole).unwrap());
     let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
 fn a_checkpoint_continues_only_its_own_render() {
-    let dir = temp_dir("mismatch");
+    let dir = temp_dir("reference-mismatch");
     let data = small("cornell_box.ron", 8);
     let out = dir.join("ref.exr");
     reference(&data, 3, 2, &out, Duration::ZERO).unwrap();
@@ -194,45 +185,25 @@ fn a_checkpoint_continues_only_its_own_render() {
 
 #[test]
 fn ctrl_c_keeps_the_checkpoint_and_a_second_run_resumes_it_exactly() {
-    let dir = temp_dir("sigint");
+    let dir = temp_dir("reference-sigint");
     let out = dir.join("cb.exr");
     let cp = checkpoint_path(&out);
-    let mut child = Command::new(env!("CARGO_BIN_EXE_stagelight"))
-        .args([
-            "reference",
-            "scenes/cornell_box.ron",
-            "--spp",
-            "100000",
-            "--quiet",
-        ])
-        .args(["--seed", "5", "--checkpoint-every", "0.2", "-o"])
-        .arg(&out)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("stagelight starts");
-    // Wait for a first checkpoint, however slow the machine.
-    let deadline = std::time::Instant::now() + Duration::from_secs(120);
-    while !cp.exists() {
-        assert!(
-            std::time::Instant::now() < deadline,
-            "no checkpoint written"
-        );
-        if let Ok(Some(status)) = child.try_wait() {
-            panic!("stagelight ended early: {status}");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    let killed = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(killed.success());
-    let o = child.wait_with_output().unwrap();
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(130), "{stderr}");
-    assert!(String::from_utf8_lossy(&o.stdout).contains("run the same command again"));
+    let mut child = spawn(
+        stagelight_command()
+            .args([
+                "reference",
+                "scenes/cornell_box.ron",
+                "--spp",
+                "100000",
+                "--quiet",
+            ])
+            .args(["--seed", "5", "--checkpoint-every", "0.2", "-o"])
+            .arg(&out),
+    );
+    wait_until(&mut child, "a first checkpoint", || cp.exists());
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(stdout(&o).contains("run the same command again"));
     let stopped = Checkpoint::read(&cp).unwrap().header.passes;
     assert!(stopped >= 1);
     let attributes = reference_attributes(&out).unwrap();
@@ -241,23 +212,21 @@ fn ctrl_c_keeps_the_checkpoint_and_a_second_run_resumes_it_exactly() {
     // Resume to one pass more than was done, then compare with an uninterrupted render.
     let target = (stopped + 1).to_string();
     let run = |output: &Path| {
-        Command::new(env!("CARGO_BIN_EXE_stagelight"))
-            .args([
-                "reference",
-                "scenes/cornell_box.ron",
-                "--spp",
-                &target,
-                "--quiet",
-            ])
-            .args(["--seed", "5", "-o"])
-            .arg(output)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .output()
-            .expect("stagelight runs")
+        stagelight(&[
+            "reference",
+            "scenes/cornell_box.ron",
+            "--spp",
+            &target,
+            "--quiet",
+            "--seed",
+            "5",
+            "-o",
+            output.to_str().unwrap(),
+        ])
     };
     let o = run(&out);
     assert_eq!(o.status.code(), Some(0));
-    assert!(String::from_utf8_lossy(&o.stdout).contains(&format!("resumed from {stopped} spp")));
+    assert!(stdout(&o).contains(&format!("resumed from {stopped} spp")));
     let whole = dir.join("whole.exr");
     assert_eq!(run(&whole).status.code(), Some(0));
     // Same film sums, same EXR bytes (pixels and header).

@@ -2,9 +2,7 @@
 //! that sum to one, each strategy alone converging to the same light, light tracing alone
 //! matching PT, and determinism across thread counts.
 
-mod common;
-
-use common::{load_small, mean_over_seeds, render_bdpt, render_pt};
+use crate::common::{load_small, mean_over_seeds, render_bdpt, render_pt};
 use stagelight::film::Image;
 use stagelight::integrators::SceneData;
 use stagelight::integrators::bdpt::{self, BdptSettings, StrategyFilter};

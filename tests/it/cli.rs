@@ -1,25 +1,8 @@
 //! The command line: exit codes, clear errors for bad input, and Ctrl-C keeping finished work.
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
-fn stagelight(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_stagelight"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("stagelight runs")
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("stagelight-cli-{name}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use crate::common::{
+    interrupt, spawn, stagelight, stagelight_command, stderr, stdout, temp_dir, wait_for_progress,
+};
 
 #[test]
 fn zero_samples_is_a_clear_error() {
@@ -44,7 +27,7 @@ fn missing_scene_names_the_file() {
 
 #[test]
 fn malformed_scene_names_file_and_line() {
-    let dir = temp_dir("malformed");
+    let dir = temp_dir("cli-malformed");
     let scene = dir.join("broken.ron");
     std::fs::write(&scene, "Scene(\n  camera: (\n    position: (0, 0, 0),,\n").unwrap();
     let o = stagelight(&["render", scene.to_str().unwrap(), "--spp", "1"]);
@@ -56,7 +39,7 @@ fn malformed_scene_names_file_and_line() {
 
 #[test]
 fn diff_of_different_sizes_is_an_error_and_of_itself_is_zero() {
-    let dir = temp_dir("diff");
+    let dir = temp_dir("cli-diff");
     let (a, b) = (dir.join("a.exr"), dir.join("b.exr"));
     stagelight::film::Image::new(4, 4).write_exr(&a).unwrap();
     stagelight::film::Image::new(4, 5).write_exr(&b).unwrap();
@@ -65,12 +48,12 @@ fn diff_of_different_sizes_is_an_error_and_of_itself_is_zero() {
     assert!(stderr(&o).contains("size"), "{}", stderr(&o));
     let o = stagelight(&["diff", a.to_str().unwrap(), a.to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(0));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("relMSE  0.000000e0"));
+    assert!(stdout(&o).contains("relMSE  0.000000e0"));
 }
 
 #[test]
 fn render_writes_exr_and_png_and_reports() {
-    let dir = temp_dir("render");
+    let dir = temp_dir("cli-render");
     let out = dir.join("cb.exr");
     let o = stagelight(&[
         "render",
@@ -82,7 +65,7 @@ fn render_writes_exr_and_png_and_reports() {
         out.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    let report = String::from_utf8_lossy(&o.stdout);
+    let report = stdout(&o);
     for line in [
         "samples/s",
         "closest-hit rays",
@@ -110,35 +93,33 @@ fn ctrl_c_saves_the_finished_photon_passes_and_exits_130() {
 }
 
 fn ctrl_c_case(integrator: &str) {
-    let dir = temp_dir(&format!("sigint-{integrator}"));
+    let dir = temp_dir(&format!("cli-sigint-{integrator}"));
     let out = dir.join("long.exr");
-    let child = Command::new(env!("CARGO_BIN_EXE_stagelight"))
-        .args([
-            "render",
-            "scenes/cornell_box.ron",
-            "--integrator",
-            integrator,
-            "--spp",
-            "1000000",
-            "--quiet",
-            "-o",
-        ])
-        .arg(&out)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("stagelight starts");
-    std::thread::sleep(std::time::Duration::from_millis(2500));
-    let killed = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(killed.success());
-    let o = child.wait_with_output().unwrap();
+    let mut child = spawn(
+        stagelight_command()
+            .args([
+                "render",
+                "scenes/cornell_box.ron",
+                "--integrator",
+                integrator,
+                "--spp",
+                "1000000",
+                "--threads",
+                "2",
+                "--quiet",
+                "-o",
+            ])
+            .arg(&out),
+    );
+    // The stop ends the render after the passes in flight, so the image has some once the
+    // first has started: loading and setting up take a fraction of a CPU second (a whole
+    // 4-spp render of this scene about 0.5 s). Two threads keep idle workers from adding CPU
+    // time without progress.
+    wait_for_progress(&mut child, 1.0);
+    let o = interrupt(child);
     assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(stdout.contains("interrupted: saved the"), "{stdout}");
+    let report = stdout(&o);
+    assert!(report.contains("interrupted: saved the"), "{report}");
     let image = stagelight::film::Image::read_exr(&out).expect("the finished passes were written");
     let mean = image.channel_means();
     assert!(mean.x > 0.0 && mean.x.is_finite());
@@ -146,7 +127,7 @@ fn ctrl_c_case(integrator: &str) {
 
 #[test]
 fn bdpt_writes_the_image_and_one_image_per_strategy() {
-    let dir = temp_dir("bdpt");
+    let dir = temp_dir("cli-bdpt");
     let out = dir.join("cb.exr");
     let strategies = dir.join("strategies");
     let o = stagelight(&[
@@ -167,7 +148,7 @@ fn bdpt_writes_the_image_and_one_image_per_strategy() {
         strategies.to_str().unwrap(),
     ]);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
-    let report = String::from_utf8_lossy(&o.stdout);
+    let report = stdout(&o);
     assert!(report.contains("with bdpt") && report.contains("connect_strategies"));
     assert!(out.exists() && out.with_extension("png").exists());
     // Depth 2: paths of 2 to 4 vertices; every strategy that can carry light has its image.
@@ -196,7 +177,7 @@ fn strategy_images_need_bdpt() {
 
 #[test]
 fn photon_mappers_render_and_report_their_photons() {
-    let dir = temp_dir("photon-mappers");
+    let dir = temp_dir("cli-photon-mappers");
     for (integrator, extra) in [
         ("sppm", ["--photons-per-pass", "20000"]),
         ("ppm", ["--photons-per-pass", "20000"]),
@@ -213,7 +194,7 @@ fn photon_mappers_render_and_report_their_photons() {
         args.extend(extra);
         let o = stagelight(&args);
         assert_eq!(o.status.code(), Some(0), "{integrator}: {}", stderr(&o));
-        let report = String::from_utf8_lossy(&o.stdout);
+        let report = stdout(&o);
         assert!(
             report.contains("photons/s") && report.contains("passes/s"),
             "{report}"

@@ -1,8 +1,7 @@
 //! Numerical stability: the Cornell box moved 1e5 away from the origin along each axis renders
 //! the same image within noise (no self-intersection acne, no light leaks).
 
-mod common;
-use common::*;
+use crate::common::*;
 use glam::Vec3;
 use stagelight::scene::PreparedScene;
 

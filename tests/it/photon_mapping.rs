@@ -2,8 +2,7 @@
 //! analytic furnace, error against a path-traced reference that falls with passes. PM: its
 //! bias in the furnace, its caustic map only where needed. All: thread-count determinism.
 
-mod common;
-use common::*;
+use crate::common::*;
 use glam::DVec3;
 use stagelight::film::Image;
 use stagelight::integrators::pm;

@@ -2,8 +2,7 @@
 //! pixel's exact value is Le / (1 - rho) = 2; with the depth capped at D bounces it is the
 //! partial sum 2 - 0.5^D. These are analytic checks of the path tracer, MIS weights included.
 
-mod common;
-use common::*;
+use crate::common::*;
 
 /// Renders the furnace and checks every channel's image mean against `expected` within five
 /// standard errors (estimated from the pixel spread: pixels are independent), and every pixel

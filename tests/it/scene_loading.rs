@@ -1,18 +1,13 @@
 //! Loading the shipped scenes and the shapes, through the public API. Expected values come from
 //! SCENES.md by hand, not from the code.
 
+use crate::common::scene_path;
 use glam::Vec3;
 use stagelight::bsdf::{Material, MaterialKind};
 use stagelight::scene::{self, FLAT, NO_EMITTER, PreparedScene};
 use std::collections::BTreeSet;
 use std::f32::consts::PI;
 use std::path::{Path, PathBuf};
-
-fn scene_path(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("scenes")
-        .join(name)
-}
 
 fn load_shipped(name: &str) -> PreparedScene {
     let path = scene_path(name);

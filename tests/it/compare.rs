@@ -2,45 +2,19 @@
 //! clear errors for bad input. Tiny images and sample budgets keep it fast and independent of
 //! the machine's speed.
 
+use crate::common::{
+    interrupt, shrunk_scene, spawn, stagelight, stagelight_command, stderr, temp_dir,
+    wait_for_progress,
+};
 use glam::Vec3;
 use stagelight::compare::report::CSV_HEADER;
 use stagelight::film::Image;
 use stagelight::metrics::{MetricsError, compare};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
-
-fn stagelight(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_stagelight"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("stagelight runs")
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir =
-        std::env::temp_dir().join(format!("stagelight-compare-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// The Cornell box at `size` x `size`, written into `dir`.
 fn tiny_cornell(dir: &Path, size: u32) -> PathBuf {
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/cornell_box.ron");
-    let text = std::fs::read_to_string(source).unwrap();
-    let text = text.replacen(
-        "camera: (",
-        &format!("camera: (\n        width: {size},\n        height: {size},"),
-        1,
-    );
-    let path = dir.join("tiny_cornell.ron");
-    std::fs::write(&path, text).unwrap();
-    path
+    shrunk_scene("cornell_box", size, &dir.join("tiny_cornell.ron"))
 }
 
 /// A smooth test image with values from dark to bright.
@@ -144,7 +118,7 @@ fn integrator_names_are_parsed_with_clear_errors() {
 
 #[test]
 fn compare_writes_every_report_file_and_pt_error_falls_with_samples() {
-    let dir = temp_dir("report");
+    let dir = temp_dir("compare-report");
     let scene = tiny_cornell(&dir, 32);
     let out = dir.join("report");
     let o = stagelight(&[
@@ -249,7 +223,7 @@ fn compare_writes_every_report_file_and_pt_error_falls_with_samples() {
 #[test]
 fn a_seconds_budget_comparison_reports_its_runs() {
     // Only what does not depend on the machine's speed is checked.
-    let dir = temp_dir("seconds");
+    let dir = temp_dir("compare-seconds");
     let scene = tiny_cornell(&dir, 8);
     let reference = dir.join("ref.exr");
     let o = stagelight(&[
@@ -301,7 +275,7 @@ fn expect_clear_error(args: &[&str], needles: &[&str]) {
 
 #[test]
 fn bad_input_gives_one_clear_message_and_exit_1() {
-    let dir = temp_dir("bad");
+    let dir = temp_dir("compare-bad");
     let scene = tiny_cornell(&dir, 8);
     let scene = scene.to_str().unwrap();
 
@@ -404,17 +378,11 @@ fn the_thesis_tables_list_unbuilt_algorithms_as_missing() {
 fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
     // The preset's real scenes at 256x256 take minutes; the same files at 8x8 take a second
     // and exercise every step: references, runs, per-scene folders, the study's tables.
-    let dir = temp_dir("thesis");
+    let dir = temp_dir("compare-thesis");
     let scenes = dir.join("scenes");
     std::fs::create_dir_all(&scenes).unwrap();
     for name in ["cornell_box", "torus_glass", "door_ajar"] {
-        let source = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("scenes/{name}.ron"));
-        let text = std::fs::read_to_string(source).unwrap().replacen(
-            "camera: (",
-            "camera: (\n        width: 8,\n        height: 8,",
-            1,
-        );
-        std::fs::write(scenes.join(format!("{name}.ron")), text).unwrap();
+        shrunk_scene(name, 8, &scenes.join(format!("{name}.ron")));
     }
     let out = dir.join("thesis");
     let o = stagelight(&[
@@ -495,35 +463,30 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
 
 #[test]
 fn ctrl_c_during_a_comparison_writes_the_finished_runs_and_exits_130() {
-    let dir = temp_dir("sigint");
+    let dir = temp_dir("compare-sigint");
     let scene = tiny_cornell(&dir, 8);
     let reference = dir.join("ref.exr");
     Image::new(8, 8).write_exr(&reference).unwrap();
     let out = dir.join("report");
-    let child = Command::new(env!("CARGO_BIN_EXE_stagelight"))
-        .args(["compare", scene.to_str().unwrap(), "--reference"])
-        .arg(&reference)
-        .args([
-            "--budgets",
-            "1,100000000",
-            "--budget-unit",
-            "spp",
-            "--quiet",
-            "-o",
-        ])
-        .arg(&out)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .stdout(std::process::Stdio::piped())
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .expect("stagelight starts");
-    std::thread::sleep(std::time::Duration::from_millis(1500));
-    let killed = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .expect("kill runs");
-    assert!(killed.success());
-    let o = child.wait_with_output().unwrap();
+    let mut child = spawn(
+        stagelight_command()
+            .args(["compare", scene.to_str().unwrap(), "--reference"])
+            .arg(&reference)
+            .args([
+                "--budgets",
+                "1,100000000",
+                "--budget-unit",
+                "spp",
+                "--threads",
+                "2",
+                "--quiet",
+                "-o",
+            ])
+            .arg(&out),
+    );
+    // The 1-spp run of an 8x8 image takes milliseconds: the stop comes during the long one.
+    wait_for_progress(&mut child, 0.5);
+    let o = interrupt(child);
     assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
     let summary = std::fs::read_to_string(out.join("summary.md")).unwrap();
     assert!(summary.contains("**Interrupted:**"), "{summary}");

@@ -1,0 +1,122 @@
+//! `stagelight reference`: a long render, checkpointed, that a second run resumes or extends;
+//! and the reference a comparison makes for itself.
+
+use super::{exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool, unit_bar};
+use crate::integrators::{IntegratorKind, RenderSettings};
+use crate::reference::{
+    ReferenceBudget, ReferenceJob, ReferenceOutcome, checkpoint_path, render_reference,
+};
+use anyhow::{Result, bail};
+use std::path::PathBuf;
+use std::sync::atomic::AtomicBool;
+use std::time::Duration;
+
+/// What a reference was asked for.
+pub struct ReferenceOptions {
+    /// Scene file (RON).
+    pub scene: PathBuf,
+    /// An unbiased integrator (pt or bdpt); others are refused.
+    pub integrator: IntegratorKind,
+    /// Total budget over all runs.
+    pub budget: ReferenceBudget,
+    pub settings: RenderSettings,
+    /// Output EXR; its checkpoint and PNG preview go beside it.
+    pub output: PathBuf,
+    pub checkpoint_every: Duration,
+    /// Worker threads (None: all cores).
+    pub threads: Option<usize>,
+    /// No progress bar.
+    pub quiet: bool,
+}
+
+/// Makes, resumes or extends a reference and prints what it did. Returns the exit code: 0,
+/// or `EXIT_INTERRUPTED` when Ctrl-C stopped it (the checkpoint holds the passes done).
+pub fn reference(o: &ReferenceOptions) -> Result<i32> {
+    if !o.integrator.is_unbiased() {
+        bail!(
+            "--integrator {}: a reference needs an unbiased integrator (pt or bdpt)",
+            o.integrator
+        );
+    }
+    let data = load_scene(&o.scene)?;
+    let output = &o.output;
+    if output
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("{}: the output must be an .exr file", output.display());
+    }
+    let stop = stop_on_ctrl_c()?;
+    let pool = thread_pool(o.threads)?;
+    let job = ReferenceJob {
+        scene_path: &o.scene,
+        data,
+        integrator: o.integrator,
+        settings: o.settings,
+        budget: o.budget,
+        output,
+        checkpoint_every: o.checkpoint_every,
+    };
+    let outcome = make_reference(&job, &stop, &pool, o.quiet)?;
+    let mut report = describe_reference(&job, &outcome) + "\n";
+    report += &format!(
+        "  {} threads, {:.1} s this run, {} NaN/Inf samples; checkpoint {}\n",
+        pool.current_num_threads(),
+        outcome.seconds_this_run,
+        outcome.nonfinite,
+        checkpoint_path(output).display()
+    );
+    if outcome.interrupted {
+        report += &format!(
+            "interrupted: {} holds the {} finished passes; run the same command again to \
+             continue\n",
+            output.display(),
+            outcome.passes
+        );
+    }
+    print_out(&report);
+    Ok(exit_code(outcome.interrupted))
+}
+
+/// Makes or continues a reference in `pool`, with a progress bar in its budget's unit.
+/// Returns the outcome (interrupted or not).
+pub fn make_reference(
+    job: &ReferenceJob,
+    stop: &AtomicBool,
+    pool: &rayon::ThreadPool,
+    quiet: bool,
+) -> Result<ReferenceOutcome> {
+    let (len, unit) = match job.budget {
+        ReferenceBudget::SamplesPerPixel(spp) => (spp, "spp"),
+        ReferenceBudget::Seconds(s) => (s.ceil() as u64, "s"),
+    };
+    let bar = unit_bar(
+        len,
+        &format!("reference {{elapsed_precise}} [{{bar:40}}] {{pos}}/{{len}} {unit} (eta {{eta}})"),
+        quiet,
+    );
+    let progress = |done: f64, _target: f64| bar.set_position(done as u64);
+    let outcome = pool.install(|| render_reference(job, stop, &progress))?;
+    bar.finish_and_clear();
+    Ok(outcome)
+}
+
+/// One line on what a reference run did: made, resumed or already complete, and with what.
+pub fn describe_reference(job: &ReferenceJob, o: &ReferenceOutcome) -> String {
+    let file = job.output.display();
+    let what = format!(
+        "{} at {} spp ({:.1} s of rendering), seed {}, {}",
+        job.integrator,
+        o.passes,
+        o.seconds,
+        job.settings.seed,
+        job.scene_path.display()
+    );
+    if o.already_complete {
+        format!("{file}: already complete with {what}; nothing rendered")
+    } else if o.passes_before > 0 {
+        format!("{file}: resumed from {} spp to {what}", o.passes_before)
+    } else {
+        format!("{file}: made with {what}")
+    }
+}

@@ -1,0 +1,84 @@
+//! `stagelight render`: one image, its PNG preview, and the end-of-render report.
+
+use super::{budget_bar, exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool};
+use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings};
+use crate::sysinfo::cpu_seconds;
+use anyhow::{Result, bail};
+use std::path::PathBuf;
+
+/// What a render was asked for.
+pub struct RenderOptions {
+    /// Scene file (RON).
+    pub scene: PathBuf,
+    pub integrator: IntegratorKind,
+    pub budget: Budget,
+    pub settings: RenderSettings,
+    /// Folder of each strategy's weighted contribution (bdpt; `settings.strategy_images`
+    /// says the same).
+    pub strategy_images: Option<PathBuf>,
+    /// Output EXR; the PNG preview goes beside it.
+    pub output: PathBuf,
+    /// Worker threads (None: all cores).
+    pub threads: Option<usize>,
+    /// No progress bar.
+    pub quiet: bool,
+}
+
+/// Renders, writes the EXR, its preview and any strategy images, prints the report. Returns
+/// the exit code: 0, or `EXIT_INTERRUPTED` when Ctrl-C stopped it (the finished passes are
+/// written).
+pub fn render(o: &RenderOptions) -> Result<i32> {
+    let data = load_scene(&o.scene)?;
+    let output = &o.output;
+    if output
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("{}: the output must be an .exr file", output.display());
+    }
+    let stop = stop_on_ctrl_c()?;
+    let pool = thread_pool(o.threads)?;
+    let threads = pool.current_num_threads();
+    let budget = o.budget;
+    let bar = budget_bar(budget, o.quiet);
+    let progress = |done: u64, _total: Option<u64>| match budget {
+        Budget::SamplesPerPixel(_) => bar.set_position(done),
+        Budget::Seconds(_) => {
+            bar.set_position(bar.elapsed().as_secs().min(bar.length().unwrap_or(0)))
+        }
+    };
+    let control = Control {
+        stop: &stop,
+        progress: &progress,
+    };
+    if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
+        bail!("--strategy-images needs --integrator bdpt");
+    }
+    let cpu_start = cpu_seconds();
+    let outcome = pool.install(|| {
+        crate::integrators::render(o.integrator, data.clone(), &o.settings, budget, &control)
+    });
+    let cpu = cpu_seconds() - cpu_start;
+    bar.finish_and_clear();
+
+    let image = outcome.film.image();
+    image.write_exr(output)?;
+    let png = output.with_extension("png");
+    image.write_png(&png)?;
+    if let Some(dir) = &o.strategy_images {
+        for (name, layer) in &outcome.layers {
+            layer.write_exr(&dir.join(format!("{name}.exr")))?;
+        }
+    }
+    let mut report =
+        crate::report::render_report(&o.scene, o.integrator, threads, &outcome, cpu, &data);
+    report += &format!("wrote {} and {}\n", output.display(), png.display());
+    if outcome.interrupted {
+        report += &format!(
+            "interrupted: saved the {} finished passes ({} samples)\n",
+            outcome.passes, outcome.samples
+        );
+    }
+    print_out(&report);
+    Ok(exit_code(outcome.interrupted))
+}

@@ -1,0 +1,212 @@
+//! What the commands print: the end-of-render report, the bench table and the diff lines.
+
+use crate::integrators::{IntegratorKind, RenderOutcome, SceneData};
+use crate::metrics::ErrorMetrics;
+use crate::sysinfo::peak_memory_bytes;
+use std::fmt::Write;
+use std::path::Path;
+
+/// A rate with a k or M prefix and three decimals; small rates (passes/s) plain with two.
+pub fn mega(x: f64) -> String {
+    if x >= 1e6 {
+        format!("{:.3} M", x / 1e6)
+    } else if x >= 1e3 {
+        format!("{:.3} k", x / 1e3)
+    } else {
+        format!("{x:.2}")
+    }
+}
+
+/// The end-of-render report: passes, time, throughput, memory, and each system's share.
+pub fn render_report(
+    scene: &Path,
+    integrator: IntegratorKind,
+    threads: usize,
+    o: &RenderOutcome,
+    cpu: f64,
+    data: &SceneData,
+) -> String {
+    let mut r = String::new();
+    let wall = o.wall.as_secs_f64();
+    let cam = data.scene.camera;
+    let _ = writeln!(
+        r,
+        "{} with {} at {}x{}, {} threads",
+        scene.display(),
+        integrator.as_str(),
+        cam.width,
+        cam.height,
+        threads
+    );
+    let _ = writeln!(
+        r,
+        "  passes            {} ({} samples)",
+        o.passes, o.samples
+    );
+    let _ = writeln!(
+        r,
+        "  time              {wall:.3} s wall, {cpu:.2} s CPU ({:.2} cores busy)",
+        cpu / wall.max(1e-9)
+    );
+    let _ = writeln!(r, "  samples/s         {}", mega(o.samples as f64 / wall));
+    let _ = writeln!(
+        r,
+        "  closest-hit rays  {} ({}rays/s)",
+        o.closest_rays(),
+        mega(o.closest_rays() as f64 / wall)
+    );
+    let _ = writeln!(
+        r,
+        "  shadow rays       {} ({}rays/s)",
+        o.shadow_rays(),
+        mega(o.shadow_rays() as f64 / wall)
+    );
+    if let Some(emit) = o.stats.get("emit_photons") {
+        let _ = writeln!(
+            r,
+            "  photons           {} emitted ({}photons/s), {} passes/s",
+            emit.emitted,
+            mega(emit.emitted as f64 / wall),
+            format_args!("{:.2}", o.passes as f64 / wall)
+        );
+    }
+    let _ = writeln!(
+        r,
+        "  NaN/Inf samples   {} (counted, never added)",
+        o.film.nonfinite
+    );
+    let _ = writeln!(
+        r,
+        "  memory            peak {:.1} MiB; {} paths in flight x {} bytes/path = {:.1} MiB",
+        peak_memory_bytes() as f64 / (1 << 20) as f64,
+        o.wavefront,
+        o.bytes_per_path,
+        (o.wavefront * o.bytes_per_path) as f64 / (1 << 20) as f64
+    );
+    let _ = writeln!(
+        r,
+        "  systems           time share   runs   items taken -> emitted"
+    );
+    for (s, share) in o.stats.time_shares() {
+        let (name, runs, taken, emitted) = (s.name, s.runs, s.taken, s.emitted);
+        let _ = writeln!(
+            r,
+            "    {name:<32} {share:>6.1}% {runs:>6} {taken:>14} -> {emitted}"
+        );
+    }
+    r
+}
+
+/// The timed runs of a bench: each run's rates, and the last run itself.
+#[derive(Default)]
+pub struct BenchRuns {
+    samples_per_s: Vec<f64>,
+    closest_per_s: Vec<f64>,
+    shadow_per_s: Vec<f64>,
+    /// Empty for integrators without photons.
+    photons_per_s: Vec<f64>,
+    passes_per_s: Vec<f64>,
+    /// The last run and its CPU seconds.
+    last: Option<(RenderOutcome, f64)>,
+}
+
+impl BenchRuns {
+    /// Adds a timed run that took `wall` and `cpu` seconds.
+    pub fn add(&mut self, o: RenderOutcome, wall: f64, cpu: f64) {
+        self.samples_per_s.push(o.samples as f64 / wall);
+        self.closest_per_s.push(o.closest_rays() as f64 / wall);
+        self.shadow_per_s.push(o.shadow_rays() as f64 / wall);
+        if let Some(emit) = o.stats.get("emit_photons") {
+            self.photons_per_s.push(emit.emitted as f64 / wall);
+            self.passes_per_s.push(o.passes as f64 / wall);
+        }
+        self.last = Some((o, cpu));
+    }
+}
+
+/// The bench table (Markdown): median, min and max of each rate over the runs, then the
+/// last run's memory, CPU use and systems.
+pub fn bench_table(
+    scene: &Path,
+    integrator: IntegratorKind,
+    spp: u64,
+    threads: usize,
+    mut runs: BenchRuns,
+) -> String {
+    let count = runs.samples_per_s.len();
+    let (o, cpu) = runs.last.take().expect("at least one run");
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "bench {} ({}, {} spp, {} runs after a warm-up, {} threads)",
+        scene.display(),
+        integrator.as_str(),
+        spp,
+        count,
+        threads
+    );
+    let _ = writeln!(t, "| measure | median | min | max |");
+    let _ = writeln!(t, "|---|---|---|---|");
+    for (name, v) in [
+        ("samples/s", &mut runs.samples_per_s),
+        ("closest-hit rays/s", &mut runs.closest_per_s),
+        ("shadow rays/s", &mut runs.shadow_per_s),
+        ("photons/s", &mut runs.photons_per_s),
+        ("passes/s", &mut runs.passes_per_s),
+    ] {
+        if v.is_empty() {
+            continue; // no photons
+        }
+        v.sort_by(f64::total_cmp);
+        let _ = writeln!(
+            t,
+            "| {name} | {} | {} | {} |",
+            mega(v[v.len() / 2]),
+            mega(v[0]),
+            mega(v[v.len() - 1])
+        );
+    }
+    let _ = writeln!(t, "| bytes per path in flight | {} | | |", o.bytes_per_path);
+    let _ = writeln!(t, "| paths in flight | {} | | |", o.wavefront);
+    let _ = writeln!(
+        t,
+        "| peak memory | {:.1} MiB | | |",
+        peak_memory_bytes() as f64 / (1 << 20) as f64
+    );
+    let _ = writeln!(
+        t,
+        "| CPU s / wall s (last run) | {:.2} | | |",
+        cpu / o.wall.as_secs_f64()
+    );
+    let _ = writeln!(
+        t,
+        "| NaN/Inf samples (last run) | {} | | |",
+        o.film.nonfinite
+    );
+    let _ = writeln!(t);
+    let _ = writeln!(
+        t,
+        "| system (last run) | time share | runs | taken | emitted |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|");
+    for (s, share) in o.stats.time_shares() {
+        let (name, runs, taken, emitted) = (s.name, s.runs, s.taken, s.emitted);
+        let _ = writeln!(t, "| {name} | {share:.1}% | {runs} | {taken} | {emitted} |");
+    }
+    t
+}
+
+/// The lines of `stagelight diff`: the error measures and both images' channel means.
+pub fn diff_report(image: &Path, reference: &Path, m: &ErrorMetrics) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "{} against {}", image.display(), reference.display());
+    let _ = writeln!(t, "  relMSE  {:.6e}", m.relmse);
+    let _ = writeln!(t, "  RMSE    {:.6e}", m.rmse);
+    let _ = writeln!(t, "  MAE     {:.6e}", m.mae);
+    let _ = writeln!(
+        t,
+        "  mean    ({:.6}, {:.6}, {:.6}) against ({:.6}, {:.6}, {:.6})",
+        m.mean.x, m.mean.y, m.mean.z, m.reference_mean.x, m.reference_mean.y, m.reference_mean.z
+    );
+    t
+}

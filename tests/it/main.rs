@@ -1,0 +1,22 @@
+//! The integration tests, one binary so the suite links once. Each module is one subject;
+//! `common` holds the helpers they share (small renders, running the `stagelight` binary,
+//! temporary folders, interrupting a run once it has made progress).
+
+mod common;
+
+mod accel;
+mod bdpt;
+mod bsdf;
+mod cli;
+mod compare;
+mod determinism;
+mod film_precision;
+mod graph;
+mod photon_mapping;
+mod photons;
+mod pt_furnace;
+mod reference;
+mod scene_crosscheck;
+mod scene_errors;
+mod scene_loading;
+mod stability;
