@@ -52,17 +52,28 @@ pub fn sobol1(index: u32) -> u32 {
     pascal_reversed(index).reverse_bits()
 }
 
-/// Owen-scrambled Sobol' dimension 0 at `index`. The digit-reversed van der Corput fraction
-/// is the index itself, so the scramble needs one bit reversal, not two.
+/// Owen scramble of a digit-reversed 24-digit fraction (bit j = digit j), as a fraction (its
+/// low 8 bits zero). The digits go to the top of the hashed word: at its bottom,
+/// Laine-Karras would flip the first digits by nearly affine functions of the digits above,
+/// while here the seed fills the bits below them, and its products and carries make those
+/// flips depend on the seed far more richly.
 #[inline]
-pub fn owen_sobol0(index: u32, seed: u32) -> u32 {
-    laine_karras(index, seed).reverse_bits()
+fn owen24(digits: u32, seed: u32) -> u32 {
+    debug_assert!(digits >> 24 == 0);
+    laine_karras(digits << 8, seed).reverse_bits() << 8
 }
 
-/// Owen-scrambled Sobol' dimension 1 at `index`.
+/// Owen-scrambled Sobol' dimension 0 at `index` (below 2^24). The digit-reversed van der
+/// Corput fraction is the index itself, so the scramble needs one bit reversal, not two.
+#[inline]
+pub fn owen_sobol0(index: u32, seed: u32) -> u32 {
+    owen24(index, seed)
+}
+
+/// Owen-scrambled Sobol' dimension 1 at `index` (below 2^24).
 #[inline]
 pub fn owen_sobol1(index: u32, seed: u32) -> u32 {
-    laine_karras(pascal_reversed(index), seed).reverse_bits()
+    owen24(pascal_reversed(index), seed)
 }
 
 /// A nested permutation of the `bits`-bit index `s` (`s < 2^bits`, `bits <= 32`): bit i is
@@ -76,14 +87,15 @@ pub fn nested_shuffle(s: u32, bits: u32, seed: u32) -> u32 {
     shuffle_reversed(reverse_low(s, bits), bits, seed)
 }
 
-/// `nested_shuffle` of the index whose `bits` bits, reversed, are `reversed`.
+/// `nested_shuffle` of the index whose `bits` bits, reversed, are `reversed`. The bits are
+/// hashed at the top of the word, for the reason given at `owen24`.
 #[inline]
 pub fn shuffle_reversed(reversed: u32, bits: u32, seed: u32) -> u32 {
     debug_assert!(bits <= 32 && (bits == 32 || reversed >> bits == 0));
     if bits == 0 {
         return 0;
     }
-    laine_karras(reversed, seed).reverse_bits() >> (32 - bits)
+    (laine_karras(reversed << (32 - bits), seed).reverse_bits()) & (u32::MAX >> (32 - bits))
 }
 
 /// The low `bits` bits of `v`, in reverse order (the bits above are dropped).

@@ -500,9 +500,11 @@ fn primary_reads_the_interleaved_store_then_falls_back_to_the_hash() {
     assert!(format!("{sampler:?}").contains("slots: 5"));
 }
 
+type Integrand = fn(Vec2) -> f64;
+
 /// Per-pixel estimates of the integral of `f` over the unit square with `spp` samples of
 /// dimension pair 2, for every pixel of a `side` x `side` image.
-fn estimates(sampler: &Sampler, side: u32, spp: u64, f: fn(Vec2) -> f64) -> Vec<f64> {
+fn estimates(sampler: &Sampler, side: u32, spp: u64, f: Integrand) -> Vec<f64> {
     (0..(side * side) as u64)
         .into_par_iter()
         .map(|pixel| {
@@ -542,7 +544,7 @@ fn sobol_lowers_the_error_of_pixel_estimates() {
     // (x y, exact 1/4) and of a discontinuous one (the quarter disc, exact pi/4), per pixel
     // and for the means of 2 x 2 and 4 x 4 squares of pixels.
     let (side, spp) = (128u32, 64u64);
-    let integrands: [(&str, fn(Vec2) -> f64, f64); 2] = [
+    let integrands: [(&str, Integrand, f64); 2] = [
         ("x y", |u| (u.x * u.y) as f64, 0.25),
         (
             "disc",
