@@ -342,8 +342,10 @@ impl Sampler<'_> {
 
     /// The key of `stream`'s numbers for `index` (a pixel, a photon index, or under
     /// `Primary` the slot) and `sample` (the sample index, or the pass). Index ranges:
-    /// `Independent`: below [`Stream::index_limit`]; `Sobol`: a pixel of the image, or a
-    /// photon index below 2^36 with pass below 2^25; `Primary`: a slot of the store.
+    /// `Independent`: below [`Stream::index_limit`]; `Sobol`: a pixel of the image with
+    /// sample below 2^(61 - max(2 log2_res + log2_spp, 24) + log2_spp) (at least 2^29; 2^39
+    /// at 1920 x 1080 by default), or a photon index below 2^36 with pass below 2^25;
+    /// `Primary`: a slot of the store. Debug builds assert them.
     #[inline]
     pub fn key(&self, stream: Stream, index: u64, sample: u64) -> SampleKey {
         match *self {
@@ -448,8 +450,11 @@ fn sobol_key(
             sample >> (ORDINAL_SHIFT - PHOTON_INDEX_BITS) == 0,
             "photon pass {sample} >= 2^25"
         );
+        // Beyond the limits (release builds), passes and indices wrap, never into the ordinal.
+        let index = index & low_bits(PHOTON_INDEX_BITS);
+        let pass = sample & low_bits(ORDINAL_SHIFT - PHOTON_INDEX_BITS);
         let index = (index & !low_bits(NET_BITS)) | reverse_low(index as u32, NET_BITS) as u64;
-        return SampleKey(ordinal | sample << PHOTON_INDEX_BITS | index);
+        return SampleKey(ordinal | pass << PHOTON_INDEX_BITS | index);
     }
     let (x, y) = (index % width as u64, index / width as u64);
     debug_assert!(y >> log2_res == 0, "pixel {index} outside the image");
@@ -463,7 +468,7 @@ fn sobol_key(
         batch >> (ORDINAL_SHIFT - batch_shift) == 0,
         "sample {sample}: too many batches of 2^{log2_spp}"
     );
-    SampleKey(ordinal | batch << batch_shift | z)
+    SampleKey(ordinal | (batch & low_bits(ORDINAL_SHIFT - batch_shift)) << batch_shift | z)
 }
 
 /// The shuffled Sobol' index of dimension `dim` of a Sobol key, and the 64-bit hash whose

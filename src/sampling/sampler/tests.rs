@@ -592,3 +592,31 @@ fn sobol_lowers_the_error_of_pixel_estimates() {
         );
     }
 }
+
+#[test]
+fn sobol_works_at_its_limits() {
+    // The largest image and batch, and many batches of the smallest.
+    let big = sobol(1, 65_536, 65_536).with_samples_per_pixel(1 << MAX_LOG2_SPP);
+    let small = sobol(1, 3, 1).with_samples_per_pixel(1);
+    for (sampler, pixel, first) in [
+        (big, 65_536 * 65_536 - 1, 3u64 << 24),
+        (big, 12_345_678, 0),
+        (small, 2, (1 << 37) - 300),
+    ] {
+        for k in 0..=8 {
+            let pts: Vec<_> = (first..first + (1 << k))
+                .map(|s| sampler.get2(sampler.key(Stream::Light, pixel, s), 6))
+                .collect();
+            let Sampler::Sobol { log2_spp, .. } = sampler else {
+                unreachable!()
+            };
+            if k <= log2_spp {
+                assert!(is_net(&pts), "{sampler:?} k {k}");
+            }
+            assert!(
+                pts.iter()
+                    .all(|p| (0.0..1.0).contains(&p.x) && (0.0..1.0).contains(&p.y))
+            );
+        }
+    }
+}
