@@ -3,10 +3,19 @@
 //! Every random number is a pure function of (seed, stream, sample, dimension), where the
 //! stream is a pixel (or a light path's index) and the sample is its sample index. No generator
 //! carries state between threads, so the image does not depend on which thread ran which path.
+//! Which numbers those are is the render's [`Sampler`]'s choice (independent hashes,
+//! Owen-scrambled Sobol', or a primary-sample store).
 
+mod morton;
 mod primary;
 pub mod roulette;
+mod sampler;
+mod sobol;
 pub use primary::PrimarySamples;
+pub use sampler::{
+    DEFAULT_LOG2_SPP, MAX_LOG2_RES, MAX_LOG2_SPP, PRIMARY_STREAMS, Sampler, SamplerKind, Stream,
+    UnknownSampler,
+};
 
 use glam::{Vec2, Vec3};
 use std::f32::consts::{FRAC_1_PI, PI};
@@ -22,11 +31,17 @@ pub fn mix64(mut x: u64) -> u64 {
 }
 
 /// The random-number source of one (seed, stream, sample): `get(dim)` is a pure function of its
-/// four inputs. Copy it freely; it is 8 bytes.
+/// four inputs. Copy it freely; it is 8 bytes (it is stored per path slot, vertex and photon).
+///
+/// `SampleKey::new` and `get` are the independent sampler's hash. A key made by
+/// [`Sampler::key`] is only meaningful to that sampler's `get`/`get2` (a Sobol key packs its
+/// stream, batch and Sobol' index, a primary key its stream and slot); under
+/// `Sampler::Independent` the two ways agree bit for bit.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SampleKey(u64);
 
 impl SampleKey {
+    /// The independent sampler's key of (seed, tagged stream index, sample).
     #[inline]
     pub fn new(seed: u64, stream: u64, sample: u64) -> SampleKey {
         let a = mix64(seed ^ 0x9e37_79b9_7f4a_7c15);
