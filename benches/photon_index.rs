@@ -30,7 +30,11 @@ fn scene() -> Arc<SceneData> {
 }
 
 fn photons(data: &Arc<SceneData>, emitted: u64) -> Vec<Vec3> {
-    let mut pass = PhotonPass::new(data.clone(), 1, u32::MAX);
+    let mut pass = PhotonPass::new(
+        data.clone(),
+        stagelight::sampling::Sampler::Independent { seed: 1 },
+        u32::MAX,
+    );
     pass.trace(
         &stagelight::photons::graph(),
         0,

@@ -10,6 +10,7 @@ use crate::compare::thesis::ThesisOptions;
 use crate::integrators::{Budget, IntegratorKind, RenderSettings};
 use crate::path::MisHeuristic;
 use crate::reference::{DEFAULT_REFERENCE_SEED, ReferenceBudget};
+use crate::sampling::SamplerKind;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
@@ -58,6 +59,10 @@ fn parse_integrator(s: &str) -> std::result::Result<IntegratorKind, String> {
     IntegratorKind::from_name(s).map_err(|e| e.to_string())
 }
 
+fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
+    s.parse::<SamplerKind>().map_err(|e| e.to_string())
+}
+
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
     /// Scene file (RON).
@@ -76,6 +81,10 @@ pub struct RenderArgs {
     pub threads: Option<u64>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Where random numbers come from: `independent` (hashed) or `sobol` (Owen-scrambled
+    /// Sobol' with Morton-ordered pixels).
+    #[arg(long, default_value = "independent", value_parser = parse_sampler)]
+    pub sampler: SamplerKind,
     #[command(flatten)]
     pub photons: PhotonArgs,
     /// Maximum number of bounces (default: unlimited; Russian roulette ends paths).
@@ -189,6 +198,10 @@ pub struct ReferenceArgs {
     /// Seed (default: a reference seed that ordinary renders do not use).
     #[arg(long, default_value_t = DEFAULT_REFERENCE_SEED)]
     pub seed: u64,
+    /// Where random numbers come from: `independent` (hashed) or `sobol` (Owen-scrambled
+    /// Sobol' with Morton-ordered pixels).
+    #[arg(long, default_value = "independent", value_parser = parse_sampler)]
+    pub sampler: SamplerKind,
     /// Maximum number of bounces (default: unlimited).
     #[arg(long)]
     pub max_depth: Option<u32>,
@@ -248,6 +261,10 @@ pub struct CompareArgs {
     /// Seed of the compared renders (the reference has its own).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Where random numbers come from: `independent` (hashed) or `sobol` (Owen-scrambled
+    /// Sobol' with Morton-ordered pixels).
+    #[arg(long, default_value = "independent", value_parser = parse_sampler)]
+    pub sampler: SamplerKind,
     /// Maximum number of bounces (default: unlimited).
     #[arg(long)]
     pub max_depth: Option<u32>,
@@ -375,6 +392,7 @@ impl RenderArgs {
             budget,
             settings: RenderSettings {
                 seed: self.seed,
+                sampler: self.sampler,
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
                 mis: self.mis.heuristic(),
                 strategy_images: self.strategy_images.is_some(),
@@ -408,6 +426,7 @@ impl ReferenceArgs {
             budget,
             settings: RenderSettings {
                 seed: self.seed,
+                sampler: self.sampler,
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
                 ..RenderSettings::default()
             },
@@ -440,6 +459,7 @@ impl CompareArgs {
             budgets: self.budgets.clone(),
             settings: RenderSettings {
                 seed: self.seed,
+                sampler: self.sampler,
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
                 photons: self.photons.settings(),
                 ..RenderSettings::default()

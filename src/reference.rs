@@ -21,6 +21,7 @@ use crate::film::{Film, Image};
 use crate::integrators::{
     Budget, Control, IntegratorKind, RenderSettings, Resume, SceneData, resume,
 };
+use crate::sampling::SamplerKind;
 use glam::DVec3;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -60,11 +61,19 @@ pub fn reference_attributes(
 /// renders, so a render compared against a reference never shares its random numbers.
 pub const DEFAULT_REFERENCE_SEED: u64 = 0x5eed_0000_0000_0001;
 
+fn independent_sampler() -> String {
+    SamplerKind::Independent.to_string()
+}
+
 /// What a checkpoint records besides the film.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct CheckpointHeader {
     pub integrator: String,
     pub seed: u64,
+    /// The sampler (`--sampler`); checkpoints from before samplers were chosen are
+    /// `independent`.
+    #[serde(default = "independent_sampler")]
+    pub sampler: String,
     pub max_depth: u32,
     /// The scene file, as given when the reference was started (for messages only).
     pub scene: String,
@@ -324,6 +333,7 @@ pub fn render_reference(
     let mut header = CheckpointHeader {
         integrator: job.integrator.as_str().to_string(),
         seed: job.settings.seed,
+        sampler: job.settings.sampler.to_string(),
         max_depth: job.settings.max_depth,
         scene: job.scene_path.display().to_string(),
         scene_fingerprint: fingerprint,
@@ -461,6 +471,11 @@ fn check_compatible(
             "seed {}, not {} (use --seed {})",
             found.seed, wanted.seed, found.seed
         ))
+    } else if found.sampler != wanted.sampler {
+        Some(format!(
+            "sampler {}, not {} (use --sampler {})",
+            found.sampler, wanted.sampler, found.sampler
+        ))
     } else if found.max_depth != wanted.max_depth {
         Some(format!(
             "maximum depth {}, not {}",
@@ -504,10 +519,17 @@ fn write_images(
     } else {
         header.max_depth.to_string()
     };
+    // The sampler is named only when it is not the default, so references made before
+    // samplers were chosen keep their header.
+    let sampler = if header.sampler == independent_sampler() {
+        String::new()
+    } else {
+        format!("sampler={}; ", header.sampler)
+    };
     let attributes = [(
         ATTRIBUTE,
         format!(
-            "spp={}; seed={}; integrator={}; maxDepth={depth}; scene={}",
+            "spp={}; seed={}; {sampler}integrator={}; maxDepth={depth}; scene={}",
             header.passes,
             header.seed,
             header.integrator,

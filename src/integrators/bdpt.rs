@@ -28,7 +28,7 @@ use crate::integrators::{
 };
 use crate::path::MisHeuristic;
 use crate::pipeline::{Graph, Node, Stats};
-use crate::sampling::SampleKey;
+use crate::sampling::{Sampler, SamplerKind};
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::{DVec3, Vec3};
 use std::collections::BTreeMap;
@@ -70,13 +70,6 @@ pub fn light_vertex_dim(d: usize) -> u32 {
     5 + (d as u32 - 1) * LIGHT_DIMS_PER_VERTEX
 }
 
-/// The stream of a light subpath: the sample's pixel with the top bit set, so that it never
-/// meets a camera stream.
-#[inline]
-pub fn light_key(seed: u64, pixel: u64, sample_index: u64) -> SampleKey {
-    SampleKey::new(seed, pixel | 1 << 63, sample_index)
-}
-
 /// Which strategies count, and how.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum StrategyFilter {
@@ -103,6 +96,7 @@ impl StrategyFilter {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BdptSettings {
     pub seed: u64,
+    pub sampler: SamplerKind,
     /// Maximum number of scattering events (path vertices between camera and light);
     /// `u32::MAX` for unlimited.
     pub max_depth: u32,
@@ -116,6 +110,7 @@ impl From<&RenderSettings> for BdptSettings {
     fn from(s: &RenderSettings) -> BdptSettings {
         BdptSettings {
             mis: s.mis,
+            sampler: s.sampler,
             strategy_images: s.strategy_images,
             ..BdptSettings::new(s.seed, s.max_depth)
         }
@@ -126,6 +121,7 @@ impl BdptSettings {
     pub fn new(seed: u64, max_depth: u32) -> BdptSettings {
         BdptSettings {
             seed,
+            sampler: SamplerKind::Independent,
             max_depth,
             mis: MisHeuristic::Power,
             strategies: StrategyFilter::All,
@@ -153,6 +149,7 @@ impl BdptSettings {
 pub struct BdptState {
     pub data: Arc<SceneData>,
     pub settings: BdptSettings,
+    pub sampler: Sampler<'static>,
     pub pixels: u64,
     pub wave: Wave,
     /// Samples a wave may hold; light subpath k of the wave is subpath `capacity + k`.
@@ -194,6 +191,7 @@ impl BdptState {
         let pixels = cam.width as u64 * cam.height as u64;
         let subpaths = 2 * capacity;
         BdptState {
+            sampler: Sampler::new(settings.sampler, settings.seed, cam.width, cam.height),
             data,
             settings,
             pixels,
@@ -270,6 +268,7 @@ impl IntegratorState for BdptState {
     const INPUTS: &'static [&'static str] = &[
         "data",
         "settings",
+        "sampler",
         "pixels",
         "wave",
         "capacity",

@@ -6,6 +6,7 @@
 
 use crate::components::{CameraChains, Hits, Rays, VisiblePoints};
 use crate::pipeline::{Graph, Node};
+use crate::sampling::Sampler;
 use crate::scene::SceneData;
 use crate::systems::{generate, shade, trace};
 use std::sync::Arc;
@@ -15,7 +16,7 @@ use std::sync::Arc;
 /// pixel, allocated once.
 pub struct CameraWalk {
     pub data: Arc<SceneData>,
-    pub seed: u64,
+    pub sampler: Sampler<'static>,
     /// Maximum number of specular bounces; `u32::MAX` for unlimited.
     pub max_depth: u32,
     /// Sample index of the chains `generate_camera_chains` starts (the pass).
@@ -38,7 +39,7 @@ pub struct CameraWalk {
 /// passes.
 pub const INPUTS: &[&str] = &[
     "data",
-    "seed",
+    "sampler",
     "max_depth",
     "sample_index",
     "starts",
@@ -49,12 +50,12 @@ pub const INPUTS: &[&str] = &[
 ];
 
 impl CameraWalk {
-    pub fn new(data: Arc<SceneData>, seed: u64, max_depth: u32) -> CameraWalk {
+    pub fn new(data: Arc<SceneData>, sampler: Sampler<'static>, max_depth: u32) -> CameraWalk {
         let cam = data.scene.camera;
         let slots = cam.width as usize * cam.height as usize;
         CameraWalk {
             data,
-            seed,
+            sampler,
             max_depth,
             sample_index: 0,
             starts: 0,

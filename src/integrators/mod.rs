@@ -283,6 +283,8 @@ impl Default for PhotonSettings {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RenderSettings {
     pub seed: u64,
+    /// Where the random numbers come from (`--sampler`).
+    pub sampler: crate::sampling::SamplerKind,
     /// Maximum number of scattering events; `u32::MAX` for unlimited.
     pub max_depth: u32,
     /// How bidirectional strategies are weighted (bdpt).
@@ -296,6 +298,7 @@ impl Default for RenderSettings {
     fn default() -> Self {
         RenderSettings {
             seed: 0,
+            sampler: crate::sampling::SamplerKind::Independent,
             max_depth: u32::MAX,
             mis: crate::path::MisHeuristic::Power,
             strategy_images: false,

@@ -41,6 +41,7 @@ use crate::integrators::{
 };
 use crate::photons::{PhotonMaps, PhotonPass};
 use crate::pipeline::{Graph, Node};
+use crate::sampling::{Sampler, SamplerKind};
 use crate::systems::{connect, gather, generate, trace};
 use glam::DVec3;
 use std::sync::Arc;
@@ -55,6 +56,7 @@ pub const DEFAULT_MAX_RADIUS_FRACTION: f32 = 0.02;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PmSettings {
     pub seed: u64,
+    pub sampler: SamplerKind,
     pub max_depth: u32,
     pub photons: u64,
     /// Photons per density estimate, at least 2 (the k - 1 nearest over the k-th's disc).
@@ -74,6 +76,7 @@ impl From<&RenderSettings> for PmSettings {
             k: p.k,
             max_radius: p.max_radius,
             final_gather: p.final_gather,
+            sampler: s.sampler,
             ..PmSettings::new(s.seed)
         }
     }
@@ -83,6 +86,7 @@ impl PmSettings {
     pub fn new(seed: u64) -> PmSettings {
         PmSettings {
             seed,
+            sampler: SamplerKind::Independent,
             max_depth: u32::MAX,
             photons: DEFAULT_PHOTONS,
             k: DEFAULT_K,
@@ -124,15 +128,16 @@ impl PmState {
     pub fn new(data: Arc<SceneData>, settings: PmSettings) -> PmState {
         let cam = data.scene.camera;
         let pixels = cam.width as usize * cam.height as usize;
-        let mut photon_pass = PhotonPass::new(data.clone(), settings.seed, settings.max_depth);
+        let sampler = Sampler::new(settings.sampler, settings.seed, cam.width, cam.height);
+        let mut photon_pass = PhotonPass::new(data.clone(), sampler, settings.max_depth);
         photon_pass.tracing.begin_pass(0, settings.photons);
         let caustics = has_caustics(&data);
         PmState {
             settings,
             pixels,
             pass: 0,
-            camera_walk: CameraWalk::new(data.clone(), settings.seed, settings.max_depth),
-            gather_walk: CameraWalk::new(data.clone(), settings.seed, settings.max_depth),
+            camera_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
+            gather_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
             shadow: ShadowRays::new(pixels),
             pass_radiance: vec![DVec3::ZERO; pixels],
             photon_pass,

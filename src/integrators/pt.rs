@@ -22,6 +22,7 @@ use crate::integrators::{
     Budget, Control, IntegratorState, RenderOutcome, RenderSettings, SceneData, Wave, WaveState,
 };
 use crate::pipeline::{Graph, Node};
+use crate::sampling::{Sampler, SamplerKind};
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::Vec3;
 use std::ops::Range;
@@ -49,14 +50,27 @@ pub const WAVEFRONT: usize = 1 << 18;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PtSettings {
     pub seed: u64,
+    pub sampler: SamplerKind,
     /// Maximum number of scattering events; `u32::MAX` for unlimited.
     pub max_depth: u32,
+}
+
+impl PtSettings {
+    /// Independent samples, `seed`, at most `max_depth` bounces.
+    pub fn new(seed: u64, max_depth: u32) -> PtSettings {
+        PtSettings {
+            seed,
+            sampler: SamplerKind::Independent,
+            max_depth,
+        }
+    }
 }
 
 impl From<&RenderSettings> for PtSettings {
     fn from(s: &RenderSettings) -> PtSettings {
         PtSettings {
             seed: s.seed,
+            sampler: s.sampler,
             max_depth: s.max_depth,
         }
     }
@@ -89,6 +103,7 @@ impl MaterialRanges {
 pub struct PtState {
     pub data: Arc<SceneData>,
     pub settings: PtSettings,
+    pub sampler: Sampler<'static>,
     pub pixels: u64,
     pub wave: Wave,
     pub rays: Rays,
@@ -125,6 +140,7 @@ impl PtState {
         let cam = data.scene.camera;
         let pixels = cam.width as u64 * cam.height as u64;
         PtState {
+            sampler: Sampler::new(settings.sampler, settings.seed, cam.width, cam.height),
             data,
             settings,
             pixels,
@@ -223,8 +239,9 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
 
 impl IntegratorState for PtState {
     type Settings = PtSettings;
-    const INPUTS: &'static [&'static str] =
-        &["data", "settings", "pixels", "wave", "film", "scratch"];
+    const INPUTS: &'static [&'static str] = &[
+        "data", "settings", "sampler", "pixels", "wave", "film", "scratch",
+    ];
     fn graph(data: &SceneData, _: &PtSettings) -> Graph<PtState> {
         graph(data)
     }

@@ -50,6 +50,7 @@ use crate::integrators::{
 };
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node};
+use crate::sampling::{Sampler, SamplerKind};
 use crate::systems::{connect, gather, trace};
 use glam::DVec3;
 use std::sync::Arc;
@@ -65,6 +66,7 @@ pub const DEFAULT_RADIUS_FRACTION: f32 = 0.005;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ProgressiveSettings {
     pub seed: u64,
+    pub sampler: SamplerKind,
     /// Maximum number of scattering events of camera chains and photons; `u32::MAX` for
     /// unlimited.
     pub max_depth: u32,
@@ -86,6 +88,7 @@ impl ProgressiveSettings {
             photons_per_pass: p.photons_per_pass,
             alpha: p.alpha,
             initial_radius: p.radius,
+            sampler: s.sampler,
             ..ProgressiveSettings::new(s.seed, stochastic)
         }
     }
@@ -93,6 +96,7 @@ impl ProgressiveSettings {
     pub fn new(seed: u64, stochastic: bool) -> ProgressiveSettings {
         ProgressiveSettings {
             seed,
+            sampler: SamplerKind::Independent,
             max_depth: u32::MAX,
             photons_per_pass: DEFAULT_PHOTONS_PER_PASS,
             alpha: DEFAULT_ALPHA,
@@ -137,11 +141,12 @@ impl ProgressiveState {
         let pixels = cam.width as usize * cam.height as usize;
         let mut estimates = PixelEstimates::new(pixels);
         estimates.radius.fill(settings.radius_in(&data));
-        let mut photon_pass = PhotonPass::new(data.clone(), settings.seed, settings.max_depth);
+        let sampler = Sampler::new(settings.sampler, settings.seed, cam.width, cam.height);
+        let mut photon_pass = PhotonPass::new(data.clone(), sampler, settings.max_depth);
         // Direct light comes from light sampling at the visible points.
         photon_pass.tracing.store_direct = false;
         ProgressiveState {
-            camera_walk: CameraWalk::new(data.clone(), settings.seed, settings.max_depth),
+            camera_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
             data,
             settings,
             pixels,

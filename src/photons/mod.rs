@@ -18,7 +18,7 @@ pub use hash_grid::HashGrid;
 pub use kd_tree::{KdTree, Nearest};
 
 use crate::components::{Hits, PhotonFlags, PhotonWalkers, Photons, Rays};
-use crate::sampling::SampleKey;
+use crate::sampling::Sampler;
 use crate::scene::SceneData;
 use glam::Vec3;
 
@@ -37,12 +37,6 @@ pub fn bounce_dim(depth: u32) -> u32 {
     5 + depth * DIMS_PER_BOUNCE
 }
 
-/// The random numbers of photon `index` of pass `pass`: a stream apart from camera samples.
-#[inline]
-pub fn photon_key(seed: u64, pass: u64, index: u64) -> SampleKey {
-    SampleKey::new(seed, index | 3 << 62, pass)
-}
-
 /// A photon as `scatter_photons` stores it, before it joins the pass's columns.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct StoredPhoton {
@@ -57,7 +51,8 @@ pub struct StoredPhoton {
 /// Photons in flight and the photons stored so far in this pass.
 #[derive(Default)]
 pub struct PhotonTracing {
-    pub seed: u64,
+    /// The render's sampler: photon `index` of pass `pass` draws from the photon stream.
+    pub sampler: Sampler<'static>,
     /// Highest number of scattering events before a photon is stored and ends.
     pub max_depth: u32,
     /// Store photons at the first surface they meet (direct light). Integrators that
@@ -89,9 +84,9 @@ pub struct PhotonTracing {
 }
 
 impl PhotonTracing {
-    pub fn new(seed: u64, max_depth: u32, wavefront: usize) -> PhotonTracing {
+    pub fn new(sampler: Sampler<'static>, max_depth: u32, wavefront: usize) -> PhotonTracing {
         PhotonTracing {
-            seed,
+            sampler,
             max_depth,
             store_direct: true,
             rays: Rays::new(wavefront),
@@ -187,10 +182,14 @@ pub fn graph() -> crate::pipeline::Graph<PhotonPass> {
 }
 
 impl PhotonPass {
-    pub fn new(data: std::sync::Arc<SceneData>, seed: u64, max_depth: u32) -> PhotonPass {
+    pub fn new(
+        data: std::sync::Arc<SceneData>,
+        sampler: Sampler<'static>,
+        max_depth: u32,
+    ) -> PhotonPass {
         PhotonPass {
             data,
-            tracing: PhotonTracing::new(seed, max_depth, WAVEFRONT),
+            tracing: PhotonTracing::new(sampler, max_depth, WAVEFRONT),
         }
     }
 

@@ -289,6 +289,13 @@ const fn low_bits(n: u32) -> u64 {
     if n >= 64 { u64::MAX } else { (1 << n) - 1 }
 }
 
+/// The independent sampler at seed 0 (for stores built before their render's sampler is set).
+impl Default for Sampler<'_> {
+    fn default() -> Self {
+        Sampler::Independent { seed: 0 }
+    }
+}
+
 impl Sampler<'_> {
     /// The sampler of a `width` x `height` render. `Sobol` assumes `DEFAULT_LOG2_SPP`
     /// samples per pixel (see [`Sampler::Sobol`]).

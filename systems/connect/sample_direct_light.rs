@@ -7,30 +7,23 @@ use crate::components::NO_VISIBLE_POINT;
 use crate::integrators::{pm::PmState, sppm::ProgressiveState};
 use crate::math::Frame;
 use crate::pipeline::Flow;
-use crate::sampling::SampleKey;
+use crate::sampling::Stream;
 use rayon::prelude::*;
-
-/// The light-sample stream of (pixel, sample index): apart from the camera chains', so that a
-/// pass that keeps its visible points (PPM) still samples the light anew.
-#[inline]
-pub fn light_key(seed: u64, pixel: u64, sample_index: u64) -> SampleKey {
-    SampleKey::new(seed, pixel | 1 << 61, sample_index)
-}
 
 pub struct SampleDirectLight;
 
 crate::system! {
     SampleDirectLight = "sample_direct_light";
     on PmState {
-        read data, visible = camera_walk.visible, seed = settings.seed, index = pass;
+        read data, visible = camera_walk.visible, sampler = camera_walk.sampler, index = pass;
         write shadow;
     }
     on ProgressiveState {
-        read data, visible = camera_walk.visible, seed = settings.seed, index = pass;
+        read data, visible = camera_walk.visible, sampler = camera_walk.sampler, index = pass;
         write shadow;
     }
     run {
-        let (seed, index) = (*seed, *index);
+        let index = *index;
         let scene = &data.scene;
         let pixels = visible.capacity();
         let has_emitters = !scene.emitters.triangle.is_empty();
@@ -46,15 +39,15 @@ crate::system! {
                     if tri == NO_VISIBLE_POINT || !has_emitters {
                         continue;
                     }
-                    let key = light_key(seed, pixel as u64, index);
+                    let key = sampler.key(Stream::DirectLight, pixel as u64, index);
                     let wo = visible.wo[pixel];
                     let Some(light) = scene.sample_light_from(
                         visible.p[pixel],
                         visible.p_error[pixel],
                         visible.ng[pixel],
                         wo,
-                        key.get(0),
-                        key.get2(1),
+                        sampler.get(key, 0),
+                        sampler.get2(key, 1),
                     ) else {
                         continue;
                     };

@@ -6,7 +6,7 @@ use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
 use crate::pipeline::Flow;
-use crate::sampling::power_heuristic;
+use crate::sampling::{Sampler, power_heuristic};
 use crate::systems::shade::Surface;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -16,7 +16,7 @@ pub struct SampleLights;
 crate::system! {
     SampleLights = "sample_lights";
     on PtState {
-        read data, hits, rays, paths, surfaces, ranges;
+        read data, sampler, hits, rays, paths, surfaces, ranges;
         write shadow, shadow_len;
     }
     run {
@@ -31,9 +31,9 @@ crate::system! {
                 #[cfg(target_arch = "x86_64")]
                 if crate::cpu::has_avx2_fma() {
                     // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                    return unsafe { sample_chunk_avx2(data, hits, rays, paths, surfaces, c) };
+                    return unsafe { sample_chunk_avx2(data, sampler, hits, rays, paths, surfaces, c) };
                 }
-                sample_chunk(data, hits, rays, paths, surfaces, c)
+                sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
             })
             .sum();
         Flow::new(taken, cast)
@@ -45,19 +45,21 @@ crate::system! {
 #[target_feature(enable = "avx2,fma")]
 fn sample_chunk_avx2(
     data: &SceneData,
+    sampler: &Sampler,
     hits: &Hits,
     rays: &Rays,
     paths: &Paths,
     surfaces: &Surfaces,
     c: ShadowRaysChunk,
 ) -> usize {
-    sample_chunk(data, hits, rays, paths, surfaces, c)
+    sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
 }
 
 /// Light sampling at the paths of one chunk; returns the number of shadow rays cast.
 #[inline(always)]
 fn sample_chunk(
     data: &SceneData,
+    sampler: &Sampler,
     hits: &Hits,
     rays: &Rays,
     paths: &Paths,
@@ -80,8 +82,8 @@ fn sample_chunk(
             surf.p_error,
             surf.ng,
             surf.wo,
-            key.get(dim + DIM_LIGHT_PICK),
-            key.get2(dim + DIM_LIGHT_POINT),
+            sampler.get(key, dim + DIM_LIGHT_PICK),
+            sampler.get2(key, dim + DIM_LIGHT_POINT),
         ) else {
             continue;
         };

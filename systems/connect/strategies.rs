@@ -15,7 +15,7 @@ use crate::integrators::bdpt::{
 };
 use crate::path::{PathContext, Vertex, VertexKind};
 use crate::pipeline::Flow;
-use crate::sampling::SampleKey;
+use crate::sampling::Stream;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -37,7 +37,7 @@ fn strategies(
 crate::system! {
     ConnectStrategies = "connect_strategies";
     on BdptState {
-        read wave, capacity, settings, subpath_len, data, vertices, pixels;
+        read wave, capacity, settings, sampler, subpath_len, data, vertices, pixels;
         write connection_start, connections_len, shadow, connections, sample_radiance;
     }
     run {
@@ -75,7 +75,7 @@ crate::system! {
             &(0..n).step_by(CONNECT_CHUNK).collect::<Vec<_>>(),
             n,
         );
-        let (first, pixels, seed) = (wave.first, *pixels, settings.seed);
+        let (first, pixels) = (wave.first, *pixels);
         let weighted = settings.strategies == StrategyFilter::All;
         let emitters = &data.scene.emitters;
         let scene = &data.scene;
@@ -95,7 +95,7 @@ crate::system! {
                     let k = first_sample + local;
                     let g = first + k as u64;
                     let (pixel, index) = (g % pixels, g / pixels);
-                    let key = SampleKey::new(seed, pixel, index);
+                    let key = sampler.key(Stream::Connection, pixel, index);
                     let (nc, nl) = (lens[k] as usize, lens[cap + k] as usize);
                     camera.clear();
                     light.clear();
@@ -121,8 +121,8 @@ crate::system! {
                             }
                             let dim = camera_vertex_dim(ti - 1);
                             let light = scene.sample_emitter(
-                                key.get(dim + DIM_LIGHT_PICK),
-                                key.get2(dim + DIM_LIGHT_POINT),
+                                sampler.get(key, dim + DIM_LIGHT_PICK),
+                                sampler.get2(key, dim + DIM_LIGHT_POINT),
                             );
                             let (e, tri, sp) = (light.emitter, light.triangle, light.point);
                             let pdf_origin = light.pdf_area;

@@ -3,7 +3,7 @@
 
 use crate::integrators::camera_walk::CameraWalk;
 use crate::pipeline::Flow;
-use crate::sampling::SampleKey;
+use crate::sampling::Stream;
 use crate::systems::shade::extend_camera_chains::DIM_PIXEL;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -13,11 +13,11 @@ pub struct GenerateCameraChains;
 crate::system! {
     GenerateCameraChains = "generate_camera_chains";
     on CameraWalk {
-        read camera = data.scene.camera, seed, sample_index, starts;
+        read camera = data.scene.camera, sampler, sample_index, starts;
         write chains, rays, active;
     }
     run {
-        let (seed, sample_index, n) = (*seed, *sample_index, *starts);
+        let (sample_index, n) = (*sample_index, *starts);
         let cam = camera.frustum();
         let w = cam.width as u64;
         let rays = rays.chunks_mut(0..n);
@@ -28,9 +28,9 @@ crate::system! {
             .for_each(|(c, r)| {
                 for i in 0..c.len() {
                     let pixel = (c.start + i) as u64;
-                    let key = SampleKey::new(seed, pixel, sample_index);
+                    let key = sampler.key(Stream::Camera, pixel, sample_index);
                     let raster =
-                        Vec2::new((pixel % w) as f32, (pixel / w) as f32) + key.get2(DIM_PIXEL);
+                        Vec2::new((pixel % w) as f32, (pixel / w) as f32) + sampler.get2(key, DIM_PIXEL);
                     r.origin[i] = cam.position;
                     r.dir[i] = cam.direction(raster);
                     c.pixel[i] = pixel as u32;

@@ -4,7 +4,7 @@
 use crate::components::PathFlags;
 use crate::integrators::pt::{DIM_PIXEL, PtState};
 use crate::pipeline::Flow;
-use crate::sampling::SampleKey;
+use crate::sampling::Stream;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -13,14 +13,14 @@ pub struct GenerateCameraRays;
 crate::system! {
     GenerateCameraRays = "generate_camera_rays";
     on PtState {
-        read wave, camera = data.scene.camera, pixels, seed = settings.seed;
+        read wave, camera = data.scene.camera, pixels, sampler;
         write rays, paths, sample_radiance, active;
     }
     run {
         let n = wave.len;
         let cam = camera.frustum();
         let w = cam.width as u64;
-        let (first, pixels, seed) = (wave.first, *pixels, *seed);
+        let (first, pixels) = (wave.first, *pixels);
         sample_radiance[..n].fill(Vec3::ZERO);
         let rays = rays.chunks_mut(0..n);
         let paths = paths.chunks_mut(0..n);
@@ -29,8 +29,8 @@ crate::system! {
                 let slot = r.start + i;
                 let g = first + slot as u64;
                 let pixel = g % pixels;
-                let key = SampleKey::new(seed, pixel, g / pixels);
-                let jitter = key.get2(DIM_PIXEL);
+                let key = sampler.key(Stream::Camera, pixel, g / pixels);
+                let jitter = sampler.get2(key, DIM_PIXEL);
                 let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
                 r.origin[i] = cam.position;
                 r.dir[i] = cam.direction(raster);

@@ -8,27 +8,20 @@ use crate::components::NO_VISIBLE_POINT;
 use crate::integrators::pm::PmState;
 use crate::math::Frame;
 use crate::pipeline::Flow;
-use crate::sampling::SampleKey;
+use crate::sampling::Stream;
 use glam::Vec3;
 use rayon::prelude::*;
-
-/// The stream of pixel `pixel`'s final-gather chain in pass `pass`: dimensions 0 and 1 draw
-/// the direction, then the chain's bounces as camera chains do.
-#[inline]
-pub fn gather_key(seed: u64, pixel: u64, pass: u64) -> SampleKey {
-    SampleKey::new(seed, pixel | 1 << 60, pass)
-}
 
 pub struct GenerateFinalGatherRays;
 
 crate::system! {
     GenerateFinalGatherRays = "generate_final_gather_rays";
     on PmState {
-        read scene = data.scene, visible = camera_walk.visible, seed = settings.seed, pass, pixels;
+        read scene = data.scene, visible = camera_walk.visible, sampler = gather_walk.sampler, pass, pixels;
         write chains = gather_walk.chains, rays = gather_walk.rays, active = gather_walk.active;
     }
     run {
-        let (seed, pass, n) = (*seed, *pass, *pixels);
+        let (pass, n) = (*pass, *pixels);
         let rays = rays.chunks_mut(0..n);
         let started: usize = chains
             .chunks_mut(0..n)
@@ -47,7 +40,7 @@ crate::system! {
                     if tri == NO_VISIBLE_POINT {
                         continue;
                     }
-                    let key = gather_key(seed, pixel as u64, pass);
+                    let key = sampler.key(Stream::FinalGather, pixel as u64, pass);
                     c.key[i] = key;
                     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let (ng, wo) = (visible.ng[pixel], visible.wo[pixel]);
@@ -60,7 +53,7 @@ crate::system! {
                         ng,
                         wo,
                         wo_local,
-                        key.get2(0),
+                        sampler.get2(key, 0),
                         TransportMode::Radiance,
                     ) else {
                         continue;

@@ -3,9 +3,9 @@
 
 use crate::accel::offset_ray_origin;
 use crate::math::Frame;
-use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonPass, photon_key};
+use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonPass};
 use crate::pipeline::Flow;
-use crate::sampling::cosine_hemisphere;
+use crate::sampling::{Stream, cosine_hemisphere};
 use crate::scene::SceneData;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -33,7 +33,7 @@ crate::system! {
             t.active = 0;
             return Flow::new(0, 0);
         }
-        let (seed, pass, first) = (t.seed, t.pass, t.first);
+        let (sampler, pass, first) = (t.sampler, t.pass, t.first);
         let rays = t.rays.chunks_mut(0..n);
         t.walkers
             .chunks_mut(0..n)
@@ -41,12 +41,12 @@ crate::system! {
             .zip(rays)
             .for_each(|(w, r)| {
                 for i in 0..w.len() {
-                    let key = photon_key(seed, pass, first + (w.start + i) as u64);
+                    let key = sampler.key(Stream::Photon, first + (w.start + i) as u64, pass);
                     let light = data
                         .scene
-                        .sample_emitter(key.get(DIM_PICK), key.get2(DIM_POINT));
+                        .sample_emitter(sampler.get(key, DIM_PICK), sampler.get2(key, DIM_POINT));
                     let (e, sp) = (light.emitter, light.point);
-                    let local = cosine_hemisphere(key.get2(DIM_DIRECTION));
+                    let local = cosine_hemisphere(sampler.get2(key, DIM_DIRECTION));
                     let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
                     let pdf_point = light.pdf_area;
                     // Le cos / (pdf_point cos / pi); a direction in the tangent plane

@@ -5,11 +5,11 @@
 use crate::accel::offset_ray_origin;
 use crate::components::CAMERA_VERTEX;
 use crate::integrators::bdpt::{
-    BdptState, CAMERA_DIM_PIXEL, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT, light_key,
+    BdptState, CAMERA_DIM_PIXEL, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT,
 };
 use crate::math::Frame;
 use crate::pipeline::Flow;
-use crate::sampling::{SampleKey, cosine_hemisphere};
+use crate::sampling::{Stream, cosine_hemisphere};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -19,14 +19,14 @@ pub struct StartSubpaths;
 crate::system! {
     StartSubpaths = "start_subpaths";
     on BdptState {
-        read wave, data, pixels, seed = settings.seed, capacity;
+        read wave, data, pixels, sampler, capacity;
         write vertices, walkers, rays, subpath_len, active, depth;
     }
     run {
         let n = wave.len;
         let cap = *capacity;
         let cam = data.scene.camera.frustum();
-        let (first, pixels, seed) = (wave.first, *pixels, *seed);
+        let (first, pixels) = (wave.first, *pixels);
         let w = cam.width as u64;
         let emitters = &data.scene.emitters;
 
@@ -48,8 +48,8 @@ crate::system! {
                 for i in 0..v.len() {
                     let k = v.start + i;
                     let (pixel, index) = sample_of(k);
-                    let key = SampleKey::new(seed, pixel, index);
-                    let jitter = key.get2(CAMERA_DIM_PIXEL);
+                    let key = sampler.key(Stream::Camera, pixel, index);
+                    let jitter = sampler.get2(key, CAMERA_DIM_PIXEL);
                     let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
                     let dir = cam.direction(raster);
                     v.p[i] = cam.position;
@@ -91,14 +91,17 @@ crate::system! {
                 for i in 0..v.len() {
                     let k = v.start - cap + i;
                     let (pixel, index) = sample_of(k);
-                    let key = light_key(seed, pixel, index);
+                    let key = sampler.key(Stream::Light, pixel, index);
                     let light = data
                         .scene
-                        .sample_emitter(key.get(LIGHT_DIM_PICK), key.get2(LIGHT_DIM_POINT));
+                        .sample_emitter(
+                        sampler.get(key, LIGHT_DIM_PICK),
+                        sampler.get2(key, LIGHT_DIM_POINT),
+                    );
                     let (e, tri, sp) = (light.emitter, light.triangle, light.point);
                     let pdf_origin = light.pdf_area;
                     let le = emitters.radiance[e];
-                    let local = cosine_hemisphere(key.get2(LIGHT_DIM_DIRECTION));
+                    let local = cosine_hemisphere(sampler.get2(key, LIGHT_DIM_DIRECTION));
                     let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
                     let pdf_dir = local.z * FRAC_1_PI;
                     v.p[i] = sp.p;

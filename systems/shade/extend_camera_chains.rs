@@ -29,7 +29,7 @@ pub struct ExtendCameraChains;
 crate::system! {
     ExtendCameraChains = "extend_camera_chains";
     on CameraWalk {
-        read scene = data.scene, max_depth, hits, live = active;
+        read scene = data.scene, sampler, max_depth, hits, live = active;
         write chains, rays;
     }
     run {
@@ -87,7 +87,7 @@ crate::system! {
                         ng,
                         wo,
                         wo_local,
-                        c.key[i].get2(dim),
+                        sampler.get2(c.key[i], dim),
                         TransportMode::Radiance,
                     ) else {
                         continue;
@@ -95,7 +95,7 @@ crate::system! {
                     let mut beta = c.beta[i] * bs.value * (bs.wi.z.abs() / bs.pdf);
                     if depth + 1 >= ROULETTE_DEPTH {
                         let q = survival(beta, 1.0);
-                        if !survives(q, c.key[i].get(dim + 2)) {
+                        if !survives(q, sampler.get(c.key[i], dim + 2)) {
                             continue;
                         }
                         beta /= q;

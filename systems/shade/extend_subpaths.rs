@@ -13,6 +13,7 @@ use crate::integrators::bdpt::{
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction, to_area};
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
+use crate::sampling::{SampleKey, Sampler};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -21,7 +22,7 @@ pub struct ExtendSubpaths;
 crate::system! {
     ExtendSubpaths = "extend_subpaths";
     on BdptState {
-        read scene = data.scene, settings, capacity, hits, active, depth;
+        read scene = data.scene, settings, sampler, capacity, hits, active, depth;
         write vertices, subpath_len, walkers, rays;
     }
     run {
@@ -90,7 +91,7 @@ crate::system! {
                     lens[j] = d as u32 + 1;
                     wk.alive[i] = false;
                     let next = (d < settings.last_vertex(light))
-                        .then(|| scatter(scene, &mut here, &prev, &wk.key[i], d, light))
+                        .then(|| scatter(scene, sampler, &mut here, &prev, wk.key[i], d, light))
                         .flatten();
                     v.p[j] = here.p;
                     v.p_error[j] = here.p_error;
@@ -106,7 +107,8 @@ crate::system! {
                     let mut beta = wk.beta[i] * next.weight;
                     if d >= ROULETTE_DEPTH as usize {
                         let q = survival(beta, wk.roulette_scale[i]);
-                        let u = wk.key[i].get(
+                        let u = sampler.get(
+                            wk.key[i],
                             if light {
                                 light_vertex_dim(d)
                             } else {
@@ -148,9 +150,10 @@ struct Scattered {
 #[inline]
 fn scatter(
     scene: &crate::scene::PreparedScene,
+    sampler: &Sampler,
     here: &mut Vertex,
     prev: &Vertex,
-    key: &crate::sampling::SampleKey,
+    key: SampleKey,
     d: usize,
     light: bool,
 ) -> Option<Scattered> {
@@ -169,7 +172,7 @@ fn scatter(
         ng,
         wo,
         wo_local,
-        key.get2(dim + DIM_BSDF),
+        sampler.get2(key, dim + DIM_BSDF),
         mode,
     )?;
     let mut weight = bs.value * (bs.wi.z.abs() / bs.pdf);

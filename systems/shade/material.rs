@@ -23,11 +23,11 @@ crate::system! {
     ShadeMaterial;
     name(this) = this.0.shading_system();
     on PtState {
-        read data, hits, surfaces, ranges;
+        read data, sampler, hits, surfaces, ranges;
         write rays, paths;
     }
     run(this) {
         let range = ranges.of(this.0);
-        scatter_paths(data, hits, surfaces, rays, paths, range)
+        scatter_paths(data, sampler, hits, surfaces, rays, paths, range)
     }
 }

@@ -14,7 +14,7 @@ pub struct RussianRoulette;
 crate::system! {
     RussianRoulette = "russian_roulette";
     on PtState {
-        read live = active;
+        read live = active, sampler;
         write paths, rays;
     }
     run {
@@ -29,7 +29,7 @@ crate::system! {
                 for i in 0..p.len() {
                     if !p.flags[i].has(PathFlags::DEAD) && p.depth[i] >= ROULETTE_DEPTH {
                         let q = survival(p.throughput[i], 1.0);
-                        let u = p.key[i].get(bounce_dim(p.depth[i] - 1) + DIM_ROULETTE);
+                        let u = sampler.get(p.key[i], bounce_dim(p.depth[i] - 1) + DIM_ROULETTE);
                         if survives(q, u) {
                             p.throughput[i] /= q;
                         } else {

@@ -24,7 +24,7 @@ crate::system! {
         let (data, t): (&SceneData, _) = (data, tracing);
         let n = t.active;
         let scene = &data.scene;
-        let (max_depth, store_direct) = (t.max_depth, t.store_direct);
+        let (max_depth, store_direct, sampler) = (t.max_depth, t.store_direct, t.sampler);
         let chunks = n.div_ceil(CHUNK);
         t.chunk_photons.resize_with(chunks, Vec::new);
         let hits = &t.hits;
@@ -98,7 +98,7 @@ crate::system! {
                         ng,
                         wo,
                         wo_local,
-                        key.get2(dim + DIM_BSDF),
+                        sampler.get2(key, dim + DIM_BSDF),
                         TransportMode::Importance,
                     ) else {
                         continue;
@@ -112,7 +112,7 @@ crate::system! {
                     // a Lambertian photon's power unchanged (weight = albedo = q per channel
                     // when grey).
                     let q = survival(weight, 1.0);
-                    if !survives(q, key.get(dim + DIM_ROULETTE)) {
+                    if !survives(q, sampler.get(key, dim + DIM_ROULETTE)) {
                         continue;
                     }
                     w.power[i] *= weight / q;

@@ -10,6 +10,7 @@ use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_BSDF, bounce_dim};
 use crate::math::Frame;
 use crate::pipeline::Flow;
+use crate::sampling::Sampler;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -81,6 +82,7 @@ impl Surface {
 #[inline]
 pub fn scatter_paths(
     data: &SceneData,
+    sampler: &Sampler,
     hits: &Hits,
     surfaces: &Surfaces,
     rays: &mut Rays,
@@ -97,9 +99,9 @@ pub fn scatter_paths(
             #[cfg(target_arch = "x86_64")]
             if crate::cpu::has_avx2_fma() {
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                return unsafe { scatter_chunk_avx2(data, hits, surfaces, r, p) };
+                return unsafe { scatter_chunk_avx2(data, sampler, hits, surfaces, r, p) };
             }
-            scatter_chunk(data, hits, surfaces, r, p)
+            scatter_chunk(data, sampler, hits, surfaces, r, p)
         })
         .sum();
     Flow::new(taken, scattered)
@@ -110,18 +112,20 @@ pub fn scatter_paths(
 #[target_feature(enable = "avx2,fma")]
 fn scatter_chunk_avx2(
     data: &SceneData,
+    sampler: &Sampler,
     hits: &Hits,
     surfaces: &Surfaces,
     r: RaysChunk,
     p: PathsChunk,
 ) -> usize {
-    scatter_chunk(data, hits, surfaces, r, p)
+    scatter_chunk(data, sampler, hits, surfaces, r, p)
 }
 
 /// The scattering step at the paths of one chunk; returns the number that scatter on.
 #[inline(always)]
 fn scatter_chunk(
     data: &SceneData,
+    sampler: &Sampler,
     hits: &Hits,
     surfaces: &Surfaces,
     r: RaysChunk,
@@ -132,7 +136,7 @@ fn scatter_chunk(
     let (hits, surfaces) = (hits.view(range.clone()), surfaces.view(range));
     for i in 0..p.len() {
         let surf = Surface::at(data, &surfaces, hits.triangle[i], i, r.dir[i]);
-        let u = p.key[i].get2(bounce_dim(p.depth[i]) + DIM_BSDF);
+        let u = sampler.get2(p.key[i], bounce_dim(p.depth[i]) + DIM_BSDF);
         let next = sample_direction(
             &surf.material,
             &surf.frame,

@@ -37,7 +37,7 @@ pub fn render_pt(
     };
     pt::render(
         Arc::new(SceneData::new(scene)),
-        pt::PtSettings { seed, max_depth },
+        pt::PtSettings::new(seed, max_depth),
         Budget::SamplesPerPixel(spp),
         &control,
     )

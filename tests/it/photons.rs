@@ -12,7 +12,11 @@ use std::sync::Arc;
 
 fn pass(name: &str, max_depth: u32) -> PhotonPass {
     let scene = load_small(name, 8);
-    PhotonPass::new(Arc::new(SceneData::new(scene)), 7, max_depth)
+    PhotonPass::new(
+        Arc::new(SceneData::new(scene)),
+        stagelight::sampling::Sampler::Independent { seed: 7 },
+        max_depth,
+    )
 }
 
 /// Mean and standard error of a per-item quantity.
