@@ -52,6 +52,16 @@ pub enum Command {
         #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
         threads: Option<u64>,
     },
+    /// Prints an integrator's graph for a scene: its systems in run order, with the columns
+    /// each reads and writes.
+    Graph {
+        scene: PathBuf,
+        #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+        integrator: IntegratorKind,
+        /// The graph without final gathering (pm).
+        #[arg(long)]
+        no_final_gather: bool,
+    },
 }
 
 /// Parses an integrator name: unknown names and planned-but-unbuilt ones are clear errors.
@@ -349,6 +359,14 @@ fn run(cli: Cli) -> Result<i32> {
             crate::compare::thesis::run(&args.thesis_options())
         }
         Command::Compare(args) => crate::compare::run::compare(&args.options()?),
+        Command::Graph {
+            scene,
+            integrator,
+            no_final_gather,
+        } => {
+            crate::commands::graph(&scene, integrator, !no_final_gather)?;
+            Ok(0)
+        }
         Command::Diff { image, reference } => {
             crate::commands::diff(&image, &reference)?;
             Ok(0)

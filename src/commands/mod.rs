@@ -8,7 +8,7 @@ pub mod reference;
 pub mod render;
 
 use crate::film::Image;
-use crate::integrators::{Budget, SceneData};
+use crate::integrators::{Budget, IntegratorKind, RenderSettings, SceneData};
 use anyhow::{Context, Result};
 use std::path::Path;
 use std::sync::Arc;
@@ -101,5 +101,15 @@ pub fn diff(image: &Path, reference: &Path) -> Result<()> {
     let m = crate::metrics::compare(&a, &b)
         .with_context(|| format!("{} against {}", image.display(), reference.display()))?;
     print_out(&crate::report::diff_report(image, reference, &m));
+    Ok(())
+}
+
+/// Prints `integrator`'s graph for the scene at `path` (`stagelight graph`).
+pub fn graph(path: &Path, integrator: IntegratorKind, final_gather: bool) -> Result<()> {
+    let data = load_scene(path)?;
+    let mut settings = RenderSettings::default();
+    settings.photons.final_gather = final_gather;
+    let report = (integrator.info().graph)(&data, &settings);
+    print!("{}", report.description);
     Ok(())
 }

@@ -3,16 +3,8 @@
 //! multiple importance sampling (power heuristic by default, computed by the ratio walk of
 //! `crate::path`).
 //!
-//! The graph:
-//!
-//! ```text
-//! start_subpaths                      camera vertex + ray, light vertex + ray, per sample
-//! loop subpath_bounces (while subpaths are live):
-//!     trace_closest -> extend_subpaths -> compact_subpaths
-//! connect_strategies                  every (s, t): contribution, MIS weight, shadow ray
-//! trace_shadow                        all connections of the wave as one batch
-//! accumulate_connections              per-sample sums to the film, t = 1 splats in order
-//! ```
+//! Its graph, built from the scene: `stagelight graph SCENE --integrator bdpt` prints it with
+//! each system's columns, and the README shows it for `door_ajar`.
 //!
 //! Subpath vertices are stored depth by depth (`PathVertices`, one store per depth, slot =
 //! subpath), so a bounce writes one store and a store is allocated only the first time any

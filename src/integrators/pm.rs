@@ -15,21 +15,8 @@
 //! to the k-th nearest (at most `max_radius`). The result is biased (blurred by r) and the bias
 //! does not fall with passes: only more photons shrink it.
 //!
-//! The graph (the caustic system only when the scene has specular surfaces):
-//!
-//! ```text
-//! loop photon_maps (pass 0 only):
-//!     photons                       (nested: emit, then trace -> scatter -> compact)
-//!     build_photon_maps             kd-trees over the global and caustic photons
-//! generate_camera_chains
-//! loop camera_bounces: trace_closest -> extend_camera_chains -> compact_camera_chains
-//! sample_direct_light -> trace_shadow -> add_direct_light
-//! gather_caustics
-//! generate_final_gather_rays        (final gathering)
-//! loop gather_bounces: trace_closest -> extend_camera_chains -> compact_camera_chains
-//! gather_global_photons
-//! add_pass_to_film
-//! ```
+//! Its graph, built from the scene: `stagelight graph SCENE --integrator pm` prints it with
+//! each system's columns, and the README shows it for `door_ajar`.
 
 use crate::bsdf::MaterialKind;
 use crate::components::ShadowRays;

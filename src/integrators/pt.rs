@@ -2,17 +2,8 @@
 //! multiple importance sampling (power heuristic), Russian roulette, unlimited depth unless
 //! capped.
 //!
-//! The graph, built from the scene (a material kind no surface uses has no system):
-//!
-//! ```text
-//! generate_camera_rays
-//! loop bounces (while paths are live):
-//!     trace_closest -> add_emitted_light -> sort_by_material -> interpolate_surfaces
-//!     [sample_lights] -> [shade_diffuse] [shade_conductor] [shade_dielectric]
-//!     [trace_shadow -> apply_shadow_contributions]
-//!     russian_roulette
-//! accumulate_film
-//! ```
+//! Its graph, built from the scene: `stagelight graph SCENE --integrator pt` prints it with
+//! each system's columns, and the README shows it for `door_ajar`.
 
 use crate::bsdf::MaterialKind;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};

@@ -23,20 +23,8 @@
 //! pixels converge to the value at one fixed point each: aliased edges and whatever one
 //! choice at the glass showed stay in its image, whatever the number of passes.
 //!
-//! The graph of one pass:
-//!
-//! ```text
-//! generate_camera_chains              a camera ray per pixel (PPM: pass 0 only)
-//! loop camera_bounces (while chains are live):
-//!     trace_closest -> extend_camera_chains -> compact_camera_chains
-//! sample_direct_light                 a light sample per visible point
-//! trace_shadow
-//! add_direct_light                    D += emission seen + unoccluded light sample
-//! photons                             (nested: emit, then trace -> scatter -> compact)
-//! build_photon_grid                   hash grid over this pass's photons, cell = max radius
-//! gather_photons                      M and tau_M per visible point
-//! update_pixel_estimates              the progressive update above
-//! ```
+//! Its graph, built from the scene: `stagelight graph SCENE --integrator sppm` prints it with
+//! each system's columns, and the README shows it for `door_ajar`.
 //!
 //! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
 //! nothing grows with the number of passes.

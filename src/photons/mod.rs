@@ -149,14 +149,8 @@ pub struct PhotonPass {
 /// Columns set before the photon graph runs (`begin_pass` sets the pass).
 pub const INPUTS: &[&str] = &["data", "tracing"];
 
-/// The photon graph, one pass (a pass is cut into waves of at most `WAVEFRONT` photons):
-///
-/// ```text
-/// loop photon_waves (while the pass has photons left):
-///     emit_photons
-///     loop photon_bounces (while photons are live):
-///         trace_closest -> scatter_photons -> compact_photons
-/// ```
+/// The photon graph, one pass (a pass is cut into waves of at most `WAVEFRONT` photons); the
+/// photon mappers nest it (`stagelight graph SCENE --integrator sppm` prints it).
 pub fn graph() -> crate::pipeline::Graph<PhotonPass> {
     use crate::pipeline::{Graph, Node};
     use crate::systems::{generate, shade, trace};

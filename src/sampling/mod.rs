@@ -18,7 +18,7 @@ pub use sampler::{
 };
 
 use glam::{Vec2, Vec3};
-use std::f32::consts::{FRAC_1_PI, PI};
+use std::f32::consts::PI;
 
 /// A 64-bit mixing function (the finaliser of SplitMix64): a bijection with good avalanche.
 #[inline]
@@ -69,11 +69,6 @@ pub fn cosine_hemisphere(u: Vec2) -> Vec3 {
     let d = concentric_disk(u);
     let z = (1.0 - d.x * d.x - d.y * d.y).max(0.0).sqrt();
     Vec3::new(d.x, d.y, z)
-}
-
-#[inline]
-pub fn cosine_hemisphere_pdf(cos_theta: f32) -> f32 {
-    cos_theta.max(0.0) * FRAC_1_PI
 }
 
 /// Uniform point on the unit disk with low distortion (Shirley and Chiu's concentric map).

@@ -66,13 +66,6 @@ impl Surface {
     pub fn spawn(&self, w: Vec3) -> Vec3 {
         offset_ray_origin(self.p, self.p_error, self.ng, w)
     }
-
-    /// True when `wi` leaves on the geometric side of `wo` (a reflection, not a leak through
-    /// the surface that shading normals alone would allow).
-    #[inline]
-    pub fn reflects_geometrically(&self, wi: Vec3) -> bool {
-        wi.dot(self.ng) * self.wo.dot(self.ng) > 0.0
-    }
 }
 
 /// The scattering step every shading system shares: at each path of `range`, `sample`

@@ -89,3 +89,28 @@ fn every_scene_samples_lights_and_traces_shadows() {
         }
     }
 }
+
+/// The README's graph blocks (`<!-- graph: INTEGRATOR SCENE -->` then a text block) are what
+/// `stagelight graph` prints, so the docs never drift from the graphs.
+#[test]
+fn readme_graph_blocks_are_the_graphs_printed() {
+    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
+        .expect("README.md");
+    let mut checked = 0;
+    for (i, _) in readme.match_indices("<!-- graph: ") {
+        let rest = &readme[i + "<!-- graph: ".len()..];
+        let tag = &rest[..rest.find(" -->").expect("tag ends")];
+        let (name, scene) = tag.split_once(' ').expect("integrator and scene");
+        let body = rest
+            .split_once("```text\n")
+            .and_then(|(_, b)| b.split_once("```"))
+            .expect("a text block follows the tag")
+            .0;
+        let data = SceneData::new(load_small(&format!("{scene}.ron"), 8));
+        let kind = IntegratorKind::named(name);
+        let printed = (kind.info().graph)(&data, &RenderSettings::default()).description;
+        assert_eq!(body, printed, "README graph block of {tag}");
+        checked += 1;
+    }
+    assert!(checked >= 4, "found {checked} graph blocks");
+}
