@@ -381,8 +381,17 @@ impl Sampler<'_> {
     }
 
     /// Number `dim` of `key`, in [0, 1).
-    #[inline]
+    #[inline(always)]
     pub fn get(&self, key: SampleKey, dim: u32) -> f32 {
+        // The independent hash inlines into every system's loop; the others are calls.
+        match *self {
+            Sampler::Independent { .. } => key.get(dim),
+            _ => self.get_other(key, dim),
+        }
+    }
+
+    #[inline(never)]
+    fn get_other(&self, key: SampleKey, dim: u32) -> f32 {
         match *self {
             Sampler::Independent { .. } => key.get(dim),
             Sampler::Sobol { seed, log2_spp, .. } => {
@@ -402,8 +411,16 @@ impl Sampler<'_> {
     /// `get(key, d)`; `.y` is `get(key, d + 1)` under `Independent` and `Primary`, and under
     /// `Sobol` the pair's second Sobol' dimension. Treat a `get2` at `d` as using up
     /// dimensions `d` and `d + 1`.
-    #[inline]
+    #[inline(always)]
     pub fn get2(&self, key: SampleKey, dim: u32) -> Vec2 {
+        match *self {
+            Sampler::Independent { .. } => key.get2(dim),
+            _ => self.get2_other(key, dim),
+        }
+    }
+
+    #[inline(never)]
+    fn get2_other(&self, key: SampleKey, dim: u32) -> Vec2 {
         match *self {
             Sampler::Independent { .. } => key.get2(dim),
             Sampler::Sobol { seed, log2_spp, .. } => {
