@@ -14,6 +14,7 @@ pub mod compare;
 pub mod components;
 pub mod cpu;
 pub mod film;
+pub mod geometry;
 pub mod integrators;
 pub mod math;
 pub mod metrics;

@@ -41,6 +41,14 @@ pub fn luminance(c: Vec3) -> f32 {
     0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
+/// `gamma(n) = n u / (1 - n u)` with `u = f32::EPSILON / 2`: the relative error bound of `n`
+/// successive rounded operations (Higham).
+#[inline]
+pub const fn gamma(n: i32) -> f32 {
+    let nu = n as f32 * (f32::EPSILON * 0.5);
+    nu / (1.0 - nu)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

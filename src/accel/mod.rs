@@ -18,9 +18,7 @@ mod cwbvh;
 mod stack;
 mod triangle;
 
-pub use triangle::gamma;
-
-use crate::scene::{FLAT, TriangleColumns};
+use crate::geometry::TriangleColumns;
 use cwbvh::CwBvhAccel;
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
@@ -36,18 +34,6 @@ pub struct Hit {
     pub triangle: u32,
     pub b1: f32,
     pub b2: f32,
-}
-
-/// A point on a surface with a conservative bound on its floating-point error.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SurfacePoint {
-    pub p: Vec3,
-    /// Per-axis absolute error bound of `p`.
-    pub p_error: Vec3,
-    /// Unit geometric normal, from the winding (p1 - p0) x (p2 - p0).
-    pub ng: Vec3,
-    /// Unit shading normal (interpolated vertex normal, or `ng` for flat triangles).
-    pub ns: Vec3,
 }
 
 /// The accelerator: a BVH over the triangles with non-zero area, and those triangles in the
@@ -282,84 +268,11 @@ pub fn intersect_triangle(
     TraversalRay::new(origin, dir).intersect(&columns(triangle), t_max)
 }
 
-/// The surface point of a hit, with its error bound and normals.
-#[inline(always)]
-pub fn surface_point(tris: &TriangleColumns, triangle: u32, b1: f32, b2: f32) -> SurfacePoint {
-    let i = triangle as usize;
-    let (p0, p1, p2) = (tris.p0[i], tris.p1[i], tris.p2[i]);
-    // b0 from f64, so that its only error is the final rounding to f32 (relative, covered by
-    // the bound below).
-    let b0 = (1.0 - f64::from(b1) - f64::from(b2)) as f32;
-    let (w0, w1, w2) = (b0 * p0, b1 * p1, b2 * p2);
-    let p = w0 + w1 + w2;
-    let p_error = gamma(7) * (w0.abs() + w1.abs() + w2.abs());
-    let ng = tris.normal[i];
-    let ns = match tris.smooth[i] {
-        FLAT => ng,
-        k => {
-            let n = tris.vertex_normals[k as usize];
-            let ns = (b0 * n[0] + b1 * n[1] + b2 * n[2]).normalize_or_zero();
-            if ns == Vec3::ZERO { ng } else { ns }
-        }
-    };
-    SurfacePoint { p, p_error, ng, ns }
-}
-
-/// Moves `p` off the surface along the geometric normal, on the side of `w`, just far enough
-/// that a ray leaving towards `w` cannot re-hit the surface it starts on.
-#[inline]
-pub fn offset_ray_origin(p: Vec3, p_error: Vec3, ng: Vec3, w: Vec3) -> Vec3 {
-    offset_origin(p.into(), p_error.into(), ng.into(), w.into()).into()
-}
-
-/// `offset_ray_origin` on four-lane vectors: lane by lane the same operations (the dot
-/// products add in the same order), so the same bits.
-#[inline(always)]
-fn offset_origin(p: Vec3A, p_error: Vec3A, ng: Vec3A, w: Vec3A) -> Vec3A {
-    let d = ng.abs().dot(p_error);
-    let mut offset = d * ng;
-    if w.dot(ng) < 0.0 {
-        offset = -offset;
-    }
-    let po = p + offset;
-    // The addition rounded to nearest, possibly back towards p: move each component on by
-    // |po| * 2^-23, which is at least one ulp of po (and never less than the smallest normal
-    // float), in the direction of the offset. Branch-free, so it vectorises.
-    let bump = (po.abs() * f32::EPSILON).max(Vec3A::splat(f32::MIN_POSITIVE));
-    let away = Vec3A::select(offset.cmpgt(Vec3A::ZERO), bump, Vec3A::ZERO)
-        - Vec3A::select(offset.cmplt(Vec3A::ZERO), bump, Vec3A::ZERO);
-    po + away
-}
-
-/// How much of a shadow ray's length is left unchecked at its far end (pbrt's value).
-pub const SHADOW_EPSILON: f32 = 1e-4;
-
-/// A shadow ray between two surface points: `(origin, dir, t_max)` for `any_hit`, both ends
-/// moved off their surfaces (towards each other), the far end short by `SHADOW_EPSILON`, so
-/// that neither surface occludes the ray itself.
-pub fn spawn_ray_to(
-    p_from: Vec3,
-    err_from: Vec3,
-    n_from: Vec3,
-    p_to: Vec3,
-    err_to: Vec3,
-    n_to: Vec3,
-) -> (Vec3, Vec3, f32) {
-    let (p_from, p_to) = (Vec3A::from(p_from), Vec3A::from(p_to));
-    let origin = offset_origin(p_from, err_from.into(), n_from.into(), p_to - p_from);
-    let target = offset_origin(p_to, err_to.into(), n_to.into(), origin - p_to);
-    (
-        origin.into(),
-        (target - origin).into(),
-        1.0 - SHADOW_EPSILON,
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::{FLAT, NO_EMITTER};
     use crate::sampling::{SampleKey, uniform_sphere};
-    use crate::scene::NO_EMITTER;
     use glam::Vec2;
 
     /// The traversal this CPU runs (AVX2 where present) and the baseline SSE2 one give the

@@ -8,15 +8,8 @@
 //! function that rounds to exactly zero is recomputed in double precision, where the products
 //! of the (single precision) inputs are exact.
 
+use crate::math::gamma;
 use glam::{Vec3, Vec3A, Vec3Swizzles};
-
-/// `gamma(n) = n u / (1 - n u)` with `u = f32::EPSILON / 2`: the relative error bound of `n`
-/// successive rounded operations (Higham).
-#[inline]
-pub const fn gamma(n: i32) -> f32 {
-    let nu = n as f32 * (f32::EPSILON * 0.5);
-    nu / (1.0 - nu)
-}
 
 /// A ray prepared once for traversal: its reciprocal direction for the box tests and the
 /// permutation and shear of the watertight triangle test.

@@ -17,10 +17,7 @@ use crate::bsdf::Material;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
-/// Marks a triangle that emits nothing (`TriangleColumns::emitter`).
-pub const NO_EMITTER: u32 = u32::MAX;
-/// Marks a flat-shaded triangle (`TriangleColumns::smooth`).
-pub const FLAT: u32 = u32::MAX;
+pub use crate::geometry::{FLAT, NO_EMITTER, TriangleColumns};
 
 /// A pinhole camera. The image's right is forward x up; row 0 is the top row.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -34,33 +31,6 @@ pub struct Camera {
     pub fov_y_degrees: f32,
     pub width: u32,
     pub height: u32,
-}
-
-/// Every triangle of the scene as structure-of-arrays columns, indexed by triangle id.
-#[derive(Clone, Debug, Default)]
-pub struct TriangleColumns {
-    pub p0: Vec<Vec3>,
-    pub p1: Vec<Vec3>,
-    pub p2: Vec<Vec3>,
-    /// Unit geometric normal, from the winding: (p1 - p0) x (p2 - p0), normalised.
-    pub normal: Vec<Vec3>,
-    /// Index into `PreparedScene::materials`.
-    pub material: Vec<u32>,
-    /// Index into `PreparedScene::emitters`, or `NO_EMITTER`.
-    pub emitter: Vec<u32>,
-    /// Index into `vertex_normals`, or `FLAT`: only meshes that have normals pay for them.
-    pub smooth: Vec<u32>,
-    /// Unit shading normals at (p0, p1, p2) of each smooth triangle.
-    pub vertex_normals: Vec<[Vec3; 3]>,
-}
-
-impl TriangleColumns {
-    pub fn len(&self) -> usize {
-        self.p0.len()
-    }
-    pub fn is_empty(&self) -> bool {
-        self.p0.is_empty()
-    }
 }
 
 /// The emitting triangles and the distribution that picks one by power.
@@ -102,7 +72,7 @@ pub struct EmitterPoint {
     /// Index into `PreparedScene::emitters`.
     pub emitter: usize,
     pub triangle: u32,
-    pub point: crate::accel::SurfacePoint,
+    pub point: crate::geometry::SurfacePoint,
     /// Area density of the point: the emitter's pick probability over its area.
     pub pdf_area: f32,
 }
@@ -143,7 +113,7 @@ impl PreparedScene {
             return None;
         }
         let (origin, dir, t_max) =
-            crate::accel::spawn_ray_to(p, p_error, ng, light.p, light.p_error, light.ng);
+            crate::geometry::spawn_ray_to(p, p_error, ng, light.p, light.p_error, light.ng);
         Some(LightSample {
             wi,
             pdf: sampled.pdf_area * dist2 / cos_light,
@@ -165,7 +135,7 @@ impl PreparedScene {
         EmitterPoint {
             emitter: e,
             triangle,
-            point: crate::accel::surface_point(&self.triangles, triangle, b.x, b.y),
+            point: crate::geometry::surface_point(&self.triangles, triangle, b.x, b.y),
             pdf_area: emitters.pmf[e] / emitters.area[e],
         }
     }

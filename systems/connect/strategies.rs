@@ -7,8 +7,8 @@
 //! estimation); t = 1 projects a light vertex onto the image (light tracing: it lands in
 //! whichever pixel it projects to).
 
-use crate::accel::spawn_ray_to;
 use crate::components::{Connections, ShadowRays, split_ranges};
+use crate::geometry::spawn_ray_to;
 use crate::integrators::bdpt::{
     BdptSettings, BdptState, CONNECT_CHUNK, DIM_LIGHT_PICK, DIM_LIGHT_POINT, StrategyFilter,
     camera_vertex_dim,

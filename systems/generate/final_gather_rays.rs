@@ -64,7 +64,7 @@ crate::system! {
                     }
                     c.beta[i] = beta;
                     c.alive[i] = true;
-                    r.origin[i] = crate::accel::offset_ray_origin(
+                    r.origin[i] = crate::geometry::offset_ray_origin(
                         visible.p[pixel],
                         visible.p_error[pixel],
                         ng,

@@ -1,7 +1,7 @@
 //! Emits the next wave of the pass's photons: an emitter picked by power, a point uniform on it, a direction
 //! cosine-distributed about its emitting side, and the power `Le pi / pdf(point)`.
 
-use crate::accel::offset_ray_origin;
+use crate::geometry::offset_ray_origin;
 use crate::math::Frame;
 use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonPass};
 use crate::pipeline::Flow;

@@ -2,8 +2,8 @@
 //! (uniform inside the sample's pixel), and a light vertex (an emitter picked by power, a
 //! point uniform on it) with a cosine-distributed ray leaving its emitting side.
 
-use crate::accel::offset_ray_origin;
 use crate::components::CAMERA_VERTEX;
+use crate::geometry::offset_ray_origin;
 use crate::integrators::bdpt::{
     BdptState, CAMERA_DIM_PIXEL, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT,
 };

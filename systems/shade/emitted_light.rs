@@ -1,8 +1,8 @@
 //! Adds the light of emitters that paths hit, weighted by multiple importance sampling against
 //! the light sampling that could also have found them.
 
-use crate::accel::surface_point;
 use crate::components::{MISS, PathFlags};
+use crate::geometry::surface_point;
 use crate::integrators::pt::PtState;
 use crate::pipeline::Flow;
 use crate::sampling::power_heuristic;

@@ -4,9 +4,9 @@
 //! depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by throughput) end with no
 //! gather point.
 
-use crate::accel::{offset_ray_origin, surface_point};
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{MISS, NO_VISIBLE_POINT};
+use crate::geometry::{offset_ray_origin, surface_point};
 use crate::integrators::camera_walk::CameraWalk;
 use crate::math::Frame;
 use crate::pipeline::Flow;

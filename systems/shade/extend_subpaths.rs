@@ -4,9 +4,9 @@
 //! Russian roulette. A subpath ends when its ray leaves the scene, at the depth cap, when its
 //! sample carries nothing, or by roulette.
 
-use crate::accel::{offset_ray_origin, surface_point};
 use crate::bsdf::{TransportMode, sample_direction};
 use crate::components::{MISS, PathVertices, split_ranges};
+use crate::geometry::{offset_ray_origin, surface_point};
 use crate::integrators::bdpt::{
     BdptState, DIM_BSDF, DIM_ROULETTE, camera_vertex_dim, light_vertex_dim,
 };

@@ -1,7 +1,7 @@
 //! Computes the surface point of every path's hit once per bounce (position with its error
 //! bound, geometric and shading normals), for the light-sampling and shading systems.
 
-use crate::accel::surface_point;
+use crate::geometry::surface_point;
 use crate::integrators::pt::PtState;
 use crate::pipeline::Flow;
 use rayon::prelude::*;

@@ -2,9 +2,9 @@
 //! sampling the BSDF (importance transport), with Russian roulette by the sampled weight so
 //! that its power stays constant in expectation. Stored photons join the pass in photon order.
 
-use crate::accel::{offset_ray_origin, surface_point};
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{CHUNK, MISS, PhotonFlags};
+use crate::geometry::{offset_ray_origin, surface_point};
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction};
 use crate::photons::{DIM_BSDF, DIM_ROULETTE, PhotonPass, StoredPhoton, bounce_dim};
 use crate::pipeline::Flow;

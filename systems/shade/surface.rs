@@ -1,11 +1,11 @@
 //! The shading point of a hit, shared by the systems that shade, sample lights or add
 //! emission: position with its error bound, normals, the shading frame and wo.
 
-use crate::accel::offset_ray_origin;
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{
     Hits, PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView,
 };
+use crate::geometry::offset_ray_origin;
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_BSDF, bounce_dim};
 use crate::math::Frame;

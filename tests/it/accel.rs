@@ -2,9 +2,8 @@
 //! surface point error bounds and degenerate input.
 
 use glam::{DVec3, Vec3};
-use stagelight::accel::{
-    Accel, Hit, intersect_triangle, offset_ray_origin, spawn_ray_to, surface_point,
-};
+use stagelight::accel::{Accel, Hit, intersect_triangle};
+use stagelight::geometry::{offset_ray_origin, spawn_ray_to, surface_point};
 use stagelight::sampling::{SampleKey, uniform_sphere};
 use stagelight::scene::{FLAT, NO_EMITTER, TriangleColumns};
 
