@@ -4,7 +4,12 @@
 //!   primary-sample vector (a pure function of seed and evaluation index), evaluated by the
 //!   BDPT systems; in mmlt evaluation i is at depth i mod (max depth + 1).
 //! - `collect_bootstrap_weights`: each evaluation's target into its group's weights; ends the
-//!   bootstrap by the size rule (`MltSettings`, `crate::mlt::needs_more_bootstrap`).
+//!   bootstrap by the size rule: at least `BOOTSTRAP_PER_CHAIN` evaluations per chain and
+//!   `MIN_BOOTSTRAP_SAMPLES` per group, then until b's relative error is below half the
+//!   image's expected noise at M mutations per pixel (`crate::mlt::needs_more_bootstrap`; M =
+//!   --spp, or `TIMED_MUTATIONS_PER_PIXEL` under --time), but never more evaluations than
+//!   the M x pixels mutations asked for nor `MAX_BOOTSTRAP_EVALUATIONS`; `--bootstrap N`
+//!   sets N per group instead.
 //! - `select_seeds`: b_k, chains per group by largest remainder, seeds by stratified
 //!   resampling (`crate::mlt::select_seeds`).
 //! - `replay_seeds`: each chain's seed vector rebuilt from its evaluation index, evaluated
@@ -71,11 +76,12 @@ pub struct CollectBootstrapWeights;
 crate::system! {
     CollectBootstrapWeights = "collect_bootstrap_weights";
     on MltState {
-        read settings, wave = bdpt.wave, contributions = chains.proposal_contributions;
+        read settings, pixels, wave = bdpt.wave, contributions = chains.proposal_contributions;
         write bootstrap;
     }
     run {
         let n = wave.len;
+        let pixels = *pixels;
         let groups = settings.groups() as u64;
         let chains = contributions.chains() as u64;
         for k in 0..n {
@@ -98,7 +104,10 @@ crate::system! {
                     .unwrap_or(TIMED_MUTATIONS_PER_PIXEL) as f64;
                 let floor = (BOOTSTRAP_PER_CHAIN * chains).max(MIN_BOOTSTRAP_SAMPLES as u64 * groups);
                 let black = bootstrap_error(&weights).normalisation <= 0.0;
-                bootstrap.evaluated >= MAX_BOOTSTRAP_EVALUATIONS
+                // Never more evaluations than the mutations asked for (nor the cap): beyond
+                // that the bootstrap would take most of the render.
+                let cap = MAX_BOOTSTRAP_EVALUATIONS.min(floor.max(m as u64 * pixels));
+                bootstrap.evaluated >= cap
                     || (bootstrap.evaluated >= floor
                         && (black || !needs_more_bootstrap(&weights, m)))
             }
