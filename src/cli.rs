@@ -97,6 +97,8 @@ pub struct RenderArgs {
     pub sampler: SamplerKind,
     #[command(flatten)]
     pub photons: PhotonArgs,
+    #[command(flatten)]
+    pub mlt: MltArgs,
     /// Maximum number of bounces (default: unlimited; Russian roulette ends paths).
     #[arg(long)]
     pub max_depth: Option<u32>,
@@ -112,6 +114,49 @@ pub struct RenderArgs {
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// Options of the Metropolis integrators (pssmlt, mmlt).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct MltArgs {
+    /// Probability of a large step, in [0, 1] (pssmlt, mmlt; default 0.3).
+    #[arg(long, value_parser = parse_probability)]
+    pub large_step: Option<f32>,
+    /// Small steps as a wrapped normal of this sigma (default: Kelemen's exponential for
+    /// pssmlt, sigma 0.01 for mmlt).
+    #[arg(long, value_parser = parse_sigma)]
+    pub sigma: Option<f32>,
+    /// Bootstrap evaluations per seed group, a depth in mmlt (default: grows with --spp).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub bootstrap: Option<u64>,
+    /// Markov chains (default: the mutations / 64, between 256 and 32768).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1 << 15))]
+    pub chains: Option<u64>,
+}
+
+impl MltArgs {
+    pub fn options(&self) -> crate::integrators::MltOptions {
+        crate::integrators::MltOptions {
+            large_step: self.large_step,
+            sigma: self.sigma,
+            bootstrap: self.bootstrap,
+            chains: self.chains,
+        }
+    }
+}
+
+fn parse_probability(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
+        _ => Err(format!("expected a probability in [0, 1], not {s}")),
+    }
+}
+
+fn parse_sigma(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("expected a positive sigma, not {s}")),
+    }
 }
 
 /// Options of the photon mappers.
@@ -415,6 +460,7 @@ impl RenderArgs {
                 mis: self.mis.heuristic(),
                 strategy_images: self.strategy_images.is_some(),
                 photons: self.photons.settings(),
+                mlt: self.mlt.options(),
             },
             strategy_images: self.strategy_images.clone(),
             output,

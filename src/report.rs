@@ -83,6 +83,9 @@ pub fn render_report(
         o.bytes_per_path,
         (o.wavefront * o.bytes_per_path) as f64 / (1 << 20) as f64
     );
+    for (label, value) in &o.notes {
+        let _ = writeln!(r, "  {label:<17} {value}");
+    }
     let _ = writeln!(
         r,
         "  systems           time share   runs   items taken -> emitted"
@@ -165,6 +168,9 @@ pub fn bench_table(
             mega(v[0]),
             mega(v[v.len() - 1])
         );
+    }
+    for (label, value) in &o.notes {
+        let _ = writeln!(t, "| {label} (last run) | {value} | | |");
     }
     let _ = writeln!(t, "| bytes per path in flight | {} | | |", o.bytes_per_path);
     let _ = writeln!(t, "| paths in flight | {} | | |", o.wavefront);

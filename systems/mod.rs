@@ -41,9 +41,17 @@ pub mod connect {
     pub mod strategies;
 }
 
+/// Metropolis chains: the bootstrap and its seeds, proposals, acceptance and splats.
+pub mod mutate {
+    pub mod accept;
+    pub mod bootstrap;
+    pub mod propose;
+}
+
 /// Collecting finished work into the film.
 pub mod gather {
     pub mod caustic_photons;
+    pub mod chain_contributions;
     pub mod connections;
     pub mod direct_light;
     pub mod film;

@@ -20,7 +20,7 @@ use crate::integrators::{
 };
 use crate::path::MisHeuristic;
 use crate::pipeline::{Graph, Node, Stats};
-use crate::sampling::{Sampler, SamplerKind};
+use crate::sampling::{PrimarySamples, SampleKey, Sampler, SamplerKind, Stream};
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::{DVec3, Vec3};
 use std::collections::BTreeMap;
@@ -49,6 +49,76 @@ pub const LIGHT_DIM_PICK: u32 = 0;
 pub const LIGHT_DIM_POINT: u32 = 1;
 pub const LIGHT_DIM_DIRECTION: u32 = 3;
 pub const LIGHT_DIMS_PER_VERTEX: u32 = 3;
+
+/// Connection-stream dimension that picks the strategy s of a multiplexed (MMLT) sample. Only
+/// multiplexed samples read it, and they draw from `Numbers::Primary`, where the connection
+/// stream has dimensions of its own (under the render's samplers it would be the camera's
+/// pixel jitter).
+pub const CONNECTION_DIM_STRATEGY: u32 = 0;
+
+/// Numbers of one stream a sample draws with every depth up to `max_depth`: the camera
+/// stream's last is the roulette number at camera vertex `max_depth`, the connection stream's
+/// the light point of s = 1 joined at camera vertex `max_depth`; the light stream's are fewer.
+/// Finite for a finite cap: what bounds a primary-sample vector (MLT).
+pub fn stream_dims(max_depth: u32) -> u32 {
+    (camera_vertex_dim(max_depth.max(1) as usize) + DIM_LIGHT_POINT + 2)
+        .max(LIGHT_DIM_DIRECTION + 2)
+}
+
+/// Where a BDPT state's numbers come from.
+pub enum Numbers {
+    /// The render's sampler: sample k of a wave is pixel `(first + k) % pixels` at sample
+    /// index `(first + k) / pixels`, its camera ray jittered inside that pixel.
+    Render(Sampler<'static>),
+    /// A primary-sample vector per slot (MLT): sample k reads slot k of `store` (keys index the
+    /// slot), and its raster position is the camera stream's first two numbers over the whole
+    /// film.
+    Primary {
+        store: PrimarySamples,
+        fallback_seed: u64,
+    },
+}
+
+impl Numbers {
+    /// The sampler the systems draw with.
+    #[inline]
+    pub fn sampler(&self) -> Sampler<'_> {
+        match self {
+            Numbers::Render(s) => *s,
+            Numbers::Primary {
+                store,
+                fallback_seed,
+            } => Sampler::Primary {
+                store,
+                fallback_seed: *fallback_seed,
+            },
+        }
+    }
+
+    #[inline]
+    pub fn is_primary(&self) -> bool {
+        matches!(self, Numbers::Primary { .. })
+    }
+
+    /// The key of `stream` for sample `k` of `wave`.
+    #[inline]
+    pub fn key(
+        &self,
+        sampler: &Sampler,
+        stream: Stream,
+        wave: Wave,
+        pixels: u64,
+        k: usize,
+    ) -> SampleKey {
+        match self {
+            Numbers::Render(_) => {
+                let g = wave.first + k as u64;
+                sampler.key(stream, g % pixels, g / pixels)
+            }
+            Numbers::Primary { .. } => sampler.key(stream, k as u64, 0),
+        }
+    }
+}
 
 /// First dimension of camera vertex `d` (d >= 1).
 #[inline]
@@ -141,8 +211,17 @@ impl BdptSettings {
 pub struct BdptState {
     pub data: Arc<SceneData>,
     pub settings: BdptSettings,
-    pub sampler: Sampler<'static>,
+    pub sampler: Numbers,
     pub pixels: u64,
+    /// Multiplexed samples (MMLT): the path depth of each sample of the wave, or empty for
+    /// full BDPT. A multiplexed sample uses one strategy (s, t) with s + t = depth + 2, s
+    /// picked by its connection stream, its subpaths exactly s and t vertices long, and its
+    /// contribution is the MIS-weighted one times depth + 2.
+    pub multiplex: Vec<u32>,
+    /// The strategy s of each multiplexed sample (written by `start_subpaths`).
+    pub chosen_s: Vec<u16>,
+    /// The pixel of each sample's camera ray (where strategies with t >= 2 land).
+    pub sample_pixel: Vec<u32>,
     pub wave: Wave,
     /// Samples a wave may hold; light subpath k of the wave is subpath `capacity + k`.
     pub capacity: usize,
@@ -183,7 +262,15 @@ impl BdptState {
         let pixels = cam.width as u64 * cam.height as u64;
         let subpaths = 2 * capacity;
         BdptState {
-            sampler: Sampler::new(settings.sampler, settings.seed, cam.width, cam.height),
+            sampler: Numbers::Render(Sampler::new(
+                settings.sampler,
+                settings.seed,
+                cam.width,
+                cam.height,
+            )),
+            multiplex: Vec::new(),
+            chosen_s: vec![0; capacity],
+            sample_pixel: vec![0; capacity],
             data,
             settings,
             pixels,
@@ -239,6 +326,17 @@ pub fn graph() -> Graph<BdptState> {
     Graph::new("bdpt", nodes)
 }
 
+/// The evaluation part of the graph, without the film: subpaths, connections and their
+/// shadow rays. MLT runs it on its chains' proposals and gathers the connections itself.
+pub fn evaluation_graph() -> Graph<BdptState> {
+    let mut nodes = subpath_nodes();
+    nodes.extend([
+        Node::system(connect::strategies::ConnectStrategies),
+        Node::system(trace::shadow::TraceShadow),
+    ]);
+    Graph::new("bdpt_evaluation", nodes)
+}
+
 /// The first half of the graph: both subpaths of every sample, walked to their ends.
 fn subpath_nodes() -> Vec<Node<BdptState>> {
     vec![
@@ -262,6 +360,7 @@ impl IntegratorState for BdptState {
         "settings",
         "sampler",
         "pixels",
+        "multiplex",
         "wave",
         "capacity",
         "film",

@@ -43,6 +43,10 @@ pub trait PassState: IntegratorState {
     fn new(data: Arc<SceneData>, settings: Self::Settings) -> Self;
     /// Prepares pass `pass` (0, 1, ...).
     fn begin_pass(&mut self, pass: u64);
+    /// Lines the integrator adds to the render report (label, value).
+    fn report(&self) -> Vec<(&'static str, String)> {
+        Vec::new()
+    }
     /// The image of `passes` finished passes, the bytes of state per pixel and the slots in
     /// flight.
     fn finish(self, passes: u64) -> (Film, usize, usize);
@@ -103,6 +107,7 @@ pub fn render_waves<S: WaveState>(
         bytes_per_path,
         wavefront: plan.capacity(),
         layers,
+        notes: Vec::new(),
     }
 }
 
@@ -138,6 +143,7 @@ pub fn render_passes<S: PassState>(
         (control.progress)(passes, total);
     }
     let interrupted = control.stopped() && total.is_some_and(|t| passes < t);
+    let notes = state.report();
     let (film, bytes_per_path, wavefront) = state.finish(passes);
     let pixels = film.width as u64 * film.height as u64;
     RenderOutcome {
@@ -151,6 +157,7 @@ pub fn render_passes<S: PassState>(
         bytes_per_path,
         wavefront,
         layers: Vec::new(),
+        notes,
     }
 }
 

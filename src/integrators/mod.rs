@@ -1,6 +1,7 @@
 //! Integrators: one file each, with its graph of systems and its parameters.
 
 pub mod bdpt;
+pub mod mlt;
 pub mod pm;
 pub mod pt;
 pub mod sppm;
@@ -50,7 +51,7 @@ fn graph_report<S: IntegratorState>(data: &SceneData, settings: &S::Settings) ->
 }
 
 /// Every integrator built into this binary, in the order reports list them.
-pub static REGISTRY: [IntegratorInfo; 5] = [
+pub static REGISTRY: [IntegratorInfo; 7] = [
     IntegratorInfo {
         name: "pt",
         description: "path tracing with next-event estimation and MIS",
@@ -114,6 +115,53 @@ pub static REGISTRY: [IntegratorInfo; 5] = [
         graph: |data, s| {
             let settings = sppm::ProgressiveSettings::from_render(s, true);
             graph_report::<sppm::ProgressiveState>(data, &settings)
+        },
+    },
+    IntegratorInfo {
+        name: "pssmlt",
+        description: "Kelemen primary-sample-space MLT over full BDPT",
+        // Consistent: b is estimated by the bootstrap, and a render does not resume.
+        unbiased: false,
+        options: &[
+            "--large-step",
+            "--sigma",
+            "--bootstrap",
+            "--chains",
+            "--mis",
+        ],
+        render: |data, s, budget, control, _| {
+            mlt::render(
+                data,
+                mlt::MltSettings::from_render(s, false),
+                budget,
+                control,
+            )
+        },
+        graph: |data, s| {
+            graph_report::<mlt::MltState>(data, &mlt::MltSettings::from_render(s, false))
+        },
+    },
+    IntegratorInfo {
+        name: "mmlt",
+        description: "multiplexed MLT: one BDPT strategy per evaluation (pbrt-v4's mlt)",
+        unbiased: false,
+        options: &[
+            "--large-step",
+            "--sigma",
+            "--bootstrap",
+            "--chains",
+            "--mis",
+        ],
+        render: |data, s, budget, control, _| {
+            mlt::render(
+                data,
+                mlt::MltSettings::from_render(s, true),
+                budget,
+                control,
+            )
+        },
+        graph: |data, s| {
+            graph_report::<mlt::MltState>(data, &mlt::MltSettings::from_render(s, true))
         },
     },
 ];
@@ -292,6 +340,21 @@ pub struct RenderSettings {
     /// Keep each strategy's weighted contribution as its own image (bdpt).
     pub strategy_images: bool,
     pub photons: PhotonSettings,
+    pub mlt: MltOptions,
+}
+
+/// Options of the Metropolis integrators (pssmlt, mmlt); None: the integrator's default.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct MltOptions {
+    /// Probability of a large step (0.3).
+    pub large_step: Option<f32>,
+    /// Small steps as a wrapped normal of this sigma (default: Kelemen's for pssmlt,
+    /// sigma 0.01 for mmlt).
+    pub sigma: Option<f32>,
+    /// Bootstrap evaluations per group (per depth in mmlt).
+    pub bootstrap: Option<u64>,
+    /// Chains (default: from the budget).
+    pub chains: Option<u64>,
 }
 
 impl Default for RenderSettings {
@@ -303,6 +366,7 @@ impl Default for RenderSettings {
             mis: crate::path::MisHeuristic::Power,
             strategy_images: false,
             photons: PhotonSettings::default(),
+            mlt: MltOptions::default(),
         }
     }
 }
@@ -365,6 +429,8 @@ pub struct RenderOutcome {
     pub wavefront: usize,
     /// Further images the integrator made, by name (BDPT's per-strategy images).
     pub layers: Vec<(String, crate::film::Image)>,
+    /// Lines the integrator adds to the report and the bench table (label, value).
+    pub notes: Vec<(&'static str, String)>,
 }
 
 impl RenderOutcome {

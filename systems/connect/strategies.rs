@@ -37,19 +37,30 @@ fn strategies(
 crate::system! {
     ConnectStrategies = "connect_strategies";
     on BdptState {
-        read wave, capacity, settings, sampler, subpath_len, data, vertices, pixels;
+        read wave, capacity, settings, numbers = sampler, subpath_len, data, vertices, pixels, multiplex, chosen_s, sample_pixel;
         write connection_start, connections_len, shadow, connections, sample_radiance;
     }
     run {
         let n = wave.len;
         let cap = *capacity;
         let settings = *settings;
+        let sampler = numbers.sampler();
+        let sampler = &sampler;
+        // A multiplexed sample keeps its one strategy, its weight times the strategy count.
+        let multiplexed = !multiplex.is_empty();
+        let keeps = |k: usize, (s, t): (usize, usize)| {
+            !multiplexed || (s == chosen_s[k] as usize && s + t == multiplex[k] as usize + 2)
+        };
         // Slots per sample, then where each sample's begin.
         let lens = subpath_len;
         let counts: Vec<usize> = (0..n)
             .into_par_iter()
             .with_min_len(CONNECT_CHUNK)
-            .map(|k| strategies(&settings, lens[k] as usize, lens[cap + k] as usize).count())
+            .map(|k| {
+                strategies(&settings, lens[k] as usize, lens[cap + k] as usize)
+                    .filter(|&st| keeps(k, st))
+                    .count()
+            })
             .collect();
         let starts = &mut *connection_start;
         starts[0] = 0;
@@ -75,7 +86,7 @@ crate::system! {
             &(0..n).step_by(CONNECT_CHUNK).collect::<Vec<_>>(),
             n,
         );
-        let (first, pixels) = (wave.first, *pixels);
+        let (wave, pixels) = (*wave, *pixels);
         let weighted = settings.strategies == StrategyFilter::All;
         let emitters = &data.scene.emitters;
         let scene = &data.scene;
@@ -93,9 +104,9 @@ crate::system! {
                 for (local, out) in radiance.iter_mut().enumerate() {
                     *out = Vec3::ZERO;
                     let k = first_sample + local;
-                    let g = first + k as u64;
-                    let (pixel, index) = (g % pixels, g / pixels);
-                    let key = sampler.key(Stream::Connection, pixel, index);
+                    let pixel = sample_pixel[k];
+                    let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
+                    let strategy_count = if multiplexed { multiplex[k] as f32 + 2.0 } else { 1.0 };
                     let (nc, nl) = (lens[k] as usize, lens[cap + k] as usize);
                     camera.clear();
                     light.clear();
@@ -106,11 +117,12 @@ crate::system! {
                         light.push(Vertex::from_store(store, cap + k, d));
                     }
                     let slots = starts[k] - sh.start..;
-                    for (this, (si, ti)) in slots.zip(strategies(&settings, nc, nl)) {
+                    let kept = strategies(&settings, nc, nl).filter(|&st| keeps(k, st));
+                    for (this, (si, ti)) in slots.zip(kept) {
                         sh.t_max[this] = 0.0;
                         sh.contribution[this] = Vec3::ZERO;
                         cn.sample[this] = k as u32;
-                        cn.pixel[this] = pixel as u32;
+                        cn.pixel[this] = pixel;
                         cn.s[this] = si as u16;
                         cn.t[this] = ti as u16;
                         // s = 1 with t >= 2: a fresh light sample at z_{t-1}.
@@ -147,8 +159,9 @@ crate::system! {
                         };
                         let weight = if weighted {
                             ctx.mis_weight(&camera, light_side, si, ti, settings.mis)
+                                * strategy_count
                         } else {
-                            1.0
+                            strategy_count
                         };
                         let contribution = conn.contribution * weight;
                         if contribution == Vec3::ZERO {

@@ -1,11 +1,17 @@
 //! Starts both subpaths of every sample of the wave: the camera vertex and a camera ray
 //! (uniform inside the sample's pixel), and a light vertex (an emitter picked by power, a
 //! point uniform on it) with a cosine-distributed ray leaving its emitting side.
+//!
+//! Under primary-sample numbers (MLT) the raster position is the camera stream's first two
+//! numbers over the whole film, and a multiplexed sample (MMLT) first picks its strategy s
+//! from its connection stream: its camera subpath then walks to exactly t = depth + 2 - s
+//! vertices and its light subpath to s (none for s = 0, the light vertex alone for s = 1).
 
 use crate::components::CAMERA_VERTEX;
 use crate::geometry::offset_ray_origin;
 use crate::integrators::bdpt::{
-    BdptState, CAMERA_DIM_PIXEL, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT,
+    BdptState, CAMERA_DIM_PIXEL, CONNECTION_DIM_STRATEGY, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK,
+    LIGHT_DIM_POINT,
 };
 use crate::math::Frame;
 use crate::pipeline::Flow;
@@ -19,21 +25,55 @@ pub struct StartSubpaths;
 crate::system! {
     StartSubpaths = "start_subpaths";
     on BdptState {
-        read wave, data, pixels, sampler, capacity;
-        write vertices, walkers, rays, subpath_len, active, depth;
+        read wave, data, pixels, numbers = sampler, capacity, multiplex;
+        write vertices, walkers, rays, subpath_len, active, depth, sample_pixel, chosen_s;
     }
     run {
         let n = wave.len;
         let cap = *capacity;
         let cam = data.scene.camera.frustum();
-        let (first, pixels) = (wave.first, *pixels);
+        let (wave, pixels) = (*wave, *pixels);
         let w = cam.width as u64;
         let emitters = &data.scene.emitters;
+        let sampler = numbers.sampler();
+        let sampler = &sampler;
+        let film_wide = numbers.is_primary();
+        let size = glam::Vec2::new(cam.width as f32, cam.height as f32);
 
         let has_light = !emitters.triangle.is_empty();
-        let sample_of = |k: usize| {
-            let g = first + k as u64;
-            (g % pixels, g / pixels)
+        // The camera key, the raster position and its pixel of sample k.
+        let raster_of = |k: usize| {
+            let key = numbers.key(sampler, Stream::Camera, wave, pixels, k);
+            let u = sampler.get2(key, CAMERA_DIM_PIXEL);
+            if film_wide {
+                let raster = u * size;
+                let x = (raster.x as u64).min(w - 1);
+                let y = (raster.y as u64).min(cam.height as u64 - 1);
+                (key, raster, y * w + x)
+            } else {
+                let pixel = (wave.first + k as u64) % pixels;
+                (key, Vec2::new((pixel % w) as f32, (pixel / w) as f32) + u, pixel)
+            }
+        };
+        let multiplexed = !multiplex.is_empty();
+        sample_pixel[..n]
+            .par_iter_mut()
+            .zip(chosen_s[..n].par_iter_mut())
+            .enumerate()
+            .with_min_len(crate::components::CHUNK)
+            .for_each(|(k, (pixel, s))| {
+                *pixel = raster_of(k).2 as u32;
+                if multiplexed {
+                    let strategies = multiplex[k] + 2;
+                    let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
+                    let u = sampler.get(key, CONNECTION_DIM_STRATEGY);
+                    *s = ((u * strategies as f32) as u32).min(strategies - 1) as u16;
+                }
+            });
+        // Vertices each subpath of sample k may have (camera, light) for a multiplexed one.
+        let lengths = |k: usize| {
+            let s = chosen_s[k] as u32;
+            (multiplex[k] + 2 - s, s)
         };
 
         // Camera subpaths: subpath k, walker slot k.
@@ -47,11 +87,10 @@ crate::system! {
             .for_each(|((v, wk), r)| {
                 for i in 0..v.len() {
                     let k = v.start + i;
-                    let (pixel, index) = sample_of(k);
-                    let key = sampler.key(Stream::Camera, pixel, index);
-                    let jitter = sampler.get2(key, CAMERA_DIM_PIXEL);
-                    let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
+                    let (key, raster, _) = raster_of(k);
                     let dir = cam.direction(raster);
+                    // A multiplexed sample with t = 1 needs only the camera vertex.
+                    let walks = !multiplexed || lengths(k).0 >= 2;
                     v.p[i] = cam.position;
                     v.p_error[i] = Vec3::ZERO;
                     v.ng[i] = cam.forward;
@@ -66,13 +105,18 @@ crate::system! {
                     wk.beta[i] = Vec3::ONE;
                     wk.pdf_dir[i] = cam.pdf_dir(dir);
                     wk.roulette_scale[i] = 1.0;
-                    wk.alive[i] = true;
+                    wk.alive[i] = walks;
                     r.origin[i] = cam.position;
-                    r.dir[i] = dir;
+                    r.dir[i] = if walks { dir } else { Vec3::ZERO };
                 }
             });
         subpath_len[..n].fill(1);
         subpath_len[cap..cap + n].fill(if has_light { 1 } else { 0 });
+        if multiplexed && has_light {
+            for k in 0..n {
+                subpath_len[cap + k] = lengths(k).1.min(1);
+            }
+        }
         if !has_light {
             *active = n;
             *depth = 1;
@@ -90,8 +134,9 @@ crate::system! {
             .for_each(|((v, wk), r)| {
                 for i in 0..v.len() {
                     let k = v.start - cap + i;
-                    let (pixel, index) = sample_of(k);
-                    let key = sampler.key(Stream::Light, pixel, index);
+                    let key = numbers.key(sampler, Stream::Light, wave, pixels, k);
+                    // A multiplexed sample with s <= 1 walks no light subpath.
+                    let walks = !multiplexed || lengths(k).1 >= 2;
                     let light = data
                         .scene
                         .sample_emitter(
@@ -124,9 +169,10 @@ crate::system! {
                     wk.beta[i] = beta;
                     wk.pdf_dir[i] = pdf_dir;
                     wk.roulette_scale[i] = beta.max_element().max(f32::MIN_POSITIVE);
-                    wk.alive[i] = pdf_dir > 0.0;
+                    let walks = walks && pdf_dir > 0.0;
+                    wk.alive[i] = walks;
                     r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, dir);
-                    r.dir[i] = if pdf_dir > 0.0 { dir } else { Vec3::ZERO };
+                    r.dir[i] = if walks { dir } else { Vec3::ZERO };
                 }
             });
         *active = 2 * n;

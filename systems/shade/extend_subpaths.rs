@@ -22,10 +22,24 @@ pub struct ExtendSubpaths;
 crate::system! {
     ExtendSubpaths = "extend_subpaths";
     on BdptState {
-        read scene = data.scene, settings, sampler, capacity, hits, active, depth;
+        read scene = data.scene, settings, numbers = sampler, capacity, hits, active, depth, multiplex, chosen_s;
         write vertices, subpath_len, walkers, rays;
     }
     run {
+        let sampler = numbers.sampler();
+        let sampler = &sampler;
+        // The last vertex index subpath `sub` may reach: the depth cap, or for a multiplexed
+        // sample its strategy's t - 1 (camera) or s - 1 (light).
+        let last_vertex = |sub: usize, light: bool| {
+            if multiplex.is_empty() {
+                settings.last_vertex(light)
+            } else {
+                let k = if light { sub - *capacity } else { sub };
+                let s = chosen_s[k] as usize;
+                let t = multiplex[k] as usize + 2 - s;
+                if light { s.saturating_sub(1) } else { t - 1 }
+            }
+        };
         let d = *depth;
         while vertices.len() <= d {
             vertices.push(PathVertices::new(2 * *capacity));
@@ -90,7 +104,7 @@ crate::system! {
                     here.pdf_fwd = to_area(wk.pdf_dir[i], &prev, &here);
                     lens[j] = d as u32 + 1;
                     wk.alive[i] = false;
-                    let next = (d < settings.last_vertex(light))
+                    let next = (d < last_vertex(sub, light))
                         .then(|| scatter(scene, sampler, &mut here, &prev, wk.key[i], d, light))
                         .flatten();
                     v.p[j] = here.p;

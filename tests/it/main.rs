@@ -12,6 +12,7 @@ mod compare;
 mod determinism;
 mod film_precision;
 mod graph;
+mod mlt;
 mod photon_mapping;
 mod photons;
 mod pt_furnace;

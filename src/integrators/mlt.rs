@@ -1,0 +1,455 @@
+//! Metropolis light transport in primary sample space over BDPT: `pssmlt` (Kelemen et al.
+//! 2002: every evaluation is a full BDPT sample, the target the luminance of all its
+//! contributions, light-tracing splats included) and `mmlt` (Hachisuka et al. 2014, pbrt-v4's
+//! `mlt`: every evaluation one strategy (s, t) at the chain's depth, its MIS weight in the
+//! target). The kernel (mutations, acceptance, expected-value splats, seeds) is `crate::mlt`;
+//! the evaluation is the BDPT graph's own systems, run as a nested graph on a `BdptState`
+//! whose numbers come from the chains' primary-sample vectors (`bdpt::Numbers::Primary`).
+//!
+//! The graph (one run per pass; a pass is `steps_per_pass` steps of every chain):
+//!
+//! ```text
+//! once bootstrap:
+//!     loop bootstrap_waves:  begin_bootstrap_wave -> [bdpt evaluation] -> gather_chain_contributions
+//!                            -> collect_bootstrap_weights
+//!     select_seeds -> replay_seeds -> [bdpt evaluation] -> gather_chain_contributions -> adopt_seeds
+//! loop mutation_steps:
+//!     propose_mutations -> [bdpt evaluation] -> gather_chain_contributions -> accept_or_reject
+//!     -> splat_expected_values -> commit_accepted
+//! ```
+//!
+//! Chains are the BDPT state's wavefront slots (chain i = sample slot i), all in lock step.
+//!
+//! Bounded dimensions: a primary-sample vector must have a fixed length, so MLT caps the path
+//! depth at `MLT_MAX_DEPTH` (16; `--max-depth` below that is used as given) and sizes the
+//! vectors to every number a path of that depth can draw (`bdpt::stream_dims`, three streams
+//! interleaved). Paths deeper than the cap are not rendered (on the furnace, 2^-17 of the
+//! light).
+
+use crate::film::Film;
+use crate::integrators::bdpt::{self, BdptSettings, BdptState, Numbers};
+use crate::integrators::driver::{IntegratorState, PassState, render_passes};
+use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
+use crate::mlt::{
+    ChainSplats, ChainStates, MltCounters, MutationSettings, SeedSelection, SmallStep,
+};
+use crate::path::MisHeuristic;
+use crate::pipeline::{Graph, Node};
+use crate::sampling::{PrimarySamples, SampleKey, mix64};
+use crate::systems::{gather, mutate};
+use glam::DVec3;
+use std::sync::Arc;
+use std::time::Duration;
+
+/// Deepest path MLT renders (see the module docs).
+pub const MLT_MAX_DEPTH: u32 = 16;
+/// Most chains (the BDPT wavefront).
+pub const MAX_CHAINS: usize = bdpt::WAVEFRONT;
+/// Fewest chains.
+pub const MIN_CHAINS: usize = 256;
+/// Chains are about (mutations) / this, so each chain takes at least this many steps.
+pub const STEPS_PER_CHAIN: u64 = 64;
+/// The mutations per pixel a time budget is planned for (chains and bootstrap size).
+pub const TIMED_MUTATIONS_PER_PIXEL: u64 = 256;
+/// Most bootstrap evaluations (all groups together) the automatic rule draws.
+pub const MAX_BOOTSTRAP_EVALUATIONS: u64 = 1 << 22;
+/// Bootstrap evaluations per chain at least (so chains rarely share a seed).
+pub const BOOTSTRAP_PER_CHAIN: u64 = 16;
+
+/// Separates the bootstrap's numbers from every other use of the seed.
+const BOOTSTRAP_DOMAIN: u64 = 0x6d6c_745f_626f_6f74;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MltSettings {
+    pub seed: u64,
+    /// Multiplexed (mmlt) or full BDPT per evaluation (pssmlt).
+    pub multiplexed: bool,
+    /// The path depth cap (at most `MLT_MAX_DEPTH`).
+    pub max_depth: u32,
+    pub mis: MisHeuristic,
+    pub mutation: MutationSettings,
+    /// Bootstrap evaluations per group (depth in mmlt); None: the automatic rule.
+    pub bootstrap: Option<u64>,
+    /// Chains; None: from the budget.
+    pub chains: Option<usize>,
+    /// The mutations per pixel asked for (None for a time budget).
+    pub mutations_per_pixel: Option<u64>,
+    /// Keep the bootstrap's own image (tests).
+    pub bootstrap_image: bool,
+}
+
+impl MltSettings {
+    pub fn from_render(s: &RenderSettings, multiplexed: bool) -> MltSettings {
+        let mut mutation = if multiplexed {
+            MutationSettings::MMLT
+        } else {
+            MutationSettings::PSSMLT
+        };
+        if let Some(p) = s.mlt.large_step {
+            mutation.large_step_probability = p;
+        }
+        if let Some(sigma) = s.mlt.sigma {
+            mutation.small_step = SmallStep::WrappedNormal { sigma };
+        }
+        MltSettings {
+            seed: s.seed,
+            multiplexed,
+            max_depth: s.max_depth.min(MLT_MAX_DEPTH),
+            mis: s.mis,
+            mutation,
+            bootstrap: s.mlt.bootstrap,
+            chains: s.mlt.chains.map(|c| c as usize),
+            mutations_per_pixel: None,
+            bootstrap_image: false,
+        }
+    }
+
+    /// Seed groups: one per depth 0..=max_depth (mmlt), or one.
+    pub fn groups(&self) -> usize {
+        if self.multiplexed {
+            self.max_depth as usize + 1
+        } else {
+            1
+        }
+    }
+
+    /// Numbers per primary-sample vector.
+    pub fn dims(&self) -> u32 {
+        3 * bdpt::stream_dims(self.max_depth)
+    }
+
+    /// Chains for a `pixels`-pixel image: the mutations / `STEPS_PER_CHAIN`, within
+    /// [`MIN_CHAINS`, `MAX_CHAINS`], unless given.
+    pub fn chain_count(&self, pixels: u64) -> usize {
+        self.chains.unwrap_or_else(|| {
+            let m = self
+                .mutations_per_pixel
+                .unwrap_or(TIMED_MUTATIONS_PER_PIXEL);
+            ((m * pixels / STEPS_PER_CHAIN) as usize).clamp(MIN_CHAINS, MAX_CHAINS)
+        })
+    }
+
+    /// Steps of every chain per pass: about one mutation per pixel.
+    pub fn steps_per_pass(&self, pixels: u64) -> u64 {
+        pixels.div_ceil(self.chain_count(pixels) as u64).max(1)
+    }
+
+    /// Passes for `m` mutations per pixel (rounded up).
+    pub fn passes_for(&self, pixels: u64, m: u64) -> u64 {
+        let per_pass = self.steps_per_pass(pixels) * self.chain_count(pixels) as u64;
+        (m * pixels).div_ceil(per_pass).max(1)
+    }
+}
+
+/// The bootstrap: BDPT evaluations with fresh numbers, their weights per group.
+#[derive(Default)]
+pub struct Bootstrap {
+    /// Per group, one weight per evaluation (the target: luminance, MIS-weighted in mmlt).
+    pub weights: Vec<Vec<f32>>,
+    pub evaluated: u64,
+    pub done: bool,
+    /// Per group, the evaluations' contributions summed per pixel (with `bootstrap_image`).
+    pub images: Vec<Vec<DVec3>>,
+    pub time: Duration,
+    pub started: Option<std::time::Instant>,
+    /// Seeds whose replay did not give their bootstrap weight (0: the numbers replay exactly).
+    pub replay_mismatches: usize,
+}
+
+/// The state of a Metropolis render: the chains and the BDPT state that evaluates them.
+pub struct MltState {
+    pub data: Arc<SceneData>,
+    pub settings: MltSettings,
+    pub pixels: u64,
+    pub steps_per_pass: u64,
+    pub bdpt: BdptState,
+    pub chains: ChainStates,
+    pub bootstrap: Bootstrap,
+    pub selection: Option<SeedSelection>,
+    /// Steps taken by every chain so far.
+    pub step: u64,
+    /// Steps left in the pass under way.
+    pub steps_left: u64,
+    pub counters: MltCounters,
+    pub splats: ChainSplats,
+    /// Splat sums per pixel, in chain order (f64).
+    pub splat_sums: Vec<DVec3>,
+    pub nonfinite: u64,
+}
+
+impl MltState {
+    /// The vector of bootstrap evaluation `item` (a pure function of seed and item).
+    #[inline]
+    pub fn bootstrap_number(seed: u64, item: u64, dim: u32) -> f32 {
+        SampleKey::new(mix64(seed ^ BOOTSTRAP_DOMAIN), item, 0).get(dim)
+    }
+
+    /// b = sum of b_k (0 before the bootstrap, or for a black scene).
+    pub fn normalisation(&self) -> f64 {
+        self.selection
+            .as_ref()
+            .map_or(0.0, SeedSelection::total_normalisation)
+    }
+
+    /// The bootstrap's own image (its BDPT estimate), with `bootstrap_image` set.
+    pub fn bootstrap_image(&self) -> Vec<DVec3> {
+        let mut image = vec![DVec3::ZERO; self.pixels as usize];
+        for (g, sums) in self.bootstrap.images.iter().enumerate() {
+            let n = self.bootstrap.weights[g].len().max(1) as f64;
+            for (out, v) in image.iter_mut().zip(sums) {
+                *out += *v * (self.pixels as f64 / n);
+            }
+        }
+        image
+    }
+
+    /// The image of the steps taken: splat sums x pixels / steps per chain.
+    pub fn image_film(&self) -> Film {
+        let (w, h) = (self.bdpt.film.width, self.bdpt.film.height);
+        let scale = if self.step == 0 {
+            0.0
+        } else {
+            self.pixels as f64 / self.step as f64
+        };
+        let sums = self.splat_sums.iter().map(|v| *v * scale).collect();
+        let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), self.nonfinite)
+            .expect("the image's size");
+        film.nonfinite = self.nonfinite;
+        film
+    }
+
+    /// Lines for the render report.
+    pub fn report_lines(&self) -> Vec<(&'static str, String)> {
+        let c = &self.counters;
+        let rate = |a: u64, n: u64| format!("{:.1}%", 100.0 * a as f64 / n.max(1) as f64);
+        let mut lines = vec![
+            (
+                "mutations",
+                format!(
+                    "{} ({} chains x {} steps)",
+                    c.steps,
+                    self.chains.chains(),
+                    self.step
+                ),
+            ),
+            (
+                "acceptance",
+                format!(
+                    "{} overall, {} large steps, {} small steps",
+                    rate(c.accepted, c.steps),
+                    rate(c.large_accepted, c.large_proposed),
+                    rate(c.small_accepted, c.small_proposed)
+                ),
+            ),
+            (
+                "rejected",
+                format!(
+                    "{} zero, {} invalid (never accepted)",
+                    c.rejected_zero, c.rejected_invalid
+                ),
+            ),
+            (
+                "bootstrap",
+                format!(
+                    "{} evaluations in {:.3} s, b = {:.6}",
+                    self.bootstrap.evaluated,
+                    self.bootstrap.time.as_secs_f64(),
+                    self.normalisation()
+                ),
+            ),
+        ];
+        if let Some(sel) = &self.selection
+            && self.settings.multiplexed
+        {
+            let per_depth: Vec<String> = sel
+                .normalisation
+                .iter()
+                .zip(&sel.chains_per_group)
+                .enumerate()
+                .filter(|(_, (b, _))| **b > 0.0)
+                .map(|(k, (b, n))| format!("{k}: {b:.4}/{n}"))
+                .collect();
+            lines.push(("b_k/chains by depth", per_depth.join(", ")));
+        }
+        lines
+    }
+}
+
+fn evaluation() -> Node<MltState> {
+    Node::nested(
+        bdpt::evaluation_graph(),
+        "bdpt",
+        |s: &mut MltState| &mut s.bdpt,
+        <BdptState as IntegratorState>::INPUTS,
+    )
+}
+
+/// The MLT graph (the same for pssmlt and mmlt; the settings choose).
+pub fn graph() -> Graph<MltState> {
+    use mutate::{accept, bootstrap, propose};
+    Graph::new(
+        "mlt",
+        vec![
+            Node::Once {
+                name: "bootstrap",
+                needed: |s: &MltState| !s.bootstrap.done,
+                body: vec![
+                    Node::Loop {
+                        name: "bootstrap_waves",
+                        queue_len: |s: &MltState| !s.bootstrap.done as usize,
+                        body: vec![
+                            Node::system(bootstrap::BeginBootstrapWave),
+                            evaluation(),
+                            Node::system(gather::chain_contributions::GatherChainContributions),
+                            Node::system(bootstrap::CollectBootstrapWeights),
+                        ],
+                    },
+                    Node::system(bootstrap::SelectSeeds),
+                    Node::system(bootstrap::ReplaySeeds),
+                    evaluation(),
+                    Node::system(gather::chain_contributions::GatherChainContributions),
+                    Node::system(bootstrap::AdoptSeeds),
+                ],
+            },
+            Node::Loop {
+                name: "mutation_steps",
+                queue_len: |s: &MltState| {
+                    if s.selection.is_some() {
+                        s.steps_left as usize
+                    } else {
+                        0
+                    }
+                },
+                body: vec![
+                    Node::system(propose::ProposeMutations),
+                    evaluation(),
+                    Node::system(gather::chain_contributions::GatherChainContributions),
+                    Node::system(accept::AcceptOrReject),
+                    Node::system(accept::SplatExpectedValues),
+                    Node::system(accept::CommitAccepted),
+                ],
+            },
+        ],
+    )
+}
+
+impl IntegratorState for MltState {
+    type Settings = MltSettings;
+    const INPUTS: &'static [&'static str] = &[
+        "data",
+        "settings",
+        "pixels",
+        "steps_per_pass",
+        "bdpt",
+        "chains",
+        "bootstrap",
+        "selection",
+        "step",
+        "steps_left",
+        "counters",
+        "splats",
+        "splat_sums",
+        "nonfinite",
+    ];
+    fn graph(_: &SceneData, _: &MltSettings) -> Graph<MltState> {
+        graph()
+    }
+}
+
+impl PassState for MltState {
+    fn new(data: Arc<SceneData>, settings: MltSettings) -> MltState {
+        let cam = data.scene.camera;
+        let pixels = cam.width as u64 * cam.height as u64;
+        let chains = settings.chain_count(pixels);
+        let dims = settings.dims();
+        let bdpt_settings = BdptSettings {
+            mis: settings.mis,
+            ..BdptSettings::new(settings.seed, settings.max_depth)
+        };
+        let mut bdpt = BdptState::new(data.clone(), bdpt_settings, chains);
+        bdpt.sampler = Numbers::Primary {
+            store: PrimarySamples::new(chains, dims),
+            fallback_seed: mix64(settings.seed ^ BOOTSTRAP_DOMAIN),
+        };
+        // The most contributions one evaluation makes: its own pixel and a light-tracing
+        // splat per light vertex (pssmlt); one strategy (mmlt).
+        let stride = if settings.multiplexed {
+            1
+        } else {
+            settings.max_depth as usize + 3
+        };
+        let groups = settings.groups();
+        MltState {
+            steps_per_pass: settings.steps_per_pass(pixels),
+            bootstrap: Bootstrap {
+                weights: vec![Vec::new(); groups],
+                images: if settings.bootstrap_image {
+                    vec![vec![DVec3::ZERO; pixels as usize]; groups]
+                } else {
+                    Vec::new()
+                },
+                ..Bootstrap::default()
+            },
+            data,
+            settings,
+            pixels,
+            bdpt,
+            chains: ChainStates::new(chains, dims, stride),
+            selection: None,
+            step: 0,
+            steps_left: 0,
+            counters: MltCounters::default(),
+            splats: ChainSplats::new(),
+            splat_sums: vec![DVec3::ZERO; pixels as usize],
+            nonfinite: 0,
+        }
+    }
+
+    fn begin_pass(&mut self, _pass: u64) {
+        self.steps_left = self.steps_per_pass;
+    }
+
+    fn report(&self) -> Vec<(&'static str, String)> {
+        self.report_lines()
+    }
+
+    fn finish(self, _passes: u64) -> (Film, usize, usize) {
+        let film = self.image_film();
+        let chains = self.chains.chains();
+        let bytes = 2 * self.chains.dims() as usize * 4
+            + self.chains.current_contributions.stride() * 2 * 16
+            + self.bdpt.bytes_per_sample();
+        (film, bytes, chains)
+    }
+}
+
+/// Renders with pssmlt (`multiplexed` false) or mmlt: `--spp M` is M mutations per pixel
+/// (rounded up to whole passes), a time budget ends at a pass boundary.
+pub fn render(
+    data: Arc<SceneData>,
+    mut settings: MltSettings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let budget = match budget {
+        Budget::SamplesPerPixel(m) => {
+            settings.mutations_per_pixel = Some(m);
+            Budget::SamplesPerPixel(settings.passes_for(pixels, m))
+        }
+        b => b,
+    };
+    let mutations_per_pass = settings.steps_per_pass(pixels) * settings.chain_count(pixels) as u64;
+    let mut outcome = render_passes::<MltState>(data, settings, budget, control);
+    outcome.samples = outcome.passes * mutations_per_pass;
+    let wall = outcome.wall.as_secs_f64().max(1e-9);
+    outcome.notes.insert(
+        0,
+        (
+            "mutations/s",
+            crate::report::mega(outcome.samples as f64 / wall),
+        ),
+    );
+    outcome
+}

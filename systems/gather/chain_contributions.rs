@@ -1,0 +1,60 @@
+//! Gathers each evaluated sample's connections into its chain's proposal contributions: the
+//! strategies with t >= 2 (and s = 0) summed at the sample's own pixel, and each unoccluded
+//! light-tracing splat (t = 1) at the pixel it projects to. The target is the luminance of
+//! them all (pssmlt: the whole BDPT sample; mmlt: its one strategy, MIS weight included).
+//! The same selection of connections as `accumulate_connections`, into the chains instead
+//! of the film.
+
+use crate::integrators::mlt::MltState;
+use crate::math::luminance;
+use crate::pipeline::Flow;
+use glam::Vec3;
+use rayon::prelude::*;
+
+pub struct GatherChainContributions;
+
+crate::system! {
+    GatherChainContributions = "gather_chain_contributions";
+    on MltState {
+        read wave = bdpt.wave, shadow = bdpt.shadow, connections = bdpt.connections, starts = bdpt.connection_start, radiance = bdpt.sample_radiance, sample_pixel = bdpt.sample_pixel;
+        write out = chains.proposal_contributions;
+    }
+    run {
+        let n = wave.len;
+        let made: usize = out
+            .par_chunks_mut()
+            .map(|mut chunk| {
+                let mut made = 0;
+                for local in 0..chunk.len() {
+                    let k = chunk.first_chain + local;
+                    chunk.clear(local);
+                    if k >= n {
+                        continue;
+                    }
+                    let mut own = radiance[k];
+                    let mut total = Vec3::ZERO;
+                    for slot in starts[k]..starts[k + 1] {
+                        if connections.t[slot] >= 2 && shadow.unoccluded[slot] {
+                            own += shadow.contribution[slot];
+                        }
+                    }
+                    if own != Vec3::ZERO {
+                        chunk.push(local, sample_pixel[k], own);
+                        total += own;
+                    }
+                    for slot in starts[k]..starts[k + 1] {
+                        if connections.t[slot] == 1 && shadow.unoccluded[slot] {
+                            let v = shadow.contribution[slot];
+                            chunk.push(local, connections.pixel[slot], v);
+                            total += v;
+                        }
+                    }
+                    chunk.target[local] = luminance(total);
+                    made += (chunk.target[local] != 0.0) as usize;
+                }
+                made
+            })
+            .sum();
+        Flow::new(n, made)
+    }
+}

@@ -1,0 +1,200 @@
+//! The bootstrap and the chains' seeds.
+//!
+//! - `begin_bootstrap_wave`: the next wave of bootstrap evaluations, each a fresh
+//!   primary-sample vector (a pure function of seed and evaluation index), evaluated by the
+//!   BDPT systems; in mmlt evaluation i is at depth i mod (max depth + 1).
+//! - `collect_bootstrap_weights`: each evaluation's target into its group's weights; ends the
+//!   bootstrap by the size rule: at least `BOOTSTRAP_PER_CHAIN` evaluations per chain and
+//!   `MIN_BOOTSTRAP_SAMPLES` per group, then until b's relative error is below half the
+//!   image's expected noise at M mutations per pixel (`crate::mlt::needs_more_bootstrap`; M =
+//!   --spp, or `TIMED_MUTATIONS_PER_PIXEL` under --time), but never more evaluations than
+//!   the M x pixels mutations asked for nor `MAX_BOOTSTRAP_EVALUATIONS`; `--bootstrap N`
+//!   sets N per group instead.
+//! - `select_seeds`: b_k, chains per group by largest remainder, seeds by stratified
+//!   resampling (`crate::mlt::select_seeds`).
+//! - `replay_seeds`: each chain's seed vector rebuilt from its evaluation index, evaluated
+//!   again (the same numbers give the same contribution), and `adopt_seeds` makes that the
+//!   chains' current state.
+
+use crate::components::CHUNK;
+use crate::integrators::Wave;
+use crate::integrators::bdpt::Numbers;
+use crate::integrators::mlt::{
+    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MltState, TIMED_MUTATIONS_PER_PIXEL,
+};
+use crate::mlt::{MIN_BOOTSTRAP_SAMPLES, bootstrap_error, needs_more_bootstrap};
+use crate::pipeline::Flow;
+use crate::sampling::PrimarySamples;
+use rayon::prelude::*;
+
+/// Fills slots `0..items.len()` of `store` with the vectors of bootstrap evaluations `items`.
+fn fill_vectors(store: &mut PrimarySamples, seed: u64, items: &[u64]) {
+    for dim in 0..store.dims() {
+        store.column_mut(dim)[..items.len()]
+            .par_chunks_mut(CHUNK)
+            .zip(items.par_chunks(CHUNK))
+            .for_each(|(out, items)| {
+                for (x, &item) in out.iter_mut().zip(items) {
+                    *x = MltState::bootstrap_number(seed, item, dim);
+                }
+            });
+    }
+}
+
+pub struct BeginBootstrapWave;
+
+crate::system! {
+    BeginBootstrapWave = "begin_bootstrap_wave";
+    on MltState {
+        read settings;
+        write bootstrap, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
+    }
+    run {
+        bootstrap.started.get_or_insert_with(std::time::Instant::now);
+        let Numbers::Primary { store, .. } = numbers else {
+            unreachable!("MLT evaluates primary samples")
+        };
+        let mut len = store.slots() as u64;
+        if let Some(n) = settings.bootstrap {
+            len = len.min(n * settings.groups() as u64 - bootstrap.evaluated);
+        }
+        let first = bootstrap.evaluated;
+        let items: Vec<u64> = (first..first + len).collect();
+        fill_vectors(store, settings.seed, &items);
+        let groups = settings.groups() as u64;
+        multiplex.clear();
+        if settings.multiplexed {
+            multiplex.extend(items.iter().map(|&i| (i % groups) as u32));
+        }
+        *wave = Wave { first: 0, len: len as usize };
+        Flow::new(len as usize, len as usize)
+    }
+}
+
+pub struct CollectBootstrapWeights;
+
+crate::system! {
+    CollectBootstrapWeights = "collect_bootstrap_weights";
+    on MltState {
+        read settings, pixels, wave = bdpt.wave, contributions = chains.proposal_contributions;
+        write bootstrap;
+    }
+    run {
+        let n = wave.len;
+        let pixels = *pixels;
+        let groups = settings.groups() as u64;
+        let chains = contributions.chains() as u64;
+        for k in 0..n {
+            let item = bootstrap.evaluated + k as u64;
+            let g = (item % groups) as usize;
+            bootstrap.weights[g].push(contributions.target[k]);
+            if let Some(image) = bootstrap.images.get_mut(g) {
+                for (pixel, value) in contributions.entries(k) {
+                    image[pixel as usize] += value.as_dvec3();
+                }
+            }
+        }
+        bootstrap.evaluated += n as u64;
+        let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
+        bootstrap.done = match settings.bootstrap {
+            Some(per_group) => bootstrap.evaluated >= per_group * groups,
+            None => {
+                let m = settings
+                    .mutations_per_pixel
+                    .unwrap_or(TIMED_MUTATIONS_PER_PIXEL) as f64;
+                let floor = (BOOTSTRAP_PER_CHAIN * chains).max(MIN_BOOTSTRAP_SAMPLES as u64 * groups);
+                let black = bootstrap_error(&weights).normalisation <= 0.0;
+                // Never more evaluations than the mutations asked for (nor the cap): beyond
+                // that the bootstrap would take most of the render.
+                let cap = MAX_BOOTSTRAP_EVALUATIONS.min(floor.max(m as u64 * pixels));
+                bootstrap.evaluated >= cap
+                    || (bootstrap.evaluated >= floor
+                        && (black || !needs_more_bootstrap(&weights, m)))
+            }
+        };
+        let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
+        Flow::new(n, found)
+    }
+}
+
+pub struct SelectSeeds;
+
+crate::system! {
+    SelectSeeds = "select_seeds";
+    on MltState {
+        read settings, bootstrap;
+        write selection, chains;
+    }
+    run {
+        let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
+        *selection = crate::mlt::select_seeds(&weights, chains.chains(), settings.seed);
+        if let Some(s) = selection.as_ref() {
+            s.apply(chains);
+        }
+        Flow::new(bootstrap.evaluated as usize, selection.as_ref().map_or(0, |s| s.group.len()))
+    }
+}
+
+pub struct ReplaySeeds;
+
+crate::system! {
+    ReplaySeeds = "replay_seeds";
+    on MltState {
+        read settings, selection;
+        write chains, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
+    }
+    run {
+        let Some(selection) = selection.as_ref() else {
+            *wave = Wave { first: 0, len: 0 };
+            return Flow::new(0, 0);
+        };
+        let groups = settings.groups() as u64;
+        let items: Vec<u64> = selection
+            .candidate
+            .iter()
+            .zip(&selection.group)
+            .map(|(&j, &g)| j as u64 * groups + g as u64)
+            .collect();
+        fill_vectors(&mut chains.current, settings.seed, &items);
+        let Numbers::Primary { store, .. } = numbers else {
+            unreachable!("MLT evaluates primary samples")
+        };
+        store.clone_from(&chains.current);
+        multiplex.clear();
+        if settings.multiplexed {
+            multiplex.extend_from_slice(&chains.group);
+        }
+        *wave = Wave { first: 0, len: items.len() };
+        Flow::new(items.len(), items.len())
+    }
+}
+
+pub struct AdoptSeeds;
+
+crate::system! {
+    AdoptSeeds = "adopt_seeds";
+    on MltState {
+        read selection;
+        write chains, bootstrap;
+    }
+    run {
+        chains.current_contributions.clone_from(&chains.proposal_contributions);
+        // The same numbers give the same contribution: each seed's target is its weight.
+        if let Some(sel) = selection.as_ref() {
+            bootstrap.replay_mismatches = sel
+                .group
+                .iter()
+                .zip(&sel.candidate)
+                .enumerate()
+                .filter(|&(i, (&g, &j))| {
+                    chains.current_contributions.target[i]
+                        != bootstrap.weights[g as usize][j as usize]
+                })
+                .count();
+        }
+        bootstrap.time = bootstrap.started.map_or_else(Default::default, |s| s.elapsed());
+        let n = chains.chains();
+        let live = chains.current_contributions.target.iter().filter(|&&t| t > 0.0).count();
+        Flow::new(n, live)
+    }
+}

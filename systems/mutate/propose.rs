@@ -1,0 +1,27 @@
+//! `propose_mutations`: every chain's proposal vector for the next step (`mlt::propose_mutations`:
+//! a large step with probability p, else a small step on every number; keyed by chain and
+//! step), then hands it to the BDPT state as its primary-sample store (a swap, no copy).
+
+use crate::integrators::Wave;
+use crate::integrators::bdpt::Numbers;
+use crate::integrators::mlt::MltState;
+use crate::pipeline::Flow;
+
+pub struct ProposeMutations;
+
+crate::system! {
+    ProposeMutations = "propose_mutations";
+    on MltState {
+        read settings, step;
+        write chains, numbers = bdpt.sampler, wave = bdpt.wave;
+    }
+    run {
+        crate::mlt::propose_mutations(chains, &settings.mutation, settings.seed, *step);
+        let Numbers::Primary { store, .. } = numbers else {
+            unreachable!("MLT evaluates primary samples")
+        };
+        std::mem::swap(store, &mut chains.proposal);
+        *wave = Wave { first: 0, len: chains.chains() };
+        Flow::new(chains.chains(), chains.chains())
+    }
+}

@@ -1,0 +1,223 @@
+//! Metropolis light transport (pssmlt, mmlt): normalisation (image mean luminance = b = the
+//! bootstrap image's mean), the furnace, block means against BDPT on the three scenes,
+//! thread-count independence, seeds replayed exactly, and no zero or invalid proposal ever
+//! accepted.
+
+use crate::common::{block_means, load_small, render_bdpt};
+use stagelight::film::Image;
+use stagelight::integrators::bdpt::BdptSettings;
+use stagelight::integrators::driver::run_passes;
+use stagelight::integrators::mlt::{MltSettings, MltState};
+use stagelight::integrators::{RenderSettings, SceneData};
+use stagelight::math::luminance;
+use std::sync::Arc;
+
+fn settings(multiplexed: bool, seed: u64, max_depth: u32, mutations: u64) -> MltSettings {
+    let mut s = MltSettings::from_render(
+        &RenderSettings {
+            seed,
+            max_depth,
+            ..RenderSettings::default()
+        },
+        multiplexed,
+    );
+    s.mutations_per_pixel = Some(mutations);
+    s
+}
+
+/// Runs `mutations` mutations per pixel (whole passes) and returns the state.
+fn run(scene: &str, size: u32, s: MltSettings) -> MltState {
+    let data = Arc::new(SceneData::new(load_small(scene, size)));
+    let pixels = (size * size) as u64;
+    let passes = s.passes_for(pixels, s.mutations_per_pixel.unwrap());
+    run_passes::<MltState>(data, s, passes)
+}
+
+fn image(state: &MltState) -> Image {
+    state.image_film().image()
+}
+
+fn mean_luminance(pixels: impl Iterator<Item = glam::DVec3>) -> f64 {
+    let (mut sum, mut n) = (0.0, 0.0);
+    for p in pixels {
+        sum += 0.2126 * p.x + 0.7152 * p.y + 0.0722 * p.z;
+        n += 1.0;
+    }
+    sum / n
+}
+
+const BOTH: [(bool, &str); 2] = [(false, "pssmlt"), (true, "mmlt")];
+
+#[test]
+fn mlt_image_mean_luminance_is_b_and_b_is_the_bootstrap_image_mean() {
+    for (multiplexed, name) in BOTH {
+        let mut s = settings(multiplexed, 3, 6, 8);
+        s.bootstrap_image = true;
+        let state = run("cornell_box.ron", 16, s);
+        let b = state.normalisation();
+        assert!(b > 0.0, "{name}");
+        let img = image(&state);
+        let mean = mean_luminance(img.pixels.iter().map(|p| p.as_dvec3()));
+        assert!(
+            (mean / b - 1.0).abs() < 1e-4,
+            "{name}: image mean {mean}, b {b}"
+        );
+        let boot = mean_luminance(state.bootstrap_image().into_iter());
+        assert!(
+            (boot / b - 1.0).abs() < 1e-6,
+            "{name}: bootstrap image {boot}, b {b}"
+        );
+        assert!(
+            state.counters.steps >= 8 * 256,
+            "{name}: {:?}",
+            state.counters
+        );
+    }
+}
+
+#[test]
+fn mlt_seeds_replay_their_bootstrap_weight_and_invalid_proposals_are_never_accepted() {
+    for (multiplexed, name) in BOTH {
+        let state = run("torus_glass.ron", 16, settings(multiplexed, 5, 8, 8));
+        let sel = state.selection.as_ref().expect("seeds");
+        // Every chain's current state has a positive, finite target: proposals with a zero
+        // or invalid target are never accepted.
+        let targets = &state.chains.current_contributions.target;
+        assert!(targets.iter().all(|t| t.is_finite() && *t > 0.0), "{name}");
+        let c = state.counters;
+        assert_eq!(c.rejected_invalid, 0, "{name}: {c:?}");
+        assert!(c.rejected_zero > 0 && c.accepted > 0, "{name}: {c:?}");
+        assert!(c.accepted <= c.steps - c.rejected_zero, "{name}: {c:?}");
+        assert_eq!(c.large_proposed + c.small_proposed, c.steps);
+        assert_eq!(sel.group.len(), state.chains.chains());
+        // Every seed had a positive bootstrap weight, and its replay gave that weight again.
+        for (&g, &j) in sel.group.iter().zip(&sel.candidate) {
+            assert!(
+                state.bootstrap.weights[g as usize][j as usize] > 0.0,
+                "{name}"
+            );
+        }
+        assert_eq!(state.bootstrap.replay_mismatches, 0, "{name}");
+    }
+}
+
+#[test]
+fn mlt_furnace_is_two_and_depth_caps_give_the_partial_sums() {
+    for (multiplexed, name) in BOTH {
+        for (depth, expected) in [(u32::MAX, 2.0), (0, 1.0), (1, 1.5), (3, 1.875)] {
+            let state = run("furnace.ron", 8, settings(multiplexed, 1, depth, 256));
+            let img = image(&state);
+            let b = state.normalisation();
+            assert!(
+                (b / expected - 1.0).abs() < 0.03,
+                "{name} depth {depth}: b {b} against {expected}"
+            );
+            // Every pixel the same light, within the noise of 256 correlated mutations.
+            let worst = img
+                .pixels
+                .iter()
+                .map(|p| (luminance(*p) as f64 / expected - 1.0).abs())
+                .fold(0.0, f64::max);
+            assert!(
+                worst < 0.5,
+                "{name} depth {depth}: a pixel {worst} off {expected}"
+            );
+            // 4x4 blocks (16 pixels, 4096 mutations each) within 10%.
+            for m in block_means(&img, 4) {
+                let l = 0.2126 * m[0] + 0.7152 * m[1] + 0.0722 * m[2];
+                assert!(
+                    (l / expected - 1.0).abs() < 0.1,
+                    "{name} depth {depth}: a block {l} against {expected}"
+                );
+            }
+            if multiplexed && depth == 3 {
+                let sel = state.selection.as_ref().unwrap();
+                for (k, &bk) in sel.normalisation.iter().enumerate() {
+                    let want = 0.5f64.powi(k as i32);
+                    assert!((bk / want - 1.0).abs() < 0.05, "b_{k} = {bk}, want {want}");
+                }
+            }
+        }
+    }
+}
+
+/// Per 16x16 block, luminance mean and standard error over seeds.
+fn block_stats(images: &[Image]) -> Vec<(f64, f64)> {
+    let blocks: Vec<Vec<f64>> = images
+        .iter()
+        .map(|img| {
+            block_means(img, 16)
+                .iter()
+                .map(|b| 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2])
+                .collect()
+        })
+        .collect();
+    let n = images.len() as f64;
+    (0..blocks[0].len())
+        .map(|i| {
+            let mean = blocks.iter().map(|b| b[i]).sum::<f64>() / n;
+            let var = blocks.iter().map(|b| (b[i] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            (mean, (var / n).sqrt())
+        })
+        .collect()
+}
+
+#[test]
+fn mlt_block_means_agree_with_bdpt() {
+    const SIZE: u32 = 32;
+    const DEPTH: u32 = 8;
+    const SEEDS: u64 = 4;
+    for scene in ["cornell_box.ron", "door_ajar.ron", "torus_glass.ron"] {
+        let reference: Vec<Image> = (0..SEEDS)
+            .map(|seed| {
+                render_bdpt(
+                    load_small(scene, SIZE),
+                    48,
+                    BdptSettings::new(1000 + seed, DEPTH),
+                )
+                .0
+                .film
+                .image()
+            })
+            .collect();
+        let reference = block_stats(&reference);
+        for (multiplexed, name) in BOTH {
+            let images: Vec<Image> = (0..SEEDS)
+                .map(|seed| image(&run(scene, SIZE, settings(multiplexed, seed, DEPTH, 32))))
+                .collect();
+            for (i, ((m, s), (rm, rs))) in
+                block_stats(&images).into_iter().zip(&reference).enumerate()
+            {
+                let se = (s * s + rs * rs).sqrt();
+                assert!(
+                    se < 0.35 * rm,
+                    "{scene} {name} block {i}: standard error {se} too large ({m} vs {rm})"
+                );
+                assert!(
+                    (m - rm).abs() <= 5.0 * se,
+                    "{scene} {name} block {i}: {m} vs {rm}, {:.2} standard errors",
+                    (m - rm).abs() / se
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn mlt_same_image_for_any_thread_count() {
+    for (multiplexed, name) in BOTH {
+        let images: Vec<Vec<glam::Vec3>> = [1, 2, 3]
+            .into_iter()
+            .map(|threads| {
+                let pool = rayon::ThreadPoolBuilder::new()
+                    .num_threads(threads)
+                    .build()
+                    .unwrap();
+                pool.install(|| {
+                    image(&run("door_ajar.ron", 16, settings(multiplexed, 7, 6, 4))).pixels
+                })
+            })
+            .collect();
+        assert!(images[0] == images[1] && images[1] == images[2], "{name}");
+    }
+}
