@@ -11,7 +11,7 @@
 //! of every strategy is found in one walk instead of by evaluating each from scratch.
 
 use crate::bsdf::{Material, TransportMode};
-use crate::components::{CAMERA_VERTEX, PathVerticesView};
+use crate::components::{CAMERA_VERTEX, PathVertex, PathVerticesView};
 use crate::math::Frame;
 use crate::scene::{Frustum, NO_EMITTER, PreparedScene};
 use glam::Vec3;
@@ -45,23 +45,38 @@ impl Vertex {
     /// light vertex; a camera subpath's is marked `CAMERA_VERTEX`).
     #[inline]
     pub fn from_store(store: &PathVerticesView, i: usize, depth: usize) -> Vertex {
-        let triangle = store.triangle[i];
-        let kind = match (depth, triangle) {
+        let v = store.get(i);
+        let kind = match (depth, v.triangle) {
             (_, CAMERA_VERTEX) => VertexKind::Camera,
             (0, _) => VertexKind::Light,
             _ => VertexKind::Surface,
         };
         Vertex {
             kind,
-            p: store.p[i],
-            p_error: store.p_error[i],
-            ng: store.ng[i],
-            ns: store.ns[i],
-            triangle,
-            beta: store.beta[i],
-            pdf_fwd: store.pdf_fwd[i],
-            pdf_rev: store.pdf_rev[i],
-            delta: store.delta[i],
+            p: v.p,
+            p_error: v.p_error,
+            ng: v.ng,
+            ns: v.ns,
+            triangle: v.triangle,
+            beta: v.beta,
+            pdf_fwd: v.pdf_fwd,
+            pdf_rev: v.pdf_rev,
+            delta: v.delta,
+        }
+    }
+
+    /// The vertex as its depth's store keeps it (the kind follows from depth and triangle).
+    pub fn stored(&self) -> PathVertex {
+        PathVertex {
+            p: self.p,
+            p_error: self.p_error,
+            ng: self.ng,
+            ns: self.ns,
+            triangle: self.triangle,
+            beta: self.beta,
+            pdf_fwd: self.pdf_fwd,
+            pdf_rev: self.pdf_rev,
+            delta: self.delta,
         }
     }
 

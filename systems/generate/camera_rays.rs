@@ -1,7 +1,7 @@
 //! Generates one camera ray per sample of the wave: a pinhole camera, each sample uniform
 //! inside its pixel (a one-pixel box filter).
 
-use crate::components::PathFlags;
+use crate::components::{Path, PathFlags};
 use crate::integrators::pt::{DIM_PIXEL, PtState};
 use crate::pipeline::Flow;
 use crate::sampling::Stream;
@@ -24,7 +24,7 @@ crate::system! {
         sample_radiance[..n].fill(Vec3::ZERO);
         let rays = rays.chunks_mut(0..n);
         let paths = paths.chunks_mut(0..n);
-        rays.into_par_iter().zip(paths).for_each(|(r, p)| {
+        rays.into_par_iter().zip(paths).for_each(|(r, mut p)| {
             for i in 0..r.len() {
                 let slot = r.start + i;
                 let g = first + slot as u64;
@@ -34,13 +34,18 @@ crate::system! {
                 let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
                 r.origin[i] = cam.position;
                 r.dir[i] = cam.direction(raster);
-                p.sample[i] = slot as u32;
-                p.key[i] = key;
-                p.throughput[i] = Vec3::ONE;
-                p.radiance[i] = Vec3::ZERO;
-                p.depth[i] = 0;
-                p.bsdf_pdf[i] = 0.0;
-                p.flags[i] = PathFlags(PathFlags::SPECULAR);
+                p.set(
+                    i,
+                    Path {
+                        sample: slot as u32,
+                        key,
+                        throughput: Vec3::ONE,
+                        radiance: Vec3::ZERO,
+                        depth: 0,
+                        bsdf_pdf: 0.0,
+                        flags: PathFlags(PathFlags::SPECULAR),
+                    },
+                );
             }
         });
         *active = n;

@@ -5,7 +5,7 @@
 //! sample carries nothing, or by roulette.
 
 use crate::bsdf::{TransportMode, sample_direction};
-use crate::components::{MISS, PathVertices, split_ranges};
+use crate::components::{MISS, PathVertex, PathVertices, split_ranges};
 use crate::geometry::{offset_ray_origin, surface_point};
 use crate::integrators::bdpt::{
     BdptState, DIM_BSDF, DIM_ROULETTE, camera_vertex_dim, light_vertex_dim,
@@ -69,7 +69,7 @@ crate::system! {
             .zip(views)
             .zip(prev_views)
             .zip(lens)
-            .map(|((((wk, r), v), pv), lens)| {
+            .map(|((((wk, r), mut v), pv), lens)| {
                 let mut alive = 0;
                 let base = v.start;
                 let hits = hits.view(wk.start..wk.start + wk.len());
@@ -107,15 +107,14 @@ crate::system! {
                     let next = (d < last_vertex(sub, light))
                         .then(|| scatter(scene, sampler, &mut here, &prev, wk.key[i], d, light))
                         .flatten();
-                    v.p[j] = here.p;
-                    v.p_error[j] = here.p_error;
-                    v.ng[j] = here.ng;
-                    v.ns[j] = here.ns;
-                    v.triangle[j] = here.triangle;
-                    v.beta[j] = here.beta;
-                    v.pdf_fwd[j] = here.pdf_fwd;
-                    v.pdf_rev[j] = 0.0;
-                    v.delta[j] = here.delta;
+                    // The reverse density is written by the next bounce (or stays 0).
+                    v.set(
+                        j,
+                        PathVertex {
+                            pdf_rev: 0.0,
+                            ..here.stored()
+                        },
+                    );
                     let Some(next) = next else { continue };
                     pv.pdf_rev[j] = next.pdf_rev_prev;
                     let mut beta = wk.beta[i] * next.weight;
