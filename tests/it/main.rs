@@ -11,7 +11,11 @@ mod cli;
 mod compare;
 mod determinism;
 mod film_precision;
+mod fuzz;
+#[path = "../fuzz/targets.rs"]
+mod fuzz_targets;
 mod graph;
+mod hostile;
 mod photon_mapping;
 mod photons;
 mod pt_furnace;
