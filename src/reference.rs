@@ -137,6 +137,7 @@ impl CheckpointHeader {
 }
 
 /// A checkpoint: its header and the film of its passes.
+#[derive(Clone, Debug)]
 pub struct Checkpoint {
     pub header: CheckpointHeader,
     pub film: Film,

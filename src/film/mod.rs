@@ -321,6 +321,14 @@ fn read_exr_from(
                  {MAX_READ_PIXELS} this reads"
             ));
         }
+        // No compression packs more than 1:100000 (deflate stops near 1:1032), and a pixel
+        // takes at least 2 bytes (one half-float channel).
+        if pixels > len.saturating_mul(50_000) {
+            return Err(format!(
+                "damaged EXR: its header says {w}x{h} pixels, more than a file of {len} bytes \
+                 can hold"
+            ));
+        }
         let needed = (header.chunk_count as u64).saturating_mul(MIN_CHUNK_BYTES);
         if needed > len {
             return Err(format!(

@@ -189,10 +189,14 @@ fn a_light_too_small_for_f32_is_refused_not_a_panic() {
 
 // 3 ---------------------------------------------------------------------------------------
 
-/// A small valid EXR and the offset of its dataWindow's four i32 values.
+/// A 256 x 256 EXR (as a render writes it) and the offset of its dataWindow's four i32s.
 fn exr_with_data_window(dir: &Path) -> (PathBuf, Vec<u8>, usize) {
     let path = dir.join("good.exr");
-    Image::new(8, 8).write_exr(&path).unwrap();
+    let mut image = Image::new(256, 256);
+    for (i, p) in image.pixels.iter_mut().enumerate() {
+        *p = glam::Vec3::splat((i % 7) as f32);
+    }
+    image.write_exr(&path).unwrap();
     let bytes = std::fs::read(&path).unwrap();
     let name = b"dataWindow\0box2i\0";
     let at = bytes
@@ -208,13 +212,13 @@ fn exr_with_data_window(dir: &Path) -> (PathBuf, Vec<u8>, usize) {
 fn a_damaged_exr_header_is_an_error_not_a_huge_allocation() {
     let dir = temp_dir("hostile-exr");
     let (good, bytes, at) = exr_with_data_window(&dir);
-    // One damaged byte: xMax (the third value) becomes about 2^30.
+    // One damaged byte: xMin becomes 8323072, a width of 8 million (a 25 GB allocation).
     let mut damaged = bytes.clone();
-    damaged[at + 8 + 3] = 0x40;
+    damaged[at + 2] = 0x7f;
     let bad = dir.join("damaged.exr");
     std::fs::write(&bad, &damaged).unwrap();
     let o = run(&["diff", s(&bad), s(&good)]);
-    refused(&o, "damaged.exr", &[]);
+    refused(&o, "damaged.exr", &["damaged"]);
 
     // 300 bytes that claim 100000 x 100000 pixels.
     let mut claim = bytes.clone();
@@ -235,7 +239,7 @@ fn a_damaged_exr_header_is_an_error_not_a_huge_allocation() {
         "compare",
         s(&scene),
         "--reference",
-        s(&huge),
+        s(&bad),
         "--integrators",
         "pt",
         "--budget-unit",
@@ -246,7 +250,7 @@ fn a_damaged_exr_header_is_an_error_not_a_huge_allocation() {
         "-o",
         s(&dir.join("report")),
     ]);
-    refused(&o, "huge.exr", &[]);
+    refused(&o, "damaged.exr", &["damaged"]);
 }
 
 // 4 ---------------------------------------------------------------------------------------
@@ -294,16 +298,22 @@ fn an_output_that_is_a_symbolic_link_is_refused() {
 #[test]
 fn two_renders_to_one_path_leave_a_whole_image() {
     let dir = temp_dir("hostile-race");
-    let scene = write_scene(&dir, "s.ron", &[FLOOR, LIGHT]);
+    // Large enough that writing the EXR takes a while: writers in place interleave.
+    let scene = dir.join("s.ron");
+    std::fs::write(
+        &scene,
+        scene_text(&[FLOOR, LIGHT]).replace("width: 16, height: 16", "width: 384, height: 384"),
+    )
+    .unwrap();
     let out = dir.join("out.exr");
-    for _ in 0..3 {
-        let children: Vec<Child> = (0..2)
+    for _ in 0..4 {
+        let children: Vec<Child> = (0..3)
             .map(|seed| {
                 binary()
                     .args(render_args(
                         s(&scene),
                         s(&out),
-                        &["--spp", "4", "--seed", &seed.to_string(), "--threads", "1"],
+                        &["--spp", "1", "--seed", &seed.to_string(), "--threads", "1"],
                     ))
                     .stdout(Stdio::null())
                     .stderr(Stdio::null())
@@ -315,7 +325,12 @@ fn two_renders_to_one_path_leave_a_whole_image() {
             assert!(c.wait().unwrap().success());
         }
         let image = Image::read_exr(&out).expect("a whole EXR");
-        assert_eq!((image.width, image.height), (16, 16));
+        assert_eq!((image.width, image.height), (384, 384));
+        let png = std::fs::read(dir.join("out.png")).unwrap();
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().expect("a whole PNG");
+        let mut buffer = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut buffer).expect("a whole PNG");
     }
     // No temporary file is left behind.
     let names: Vec<String> = std::fs::read_dir(&dir)
@@ -508,8 +523,8 @@ fn sigterm_and_sighup_stop_a_render_as_ctrl_c_does() {
         let pid = child.id();
         let number = if name == "TERM" { 15 } else { 1 };
         wait_for(&mut child, "the signal handler", || catches(pid, number));
-        // Some passes finish (16 x 16 pixels: thousands a second).
-        std::thread::sleep(Duration::from_millis(500));
+        // Some passes finish (the first wave is 1024 passes of 16 x 16 pixels).
+        crate::common::wait_for_progress(&mut child, 1.5);
         signal(&child, name);
         let o = child.wait_with_output().unwrap();
         assert_eq!(o.status.code(), Some(130), "SIG{name}: {}", stderr(&o));
@@ -608,9 +623,9 @@ fn forty_thousand_objects_load_in_linear_time() {
         &["--spp", "1"],
     ));
     rendered(&o);
-    // Quadratic loading took over two minutes.
+    // Quadratic loading took over two minutes (linear: 3 s, more on a loaded machine).
     assert!(
-        start.elapsed() < Duration::from_secs(30),
+        start.elapsed() < Duration::from_secs(75),
         "{:?}",
         start.elapsed()
     );
@@ -640,9 +655,9 @@ fn a_polygon_of_100000_vertices_loads_fast() {
     let out = dir.join("out.exr");
     let o = run(&render_args(s(&scene), s(&out), &["--spp", "4"]));
     rendered(&o);
-    // The fan of slivers took 53 s.
+    // The fan of slivers took 53 s (halving: about 1 s).
     assert!(
-        start.elapsed() < Duration::from_secs(20),
+        start.elapsed() < Duration::from_secs(30),
         "{:?}",
         start.elapsed()
     );

@@ -18,6 +18,7 @@ mod graph;
 mod hostile;
 mod photon_mapping;
 mod photons;
+mod properties;
 mod pt_furnace;
 mod reference;
 mod scene_crosscheck;
