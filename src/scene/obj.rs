@@ -25,6 +25,9 @@ pub struct ObjMesh {
     pub warnings: Vec<String>,
 }
 
+/// A face's corner: its position index and normal index (0-based).
+type Corner = (usize, Option<usize>);
+
 /// Reads an OBJ file; errors and warnings name it (and the line).
 pub fn load_obj(path: &Path) -> Result<ObjMesh, String> {
     let name = super::echo_path(path);
@@ -46,7 +49,7 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<ObjMesh, String> {
     let mut first_bad_normal = 0usize;
     // Faces as (line, [(position, normal)]) with indices resolved to 0-based, checked against
     // the counts at the end (a face may refer to vertices defined after it).
-    let mut faces: Vec<(usize, Vec<(usize, Option<usize>)>)> = Vec::new();
+    let mut faces: Vec<(usize, Vec<Corner>)> = Vec::new();
     for (index, raw) in bytes.split(|&b| b == b'\n').enumerate() {
         let line = index + 1;
         let raw = match raw.iter().position(|&b| b == b'#') {
@@ -234,11 +237,7 @@ fn echo_token(token: &[u8]) -> String {
 
 /// A face's vertex reference `v`, `v/vt`, `v//vn` or `v/vt/vn`: the 0-based position and
 /// normal indices (negative references count back from the vertices defined so far).
-fn corner(
-    token: &[u8],
-    positions: usize,
-    normals: usize,
-) -> Result<(usize, Option<usize>), String> {
+fn corner(token: &[u8], positions: usize, normals: usize) -> Result<Corner, String> {
     let mut parts = token.split(|&b| b == b'/');
     let p = parts.next().unwrap_or_default();
     let _texture = parts.next();

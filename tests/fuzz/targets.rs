@@ -88,7 +88,11 @@ pub fn scene(data: &[u8]) -> String {
         stop: &stop,
         progress: &|_, _| {},
     };
-    let kind = IntegratorKind::named(if data.len() % 2 == 0 { "pt" } else { "bdpt" });
+    let kind = IntegratorKind::named(if data.len().is_multiple_of(2) {
+        "pt"
+    } else {
+        "bdpt"
+    });
     let settings = RenderSettings {
         max_depth: 8,
         ..RenderSettings::default()

@@ -158,7 +158,8 @@ proptest! {
 
 /// A 4 x 3 image of a box lit from above.
 fn tiny_scene() -> Arc<SceneData> {
-    let text = "Scene(camera: (position: (0, 1, -3), look_at: (0, 1, 0), fov: 60, width: 4, height: 3),
+    let text =
+        "Scene(camera: (position: (0, 1, -3), look_at: (0, 1, 0), fov: 60, width: 4, height: 3),
         materials: {\"w\": Diffuse(reflectance: (0.6, 0.6, 0.6))},
         objects: [
             (shape: Box(min: (-2, 0, -2), max: (2, 3, 2)), material: \"w\", flip_normals: true),
@@ -221,16 +222,33 @@ proptest! {
 fn shape() -> impl Strategy<Value = (String, usize)> {
     let p = || (-5.0f64..5.0, -5.0f64..5.0, -5.0f64..5.0);
     prop_oneof![
-        Just(("Quad((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0))".to_string(), 2)),
+        Just((
+            "Quad((0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0))".to_string(),
+            2
+        )),
         Just(("Triangle((0, 0, 0), (1, 0, 0), (0, 1, 0))".to_string(), 1)),
         (p(), 0.1f64..3.0).prop_map(|((x, y, z), d)| {
-            (format!("Box(min: ({x}, {y}, {z}), max: ({}, {}, {}))", x + d, y + d, z + d), 12)
+            (
+                format!(
+                    "Box(min: ({x}, {y}, {z}), max: ({}, {}, {}))",
+                    x + d,
+                    y + d,
+                    z + d
+                ),
+                12,
+            )
         }),
         (0u32..3, any::<bool>()).prop_map(|(level, smooth)| {
-            (format!("Icosphere(level: {level}, smooth: {smooth})"), 20 << (2 * level))
+            (
+                format!("Icosphere(level: {level}, smooth: {smooth})"),
+                20 << (2 * level),
+            )
         }),
         (3u32..12, 3u32..12).prop_map(|(nu, nv)| {
-            (format!("Torus(major_radius: 1, minor_radius: 0.3, nu: {nu}, nv: {nv})"), 2 * (nu * nv) as usize)
+            (
+                format!("Torus(major_radius: 1, minor_radius: 0.3, nu: {nu}, nv: {nv})"),
+                2 * (nu * nv) as usize,
+            )
         }),
     ]
 }
@@ -239,7 +257,8 @@ fn transform() -> impl Strategy<Value = String> {
     prop_oneof![
         (-9.0f64..9.0).prop_map(|x| format!("Translate(({x}, 1, -2))")),
         (-360.0f64..360.0).prop_map(|d| format!("Rotate(axis: (1, 2, 3), degrees: {d})")),
-        (0.2f64..5.0, any::<bool>()).prop_map(|(s, mirror)| format!("Scale(({}, {s}, 1))", if mirror { -s } else { s })),
+        (0.2f64..5.0, any::<bool>())
+            .prop_map(|(s, mirror)| format!("Scale(({}, {s}, 1))", if mirror { -s } else { s })),
     ]
 }
 
