@@ -206,14 +206,20 @@ impl PhotonArgs {
 fn parse_alpha(s: &str) -> std::result::Result<f32, String> {
     match s.parse::<f32>() {
         Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
-        _ => Err(format!("alpha must be a number in (0, 1), not {s}")),
+        _ => Err(format!(
+            "alpha must be a number in (0, 1), not {}",
+            clip_word(s)
+        )),
     }
 }
 
 fn parse_radius(s: &str) -> std::result::Result<f32, String> {
     match s.parse::<f32>() {
         Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        _ => Err(format!("the radius must be a positive number, not {s}")),
+        _ => Err(format!(
+            "the radius must be a positive number, not {}",
+            clip_word(s)
+        )),
     }
 }
 
@@ -267,8 +273,8 @@ pub struct ReferenceArgs {
     /// preview go beside it.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
-    /// Seconds between checkpoints.
-    #[arg(long, default_value = "30", value_parser = parse_seconds)]
+    /// Seconds between checkpoints (at most 1e9).
+    #[arg(long, default_value = "30", value_parser = parse_checkpoint_seconds)]
     pub checkpoint_every: f64,
     /// No progress bar.
     #[arg(long)]
@@ -355,25 +361,65 @@ fn parse_budget(s: &str) -> std::result::Result<f64, String> {
     let v: f64 = s
         .trim()
         .parse()
-        .map_err(|_| format!("'{s}' is not a number"))?;
+        .map_err(|_| format!("'{}' is not a number", clip_word(s)))?;
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
-        Err(format!("budget {s} is not a positive number"))
+        Err(format!("budget {} is not a positive number", clip_word(s)))
     }
 }
 
 fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
     let v: f64 = s
         .parse()
-        .map_err(|_| format!("'{s}' is not a number of seconds"))?;
+        .map_err(|_| format!("'{}' is not a number of seconds", clip_word(s)))?;
     if v.is_finite() && v > 0.0 {
         Ok(v)
     } else {
         Err(format!(
-            "the time must be a positive number of seconds, not {s}"
+            "the time must be a positive number of seconds, not {}",
+            clip_word(s)
         ))
     }
+}
+
+/// The longest time between checkpoints (about 31 years; a Duration holds no more than
+/// 1.8e19 seconds).
+pub const MAX_CHECKPOINT_SECONDS: f64 = 1e9;
+
+fn parse_checkpoint_seconds(s: &str) -> std::result::Result<f64, String> {
+    let v = parse_seconds(s)?;
+    if v <= MAX_CHECKPOINT_SECONDS {
+        Ok(v)
+    } else {
+        Err(format!(
+            "at most {MAX_CHECKPOINT_SECONDS:e} seconds between checkpoints, not {}",
+            clip_word(s)
+        ))
+    }
+}
+
+/// Longest word of a message repeated whole: a longer one (a 300-digit number) is cut.
+const MAX_WORD: usize = 64;
+
+/// A word of the user's as a message repeats it: at most `MAX_WORD` characters.
+fn clip_word(s: &str) -> String {
+    if s.chars().count() <= MAX_WORD {
+        return s.to_string();
+    }
+    let head: String = s.chars().take(40).collect();
+    format!("{head}...({} characters)", s.chars().count())
+}
+
+/// An error message as printed: one line (line breaks become spaces), every overlong word
+/// cut (`clip_word`), and at most 2000 characters in all.
+pub fn one_line(message: &str) -> String {
+    let words: Vec<String> = message
+        .split([' ', '\n', '\r', '\t'])
+        .filter(|w| !w.is_empty())
+        .map(clip_word)
+        .collect();
+    crate::scene::clip(&words.join(" "), 2000)
 }
 
 /// Runs the command line; returns the process exit code (0 success, 1 error, 130 interrupted).
@@ -382,14 +428,29 @@ pub fn main() -> i32 {
         Ok(cli) => cli,
         Err(e) => {
             let code = if e.use_stderr() { 1 } else { 0 };
-            let _ = e.print();
+            let text = e.render().to_string();
+            if e.use_stderr()
+                && text
+                    .split_whitespace()
+                    .any(|w| w.chars().count() > MAX_WORD)
+            {
+                // clap repeats the value it refused: a huge one is cut.
+                let mut lines = text.lines();
+                let first = lines.next().unwrap_or_default();
+                eprintln!("{}", one_line(first));
+                for line in lines {
+                    eprintln!("{line}");
+                }
+            } else {
+                let _ = e.print();
+            }
             return code;
         }
     };
     match run(cli) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", one_line(&format!("{e:#}")));
             1
         }
     }
@@ -495,7 +556,10 @@ impl ReferenceArgs {
                 ..RenderSettings::default()
             },
             output,
-            checkpoint_every: std::time::Duration::from_secs_f64(self.checkpoint_every),
+            checkpoint_every: std::time::Duration::try_from_secs_f64(self.checkpoint_every)
+                .unwrap_or(std::time::Duration::from_secs(
+                    MAX_CHECKPOINT_SECONDS as u64,
+                )),
             threads: self.threads.map(|t| t as usize),
             quiet: self.quiet,
         }

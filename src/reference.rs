@@ -12,10 +12,16 @@
 //! order, so the result equals an uninterrupted render bit for bit. A checkpoint made with a
 //! different integrator, seed, depth cap or scene is refused rather than mixed in.
 //!
-//! The checkpoint file: the line `stagelight checkpoint 2`, one line of RON (the header
-//! below), then per pixel, row 0 first, the three f64 sums, the u64 sample count and the three
-//! f64 splat sums (light tracing's, zero for PT) (little-endian), then an FNV-1a 64 checksum
-//! of those bytes (u64, little-endian).
+//! The checkpoint file: the line `stagelight checkpoint 3`, one line of RON (the header
+//! below, unknown fields refused, every value checked), then per pixel, row 0 first, the
+//! three f64 sums, the u64 sample count and the three f64 splat sums (light tracing's, zero
+//! for PT) (little-endian), then an FNV-1a 64 checksum of everything before it, the first
+//! line and the header included (u64, little-endian). Version 2 files (whose checksum covered
+//! the pixels only) are still read, their header checked the same way.
+//!
+//! While a run makes or continues a reference it holds `REF.exr.lock` (an advisory lock, let
+//! go when the process ends however it ends): a second run on the same output is refused
+//! instead of mixing its passes in.
 
 use crate::film::{Film, Image};
 use crate::integrators::{
@@ -29,7 +35,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-const MAGIC: &str = "stagelight checkpoint 2\n";
+const MAGIC: &str = "stagelight checkpoint 3\n";
+/// The previous format: the checksum covered the pixel data only.
+const MAGIC_V2: &str = "stagelight checkpoint 2\n";
 
 /// Bytes per pixel in a checkpoint: the sum (3 x f64), the sample count (u64) and the splat
 /// sum (3 x f64, light tracing's contributions), little-endian.
@@ -67,6 +75,7 @@ fn independent_sampler() -> String {
 
 /// What a checkpoint records besides the film.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct CheckpointHeader {
     pub integrator: String,
     pub seed: u64,
@@ -87,9 +96,57 @@ pub struct CheckpointHeader {
     pub seconds: f64,
     /// Non-finite samples rejected so far.
     pub nonfinite: u64,
+    /// Non-finite splats (light tracing) rejected so far (absent from version 2 files).
+    #[serde(default)]
+    pub nonfinite_splats: u64,
+}
+
+impl CheckpointHeader {
+    /// Checks every value (the checksum vouches for the bytes, this for their sense).
+    fn validate(&self) -> Result<(), String> {
+        let known = IntegratorKind::all()
+            .into_iter()
+            .any(|k| k.is_unbiased() && k.as_str() == self.integrator);
+        if !known {
+            return Err(format!(
+                "integrator \"{}\" is not one that makes references",
+                crate::scene::echo(&self.integrator)
+            ));
+        }
+        let max = crate::scene::format::MAX_IMAGE_SIZE as usize;
+        if !(1..=max).contains(&self.width) || !(1..=max).contains(&self.height) {
+            return Err(format!(
+                "image size {}x{} outside 1..={max}",
+                self.width, self.height
+            ));
+        }
+        if !(self.seconds.is_finite() && self.seconds >= 0.0) {
+            return Err(format!(
+                "render seconds {} are not a non-negative number",
+                self.seconds
+            ));
+        }
+        if self.scene_fingerprint.len() != 16
+            || !self
+                .scene_fingerprint
+                .bytes()
+                .all(|b| b.is_ascii_hexdigit())
+        {
+            return Err("the scene fingerprint is not 16 hex digits".into());
+        }
+        let samples = self.passes.checked_mul((self.width * self.height) as u64);
+        if samples.is_none_or(|n| self.nonfinite > n) {
+            return Err(format!(
+                "{} rejected samples of {} passes",
+                self.nonfinite, self.passes
+            ));
+        }
+        Ok(())
+    }
 }
 
 /// A checkpoint: its header and the film of its passes.
+#[derive(Clone, Debug)]
 pub struct Checkpoint {
     pub header: CheckpointHeader,
     pub film: Film,
@@ -158,14 +215,19 @@ pub fn scene_fingerprint(data: &SceneData) -> u64 {
 impl Checkpoint {
     /// Writes the checkpoint to a temporary file and renames it over `path`.
     pub fn write(&self, path: &Path) -> Result<(), ReferenceError> {
-        let header = ron::to_string(&self.header).map_err(|e| error(path, e))?;
+        let bytes = self.to_bytes().map_err(|e| error(path, e))?;
+        crate::film::output::write_bytes(path, &bytes).map_err(|e| error(path, e.message))
+    }
+
+    /// The checkpoint file's bytes.
+    pub fn to_bytes(&self) -> Result<Vec<u8>, String> {
+        let header = ron::to_string(&self.header).map_err(|e| e.to_string())?;
         let pixels = self.film.width * self.film.height;
         let mut bytes =
             Vec::with_capacity(MAGIC.len() + header.len() + 1 + pixels * PIXEL_BYTES + 8);
         bytes.extend_from_slice(MAGIC.as_bytes());
         bytes.extend_from_slice(header.as_bytes());
         bytes.push(b'\n');
-        let payload_start = bytes.len();
         for (i, (sum, &count)) in self
             .film
             .sums()
@@ -183,55 +245,76 @@ impl Checkpoint {
             }
         }
         let mut hash = Fnv1a::new();
-        hash.update(&bytes[payload_start..]);
+        hash.update(&bytes);
         bytes.extend_from_slice(&hash.0.to_le_bytes());
-        write_atomically(path, |tmp| {
-            std::fs::write(tmp, &bytes).map_err(|e| error(tmp, e))
-        })
+        Ok(bytes)
     }
 
     /// Reads a checkpoint; a damaged or foreign file is an error naming what is wrong.
     pub fn read(path: &Path) -> Result<Checkpoint, ReferenceError> {
         let bytes = std::fs::read(path).map_err(|e| error(path, e))?;
+        Checkpoint::from_bytes(&bytes).map_err(|message| error(path, message))
+    }
+
+    /// Reads a checkpoint from its bytes; the message does not name the file.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Checkpoint, String> {
         let damaged = |what: &str| {
-            error(
-                path,
-                format!("damaged checkpoint ({what}); delete it to start the reference over"),
-            )
+            format!("damaged checkpoint ({what}); delete it to start the reference over")
         };
-        let rest = bytes
-            .strip_prefix(MAGIC.as_bytes())
-            .ok_or_else(|| error(path, "not a stagelight checkpoint"))?;
+        let (version, rest) = if let Some(rest) = bytes.strip_prefix(MAGIC.as_bytes()) {
+            (3, rest)
+        } else if let Some(rest) = bytes.strip_prefix(MAGIC_V2.as_bytes()) {
+            (2, rest)
+        } else {
+            return Err("not a stagelight checkpoint".into());
+        };
         let newline = rest
             .iter()
             .position(|&b| b == b'\n')
             .ok_or_else(|| damaged("no header line"))?;
         let header_text =
             std::str::from_utf8(&rest[..newline]).map_err(|_| damaged("header is not text"))?;
-        let header: CheckpointHeader =
-            ron::from_str(header_text).map_err(|e| damaged(&format!("header: {e}")))?;
+        let header: CheckpointHeader = ron::from_str(header_text).map_err(|e| {
+            damaged(&format!(
+                "header: {}",
+                crate::scene::clip(&e.to_string(), 200)
+            ))
+        })?;
         let payload = &rest[newline + 1..];
         let pixels = header
             .width
             .checked_mul(header.height)
             .ok_or_else(|| damaged("image size"))?;
-        if payload.len() != pixels * PIXEL_BYTES + 8 {
+        let data_len = pixels
+            .checked_mul(PIXEL_BYTES)
+            .ok_or_else(|| damaged("image size"))?;
+        if payload.len() != data_len.saturating_add(8) {
             return Err(damaged(&format!(
                 "{} bytes of pixel data where {}x{} pixels need {}",
                 payload.len(),
                 header.width,
                 header.height,
-                pixels * PIXEL_BYTES + 8
+                data_len.saturating_add(8)
             )));
         }
-        let (data, checksum) = payload.split_at(pixels * PIXEL_BYTES);
+        let (data, checksum) = payload.split_at(data_len);
         let mut hash = Fnv1a::new();
-        hash.update(data);
+        // Version 3 covers the whole file; version 2 covered the pixel data only.
+        hash.update(if version == 3 {
+            &bytes[..bytes.len() - 8]
+        } else {
+            data
+        });
         if hash.0.to_le_bytes() != checksum {
             return Err(damaged("checksum mismatch"));
         }
+        header
+            .validate()
+            .map_err(|what| damaged(&format!("header: {what}")))?;
         let word = |chunk: &[u8], i: usize| -> [u8; 8] {
-            chunk[i * 8..i * 8 + 8].try_into().expect("8 bytes")
+            let mut w = [0u8; 8];
+            w.copy_from_slice(&chunk[i * 8..i * 8 + 8]);
+            w
         };
         let mut sum = Vec::with_capacity(pixels);
         let mut samples = Vec::with_capacity(pixels);
@@ -242,14 +325,16 @@ impl Checkpoint {
             samples.push(u64::from_le_bytes(word(chunk, 3)));
             splat.push(DVec3::new(f(4), f(5), f(6)));
         }
-        let total: u64 = samples.iter().sum();
-        if samples.iter().any(|&n| n != header.passes) {
+        if let Some(&n) = samples.iter().find(|&&n| n != header.passes) {
             return Err(damaged(&format!(
-                "{total} samples where {} passes of {pixels} pixels were recorded",
+                "a pixel with {n} samples where {} passes were recorded",
                 header.passes
             )));
         }
-        let film = Film::from_parts(
+        if sum.iter().chain(&splat).any(|v| !v.is_finite()) {
+            return Err(damaged("a pixel sum is not finite"));
+        }
+        let mut film = Film::from_parts(
             header.width,
             header.height,
             sum,
@@ -258,24 +343,81 @@ impl Checkpoint {
             header.nonfinite,
         )
         .ok_or_else(|| damaged("image size"))?;
+        film.nonfinite_splats = header.nonfinite_splats;
         Ok(Checkpoint { header, film })
     }
 }
 
-/// Runs `write` on a temporary path beside `path`, then renames it over `path`, so readers
-/// see the old file or the new one, never half of one.
-fn write_atomically(
-    path: &Path,
-    write: impl FnOnce(&Path) -> Result<(), ReferenceError>,
-) -> Result<(), ReferenceError> {
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(|e| error(path, e))?;
+/// The lock a run holds on a reference while it makes or continues it.
+pub struct ReferenceLock {
+    path: PathBuf,
+    _file: std::fs::File,
+}
+
+/// The lock file beside a reference EXR: `REF.exr.lock`.
+pub fn lock_path(reference: &Path) -> PathBuf {
+    let mut name = reference.as_os_str().to_owned();
+    name.push(".lock");
+    PathBuf::from(name)
+}
+
+impl ReferenceLock {
+    /// Takes the lock of `reference`, or says that another run holds it.
+    pub fn acquire(reference: &Path) -> Result<ReferenceLock, ReferenceError> {
+        let path = lock_path(reference);
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).map_err(|e| error(&path, e))?;
+        }
+        loop {
+            let file = std::fs::OpenOptions::new()
+                .create(true)
+                .truncate(false)
+                .write(true)
+                .open(&path)
+                .map_err(|e| error(&path, format!("cannot make the lock file: {e}")))?;
+            match file.try_lock() {
+                Ok(()) => {}
+                Err(std::fs::TryLockError::WouldBlock) => {
+                    return Err(error(
+                        reference,
+                        format!(
+                            "another stagelight run is making this reference (it holds {}); \
+                             wait for it to finish, or choose another output",
+                            path.display()
+                        ),
+                    ));
+                }
+                Err(std::fs::TryLockError::Error(e)) => {
+                    return Err(error(&path, format!("cannot lock: {e}")));
+                }
+            }
+            // The holder before us may have removed the file between our open and our lock:
+            // the lock counts only on the file that is still at the path.
+            if same_inode(&file, &path) {
+                return Ok(ReferenceLock { path, _file: file });
+            }
+        }
     }
-    let mut tmp = path.as_os_str().to_owned();
-    tmp.push(".partial");
-    let tmp = PathBuf::from(tmp);
-    write(&tmp)?;
-    std::fs::rename(&tmp, path).map_err(|e| error(path, e))
+}
+
+impl Drop for ReferenceLock {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_file(&self.path);
+    }
+}
+
+#[cfg(unix)]
+fn same_inode(file: &std::fs::File, path: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (file.metadata(), std::fs::metadata(path)) {
+        (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+        _ => false,
+    }
+}
+
+#[cfg(not(unix))]
+fn same_inode(_: &std::fs::File, path: &Path) -> bool {
+    path.exists()
 }
 
 /// How long a reference renders, in total over all its runs.
@@ -326,6 +468,7 @@ pub fn render_reference(
     stop: &AtomicBool,
     progress: &(dyn Fn(f64, f64) + Sync),
 ) -> Result<ReferenceOutcome, ReferenceError> {
+    let _lock = ReferenceLock::acquire(job.output)?;
     let checkpoint_file = checkpoint_path(job.output);
     let cam = job.data.scene.camera;
     let (width, height) = (cam.width as usize, cam.height as usize);
@@ -342,6 +485,7 @@ pub fn render_reference(
         passes: 0,
         seconds: 0.0,
         nonfinite: 0,
+        nonfinite_splats: 0,
     };
     let mut film = if checkpoint_file.exists() {
         let checkpoint = Checkpoint::read(&checkpoint_file)?;
@@ -421,6 +565,7 @@ pub fn render_reference(
         header.passes = outcome.passes;
         header.seconds += wall;
         header.nonfinite = film.nonfinite;
+        header.nonfinite_splats = film.nonfinite_splats;
         seconds_this_run += wall;
         if new_passes > 0 {
             Checkpoint {
@@ -536,15 +681,11 @@ fn write_images(
             header.scene.replace('\n', " ")
         ),
     )];
-    write_atomically(job.output, |tmp| {
-        image
-            .write_exr_with_attributes(tmp, &attributes)
-            .map_err(|e| error(job.output, e.message))
-    })?;
+    image
+        .write_exr_with_attributes(job.output, &attributes)
+        .map_err(|e| error(job.output, e.message))?;
     let png = job.output.with_extension("png");
-    write_atomically(&png, |tmp| {
-        image.write_png(tmp).map_err(|e| error(&png, e.message))
-    })
+    image.write_png(&png).map_err(|e| error(&png, e.message))
 }
 
 /// A reference image with what its header says about it.

@@ -72,8 +72,13 @@ pub fn render_report(
     }
     let _ = writeln!(
         r,
-        "  NaN/Inf samples   {} (counted, never added)",
-        o.film.nonfinite
+        "  NaN/Inf samples   {} (counted as black, never added){}",
+        o.film.nonfinite,
+        if o.film.nonfinite_splats > 0 {
+            format!("; {} NaN/Inf splats dropped", o.film.nonfinite_splats)
+        } else {
+            String::new()
+        }
     );
     let _ = writeln!(
         r,
@@ -98,6 +103,33 @@ pub fn render_report(
         );
     }
     r
+}
+
+/// Share of rejected (NaN or infinite) samples above which a render warns: they count as
+/// black, so the image is darker by about that share.
+pub const NONFINITE_WARNING_SHARE: f64 = 0.001;
+
+/// A warning when many samples (or splats) were NaN or infinite: the image is then darker
+/// than it should be (or lacks light tracing's part), which a user must not miss.
+pub fn nonfinite_warning(film: &crate::film::Film) -> Option<String> {
+    let samples = film.total_samples().max(1);
+    let share = film.nonfinite as f64 / samples as f64;
+    if share > NONFINITE_WARNING_SHARE {
+        return Some(format!(
+            "{:.2}% of the samples ({} of {samples}) were NaN or infinite and count as black: \
+             the image is too dark (very bright lights or extreme geometry overflow f32)",
+            100.0 * share,
+            film.nonfinite
+        ));
+    }
+    if film.nonfinite_splats as f64 > NONFINITE_WARNING_SHARE * samples as f64 {
+        return Some(format!(
+            "{} light-tracing splats were NaN or infinite and were dropped: the image lacks \
+             part of its light",
+            film.nonfinite_splats
+        ));
+    }
+    None
 }
 
 /// The timed runs of a bench: each run's rates, and the last run itself.

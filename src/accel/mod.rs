@@ -73,21 +73,41 @@ fn finite_nonzero(origin: Vec3A, dir: Vec3A) -> bool {
     origin.is_finite() && dir.is_finite() && dir.cmpne(Vec3A::ZERO).any()
 }
 
-/// Whether the triangle has exactly zero area (or a non-finite vertex). The differences of
-/// f32 coordinates are exact in f64 for any realistic scene, so "zero" here means what it says.
+/// Whether the triangle has exactly zero area, or a vertex that is not finite or lies beyond
+/// `scene::MAX_COORDINATE` (prepared scenes have none: this guards the tree's build, whose
+/// box areas overflow f32 from about 1e19). The differences of f32 coordinates are exact in
+/// f64 for any realistic scene, so "zero" here means what it says.
 fn is_degenerate(p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
-    if !(p0.is_finite() && p1.is_finite() && p2.is_finite()) {
+    let within =
+        |p: Vec3| p.is_finite() && p.abs().max_element() < crate::scene::MAX_COORDINATE as f32;
+    if !(within(p0) && within(p1) && within(p2)) {
         return true;
     }
     let (p0, p1, p2) = (p0.as_dvec3(), p1.as_dvec3(), p2.as_dvec3());
     (p1 - p0).cross(p2 - p0) == DVec3::ZERO
 }
 
+/// A triangle's corners as bits, rotated so the smallest comes first: equal for the same
+/// triangle whichever corner it starts at, different for the reversed winding.
+fn cyclic_key(corners: [Vec3; 3]) -> [[u32; 3]; 3] {
+    let bits = corners.map(|p| p.to_array().map(f32::to_bits));
+    let first = (0..3).min_by_key(|&k| bits[k]).unwrap_or(0);
+    [bits[first], bits[(first + 1) % 3], bits[(first + 2) % 3]]
+}
+
 impl Accel {
     /// Builds the tree. Zero-area triangles are left out: they are never hit.
     pub fn build(triangles: &TriangleColumns) -> Accel {
+        // Exact copies of a triangle (the same corners in the same cyclic order) are left out
+        // too: a copy is never the nearest hit before its original, and thousands of them
+        // (a polygon that repeats its vertices) made a tree too deep for obvhs' checks.
+        let mut seen = std::collections::HashSet::new();
         let kept: Vec<u32> = (0..triangles.len())
-            .filter(|&i| !is_degenerate(triangles.p0[i], triangles.p1[i], triangles.p2[i]))
+            .filter(|&i| {
+                let corners = [triangles.p0[i], triangles.p1[i], triangles.p2[i]];
+                !is_degenerate(corners[0], corners[1], corners[2])
+                    && seen.insert(cyclic_key(corners))
+            })
             .map(|i| i as u32)
             .collect();
         if kept.is_empty() {

@@ -1,7 +1,9 @@
 //! `stagelight bench`: a scene rendered several times at a fixed budget, its throughput as a
 //! table (`report::bench_table`).
 
-use super::{load_scene, print_out, thread_pool};
+use super::{
+    check_render_memory, check_samples, check_threads, load_scene, print_out, thread_pool,
+};
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings};
 use crate::report::{BenchRuns, bench_table};
 use crate::sysinfo::cpu_seconds;
@@ -25,8 +27,16 @@ pub struct BenchOptions {
 
 /// Renders one warm-up run and `runs` timed ones, and prints the table.
 pub fn bench(o: &BenchOptions) -> Result<()> {
+    check_threads(o.threads)?;
     let data = load_scene(&o.scene)?;
+    check_samples("--spp", o.spp, &data)?;
     let pool = thread_pool(o.threads)?;
+    check_render_memory(
+        o.integrator,
+        &RenderSettings::default(),
+        &data,
+        pool.current_num_threads(),
+    )?;
     let stop = AtomicBool::new(false);
     let control = Control {
         stop: &stop,

@@ -9,7 +9,7 @@ pub mod render;
 
 use crate::film::Image;
 use crate::integrators::{Budget, IntegratorKind, RenderSettings, SceneData};
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -22,8 +22,31 @@ pub fn exit_code(interrupted: bool) -> i32 {
     if interrupted { EXIT_INTERRUPTED } else { 0 }
 }
 
-/// A pool of `threads` workers (default: all cores).
+/// The most worker threads a command starts: 8 per core, and at least 256 (more only
+/// thrash; a mistyped count would exhaust the machine's process table).
+pub fn max_threads() -> usize {
+    let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+    (8 * cores).max(256)
+}
+
+/// Checks a `--threads` count (1..=`max_threads()`).
+pub fn check_threads(threads: Option<usize>) -> Result<()> {
+    if let Some(n) = threads
+        && n > max_threads()
+    {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        bail!(
+            "--threads {n}: at most {} threads (this machine has {cores} cores)",
+            max_threads()
+        );
+    }
+    Ok(())
+}
+
+/// A pool of `threads` workers (default: all cores); a count above `max_threads()` is
+/// refused.
 pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
+    check_threads(threads)?;
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(n) = threads {
         builder = builder.num_threads(n);
@@ -40,6 +63,115 @@ pub fn load_scene(path: &Path) -> Result<Arc<SceneData>> {
     Ok(Arc::new(SceneData::new(scene)))
 }
 
+/// Checks, before any rendering, that every output can be written (`film::output::
+/// check_writable`: its folder is created) and that none is an input file (the scene, a
+/// reference).
+pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<()> {
+    for output in outputs {
+        for input in inputs {
+            if crate::film::output::same_file(output, input) {
+                bail!(
+                    "{}: the output is the input file {}: choose another output",
+                    output.display(),
+                    input.display()
+                );
+            }
+        }
+    }
+    for output in outputs {
+        crate::film::output::check_writable(output)?;
+    }
+    Ok(())
+}
+
+/// Checks that `spp` passes of the scene's image can be counted: spp x pixels samples fit in
+/// a u64 (they wrapped to 0 passes and a black image).
+pub fn check_samples(option: &str, spp: u64, data: &SceneData) -> Result<()> {
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    if spp.checked_mul(pixels).is_none() {
+        bail!(
+            "{option} {spp}: {spp} passes of {}x{} pixels are more samples than can be \
+             counted (at most {} passes at this size)",
+            cam.width,
+            cam.height,
+            u64::MAX / pixels
+        );
+    }
+    Ok(())
+}
+
+/// Bytes per pixel of the film and the images written from it (sums, counts, the image and
+/// its encoding).
+const FILM_BYTES_PER_PIXEL: u64 = 64;
+/// Bytes per emitted photon of the photon mappers (the photons stored at each bounce and
+/// their index).
+const PHOTON_BYTES: u64 = 200;
+
+/// An estimate of the memory a render takes beyond its scene (loaded already): the film,
+/// the integrator's state and its photons.
+pub fn render_memory(
+    kind: IntegratorKind,
+    settings: &RenderSettings,
+    data: &SceneData,
+    threads: usize,
+) -> u64 {
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let film = pixels.saturating_mul(FILM_BYTES_PER_PIXEL);
+    let p = &settings.photons;
+    let state = match kind.as_str() {
+        // Wavefronts of at most 2^18 (pt) and 2^15 (bdpt) paths; bdpt's film has splats.
+        "pt" => (1u64 << 18) * 300,
+        "bdpt" => (1u64 << 15) * 4200 + pixels.saturating_mul(24),
+        // The photon mappers keep state per pixel, and photons.
+        "pm" => pixels
+            .saturating_mul(800)
+            .saturating_add(p.photons.saturating_mul(PHOTON_BYTES))
+            .saturating_add((p.k as u64).saturating_mul(16 * threads as u64)),
+        _ => pixels
+            .saturating_mul(500)
+            .saturating_add(p.photons_per_pass.saturating_mul(PHOTON_BYTES)),
+    };
+    film.saturating_add(state)
+}
+
+/// Refuses a render whose estimated memory exceeds what this process may use.
+pub fn check_render_memory(
+    kind: IntegratorKind,
+    settings: &RenderSettings,
+    data: &SceneData,
+    threads: usize,
+) -> Result<()> {
+    // PM's estimate takes the k nearest of the stored photons.
+    if kind.as_str() == "pm" && settings.photons.k as u64 > settings.photons.photons {
+        bail!(
+            "--k {}: a density estimate cannot take more photons than --photons {} traces",
+            settings.photons.k,
+            settings.photons.photons
+        );
+    }
+    let cam = data.scene.camera;
+    let what = match kind.as_str() {
+        "pm" => format!(
+            "{} at {}x{} with {} photons",
+            kind, cam.width, cam.height, settings.photons.photons
+        ),
+        "ppm" | "sppm" => format!(
+            "{} at {}x{} with {} photons per pass",
+            kind, cam.width, cam.height, settings.photons.photons_per_pass
+        ),
+        _ => format!("{} at {}x{}", kind, cam.width, cam.height),
+    };
+    crate::sysinfo::check_memory(
+        &format!("rendering {what}"),
+        render_memory(kind, settings, data, threads),
+        crate::sysinfo::memory_limit(),
+    )
+    .map_err(|e| anyhow::anyhow!("{}: {e}", data.scene.source.display()))?;
+    Ok(())
+}
+
 /// The file stem of a scene, for default output names and titles.
 pub fn scene_stem(scene: &Path) -> String {
     scene
@@ -47,8 +179,9 @@ pub fn scene_stem(scene: &Path) -> String {
         .map_or("scene".into(), |s| s.to_string_lossy().into_owned())
 }
 
-/// A flag Ctrl-C sets: renders stop after the passes in flight. A second Ctrl-C while files
-/// are being written has no further effect.
+/// A flag Ctrl-C (SIGINT), SIGTERM and SIGHUP set: renders stop after the passes in flight,
+/// write what they finished and exit 130. A second signal while files are being written has
+/// no further effect.
 pub fn stop_on_ctrl_c() -> Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();

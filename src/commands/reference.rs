@@ -1,7 +1,10 @@
 //! `stagelight reference`: a long render, checkpointed, that a second run resumes or extends;
 //! and the reference a comparison makes for itself.
 
-use super::{exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool, unit_bar};
+use super::{
+    check_outputs, check_samples, check_threads, exit_code, load_scene, print_out, stop_on_ctrl_c,
+    thread_pool, unit_bar,
+};
 use crate::integrators::{IntegratorKind, RenderSettings};
 use crate::reference::{
     ReferenceBudget, ReferenceJob, ReferenceOutcome, checkpoint_path, render_reference,
@@ -38,7 +41,6 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
             o.integrator
         );
     }
-    let data = load_scene(&o.scene)?;
     let output = &o.output;
     if output
         .extension()
@@ -46,6 +48,12 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
     {
         bail!("{}: the output must be an .exr file", output.display());
     }
+    check_threads(o.threads)?;
+    let data = load_scene(&o.scene)?;
+    if let ReferenceBudget::SamplesPerPixel(spp) = o.budget {
+        check_samples("--spp", spp, &data)?;
+    }
+    check_reference_outputs(output, &[&o.scene])?;
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
     let job = ReferenceJob {
@@ -76,6 +84,17 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
     }
     print_out(&report);
     Ok(exit_code(outcome.interrupted))
+}
+
+/// Checks the files a reference writes (the EXR, its PNG preview and its checkpoint) before
+/// rendering: writable, and none of them an input.
+pub fn check_reference_outputs(
+    output: &std::path::Path,
+    inputs: &[&std::path::Path],
+) -> Result<()> {
+    let png = output.with_extension("png");
+    let checkpoint = checkpoint_path(output);
+    check_outputs(&[output, &png, &checkpoint], inputs)
 }
 
 /// Makes or continues a reference in `pool`, with a progress bar in its budget's unit.

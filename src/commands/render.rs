@@ -1,6 +1,9 @@
 //! `stagelight render`: one image, its PNG preview, and the end-of-render report.
 
-use super::{budget_bar, exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool};
+use super::{
+    EXIT_INTERRUPTED, budget_bar, check_outputs, check_render_memory, check_samples, check_threads,
+    exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool,
+};
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings};
 use crate::sysinfo::cpu_seconds;
 use anyhow::{Result, bail};
@@ -28,7 +31,6 @@ pub struct RenderOptions {
 /// the exit code: 0, or `EXIT_INTERRUPTED` when Ctrl-C stopped it (the finished passes are
 /// written).
 pub fn render(o: &RenderOptions) -> Result<i32> {
-    let data = load_scene(&o.scene)?;
     let output = &o.output;
     if output
         .extension()
@@ -36,9 +38,24 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     {
         bail!("{}: the output must be an .exr file", output.display());
     }
+    if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
+        bail!("--strategy-images needs --integrator bdpt");
+    }
+    check_threads(o.threads)?;
+    let data = load_scene(&o.scene)?;
+    if let Budget::SamplesPerPixel(spp) = o.budget {
+        check_samples("--spp", spp, &data)?;
+    }
+    let png = output.with_extension("png");
+    // Every output is checked before the render, not found unwritable after it.
+    let mut outputs = vec![output.as_path(), png.as_path()];
+    let strategy_probe = o.strategy_images.as_ref().map(|dir| dir.join("s1_t1.exr"));
+    outputs.extend(strategy_probe.as_deref());
+    check_outputs(&outputs, &[&o.scene])?;
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
     let threads = pool.current_num_threads();
+    check_render_memory(o.integrator, &o.settings, &data, threads)?;
     let budget = o.budget;
     let bar = budget_bar(budget, o.quiet);
     let progress = |done: u64, _total: Option<u64>| match budget {
@@ -51,9 +68,6 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         stop: &stop,
         progress: &progress,
     };
-    if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
-        bail!("--strategy-images needs --integrator bdpt");
-    }
     let cpu_start = cpu_seconds();
     let outcome = pool.install(|| {
         crate::integrators::render(o.integrator, data.clone(), &o.settings, budget, &control)
@@ -61,9 +75,16 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     let cpu = cpu_seconds() - cpu_start;
     bar.finish_and_clear();
 
+    if outcome.passes == 0 {
+        // Nothing finished: an existing output is better than a black image.
+        print_out(&format!(
+            "interrupted before the first pass finished: nothing written ({} is as it was)\n",
+            output.display()
+        ));
+        return Ok(EXIT_INTERRUPTED);
+    }
     let image = outcome.film.image();
     image.write_exr(output)?;
-    let png = output.with_extension("png");
     image.write_png(&png)?;
     if let Some(dir) = &o.strategy_images {
         for (name, layer) in &outcome.layers {
@@ -80,5 +101,8 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         );
     }
     print_out(&report);
+    if let Some(warning) = crate::report::nonfinite_warning(&outcome.film) {
+        eprintln!("warning: {warning}");
+    }
     Ok(exit_code(outcome.interrupted))
 }

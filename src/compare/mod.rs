@@ -57,21 +57,39 @@ pub fn validate_budgets(budgets: &[f64], unit: BudgetUnit) -> Result<(), String>
     }
     for &b in budgets {
         if !(b.is_finite() && b > 0.0) {
-            return Err(format!("budget {b} is not a positive number"));
+            return Err(format!("budget {} is not a positive number", short(b)));
         }
-        if unit == BudgetUnit::Spp && (b.fract() != 0.0 || b > u32::MAX as f64) {
+        if unit == BudgetUnit::Spp && b > u32::MAX as f64 {
             return Err(format!(
-                "budget {b} is not a whole number of samples per pixel"
+                "budget {b:e} is too large: at most {} samples per pixel",
+                u32::MAX
+            ));
+        }
+        if unit == BudgetUnit::Spp && b.fract() != 0.0 {
+            return Err(format!(
+                "budget {} is not a whole number of samples per pixel",
+                short(b)
             ));
         }
     }
     if let Some(w) = budgets.windows(2).find(|w| w[1] <= w[0]) {
         return Err(format!(
             "budgets must be strictly increasing, but {} follows {}",
-            w[1], w[0]
+            short(w[1]),
+            short(w[0])
         ));
     }
     Ok(())
+}
+
+/// A number as a message repeats it: plain, or in scientific notation when plain would be
+/// long (1e300 is not 301 digits).
+fn short(x: f64) -> String {
+    if x != 0.0 && x.is_finite() && !(1e-6..1e15).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
 }
 
 /// A report file could not be written.

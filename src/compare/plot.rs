@@ -59,7 +59,7 @@ pub fn write_error_plot(c: &Comparison, png: &Path, svg: &Path) -> Result<(), Re
         let root = SVGBackend::with_string(&mut text, (w, h)).into_drawing_area();
         draw_error_plot(c, &root).map_err(|e| report_error(svg, e))?;
     }
-    std::fs::write(svg, text).map_err(|e| report_error(svg, e))
+    crate::film::output::write_bytes(svg, text.as_bytes()).map_err(|e| report_error(svg, e.message))
 }
 
 fn draw_error_plot<DB: DrawingBackend>(
@@ -204,16 +204,9 @@ fn tick(v: f64) -> String {
 }
 
 fn write_rgb_png(path: &Path, w: u32, h: u32, rgb: &[u8]) -> Result<(), ReportError> {
-    let file = std::fs::File::create(path).map_err(|e| report_error(path, e))?;
-    let mut encoder = png::Encoder::new(std::io::BufWriter::new(file), w, h);
-    encoder.set_color(png::ColorType::Rgb);
-    encoder.set_depth(png::BitDepth::Eight);
-    let mut writer = encoder
-        .write_header()
-        .map_err(|e| report_error(path, format!("cannot write PNG: {e}")))?;
-    writer
-        .write_image_data(rgb)
-        .map_err(|e| report_error(path, format!("cannot write PNG: {e}")))
+    use crate::film::output::{encode_rgb_png, write_atomically};
+    write_atomically(path, |out| encode_rgb_png(out, w, h, rgb))
+        .map_err(|e| report_error(path, e.message))
 }
 
 /// Decades of per-pixel relative squared error the false-colour maps span.

@@ -41,7 +41,16 @@ pub fn write_report(c: &Comparison, dir: &Path) -> Result<(), ReportError> {
     super::plot::write_error_plot(c, &dir.join(PLOT_PNG), &dir.join(PLOT_SVG))?;
     super::plot::write_grid(c, &dir.join(GRID_PNG))?;
     let summary = dir.join(SUMMARY_MD);
-    std::fs::write(&summary, summary_markdown(c)).map_err(|e| report_error(&summary, e))
+    crate::film::output::write_bytes(&summary, summary_markdown(c).as_bytes())
+        .map_err(|e| report_error(&summary, e.message))
+}
+
+/// The files of a report folder, to check before the runs that fill them.
+pub fn report_files(dir: &Path) -> Vec<std::path::PathBuf> {
+    [RESULTS_CSV, PLOT_PNG, PLOT_SVG, GRID_PNG, SUMMARY_MD]
+        .iter()
+        .map(|f| dir.join(f))
+        .collect()
 }
 
 /// Writes runs as CSV with `CSV_HEADER`.
@@ -66,7 +75,7 @@ fn write_csv_rows(
     path: &Path,
     scenes: Option<&[&str]>,
 ) -> Result<(), ReportError> {
-    let mut w = csv::Writer::from_path(path).map_err(|e| report_error(path, e))?;
+    let mut w = csv::Writer::from_writer(Vec::new());
     let mut header: Vec<&str> = scenes.map(|_| "scene").into_iter().collect();
     header.extend(CSV_HEADER);
     w.write_record(&header).map_err(|e| report_error(path, e))?;
@@ -97,7 +106,8 @@ fn write_csv_rows(
         ]);
         w.write_record(&row).map_err(|e| report_error(path, e))?;
     }
-    w.flush().map_err(|e| report_error(path, e))
+    let bytes = w.into_inner().map_err(|e| report_error(path, e))?;
+    crate::film::output::write_bytes(path, &bytes).map_err(|e| report_error(path, e.message))
 }
 
 /// summary.md: what was compared, the pictures, equal-time and equal-quality tables, slopes

@@ -74,9 +74,24 @@ pub fn compare(o: &CompareOptions) -> Result<i32> {
     let plan = ComparePlan::new(o)?;
     let scene = &o.scene;
     let out_dir = &o.output;
+    crate::commands::check_threads(o.threads)?;
+    let data = load_scene(scene)?;
+    // The report's files, and the reference made here, are checked before any run.
+    let report_files = report::report_files(out_dir);
+    let mut outputs: Vec<&Path> = report_files.iter().map(|p| p.as_path()).collect();
+    let made_reference = out_dir.join("reference.exr");
+    let mut inputs: Vec<&Path> = vec![scene];
+    match o.reference.as_deref() {
+        Some(given) => inputs.push(given),
+        None => outputs.push(&made_reference),
+    }
+    crate::commands::check_outputs(&outputs, &inputs)?;
+    if o.reference.is_none() {
+        crate::commands::reference::check_reference_outputs(&made_reference, &inputs)?;
+        crate::commands::check_samples("--reference-spp", o.reference_spp, &data)?;
+    }
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
-    let data = load_scene(scene)?;
     let comparison = match compare_scene(
         scene,
         data,
@@ -94,6 +109,13 @@ pub fn compare(o: &CompareOptions) -> Result<i32> {
             return Ok(exit_code(true));
         }
     };
+    if comparison.interrupted && comparison.results.is_empty() {
+        print_out(&format!(
+            "interrupted before the first run finished: no report written ({} is as it was)\n",
+            out_dir.display()
+        ));
+        return Ok(exit_code(true));
+    }
     report::write_report(&comparison, out_dir)?;
     let mut text = format!(
         "{} runs of {} on {}; reference {} ({})\nwrote {}/{{{}, {}, {}, {}, {}}}\n",

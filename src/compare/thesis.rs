@@ -14,7 +14,7 @@ use super::{BudgetUnit, CompareJob, Comparison, RunResult, report};
 use crate::commands::{exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool};
 use crate::film::Image;
 use crate::integrators::{IntegratorKind, PhotonSettings, RenderSettings};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -395,13 +395,11 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
             comparison: comparisons.iter().find(|(k, _)| k == key).map(|(_, c)| c),
         })
         .collect();
-    std::fs::create_dir_all(out_dir).with_context(|| out_dir.display().to_string())?;
     let summary = out_dir.join(report::SUMMARY_MD);
-    std::fs::write(
+    crate::film::output::write_bytes(
         &summary,
-        summary_markdown(&scenes, pool.current_num_threads(), &o.photon_budgets),
-    )
-    .with_context(|| summary.display().to_string())?;
+        summary_markdown(&scenes, pool.current_num_threads(), &o.photon_budgets).as_bytes(),
+    )?;
     let csv = out_dir.join(report::RESULTS_CSV);
     let all: Vec<(&str, &Comparison)> = comparisons.iter().map(|(k, c)| (*k, c)).collect();
     write_csv(&all, &csv)?;

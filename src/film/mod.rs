@@ -1,8 +1,17 @@
 //! The film: per-pixel sums in f64 (so a million samples of a constant give that constant
 //! exactly), non-finite samples counted and never added, and images written as EXR (float32
-//! linear RGB, unscaled) and PNG (sRGB preview).
+//! linear RGB, unscaled) and PNG (sRGB preview), each under a temporary name and renamed
+//! (`output`).
+//!
+//! A rejected (NaN or infinite) sample still counts in its pixel's sample count: it weighs as
+//! black in the pixel's mean, so a pixel with rejected samples is darkened by their share.
+//! Every integrator does the same (the photon mappers drop a non-finite estimate as zero),
+//! and the reports count them; `stagelight render` warns when their share is large.
+
+pub mod output;
 
 use glam::{DVec3, Vec3};
+use std::io::{Read, Seek};
 use std::path::Path;
 
 /// Accumulated samples of one render.
@@ -16,8 +25,10 @@ pub struct Film {
     /// and are divided by the number of passes (light paths per pixel), not by the pixel's
     /// own sample count. Empty until the first splat.
     splat: Vec<DVec3>,
-    /// Samples rejected because a channel was NaN or infinite.
+    /// Samples rejected because a channel was NaN or infinite (they count as black).
     pub nonfinite: u64,
+    /// Splats rejected because a channel was NaN or infinite (counted apart from samples).
+    pub nonfinite_splats: u64,
 }
 
 impl Film {
@@ -29,6 +40,7 @@ impl Film {
             samples: vec![0; width * height],
             splat: Vec::new(),
             nonfinite: 0,
+            nonfinite_splats: 0,
         }
     }
 
@@ -43,11 +55,11 @@ impl Film {
         }
     }
 
-    /// Adds a splat to a pixel; a non-finite one is counted instead.
+    /// Adds a splat to a pixel; a non-finite one is counted (in `nonfinite_splats`) instead.
     #[inline]
     pub fn add_splat(&mut self, pixel: usize, value: Vec3) {
         if !value.is_finite() {
-            self.nonfinite += 1;
+            self.nonfinite_splats += 1;
             return;
         }
         if self.splat.is_empty() {
@@ -83,6 +95,7 @@ impl Film {
                 samples,
                 splat,
                 nonfinite,
+                nonfinite_splats: 0,
             })
     }
 
@@ -182,7 +195,16 @@ impl Image {
         path: &Path,
         attributes: &[(&str, String)],
     ) -> Result<(), ImageError> {
-        create_parent(path)?;
+        output::write_atomically(path, |file| self.encode_exr(file, attributes))
+            .map_err(ImageError::from)
+    }
+
+    /// The EXR file's bytes to `out`.
+    fn encode_exr(
+        &self,
+        out: &mut (impl std::io::Write + Seek),
+        attributes: &[(&str, String)],
+    ) -> Result<(), String> {
         use exr::prelude::*;
         let mut layer_attributes = LayerAttributes::default();
         for (name, value) in attributes {
@@ -211,22 +233,30 @@ impl Image {
         );
         Image::from_layer(layer)
             .write()
-            .to_file(path)
-            .map_err(|e| image_error(path, format!("cannot write EXR: {e}")))
+            .to_buffered(out)
+            .map_err(|e| format!("cannot write EXR: {e}"))
     }
 
-    /// Reads the first RGB(A) layer of an EXR file as linear RGB.
+    /// Reads the first RGB(A) layer of an EXR file as linear RGB. The header's image size is
+    /// checked against the file's length, `MAX_READ_PIXELS` and this machine's memory before
+    /// anything is allocated for it.
     pub fn read_exr(path: &Path) -> Result<Image, ImageError> {
-        let image = exr::prelude::read_first_rgba_layer_from_file(
-            path,
-            |resolution, _| Image::new(resolution.width(), resolution.height()),
-            |image: &mut Image, position, (r, g, b, _a): (f32, f32, f32, f32)| {
-                let w = image.width;
-                image.pixels[position.y() * w + position.x()] = Vec3::new(r, g, b);
-            },
+        let file = std::fs::File::open(path).map_err(|e| image_error(path, e))?;
+        let len = file.metadata().map_err(|e| image_error(path, e))?.len();
+        read_exr_from(
+            std::io::BufReader::new(file),
+            len,
+            crate::sysinfo::memory_limit(),
         )
-        .map_err(|e| image_error(path, format!("cannot read EXR: {e}")))?;
-        Ok(image.layer_data.channel_data.pixels)
+        .map_err(|message| image_error(path, message))
+    }
+
+    /// `read_exr` of a file's bytes; the message does not name a file.
+    pub fn read_exr_bytes(
+        bytes: &[u8],
+        memory: Option<crate::sysinfo::MemoryLimit>,
+    ) -> Result<Image, String> {
+        read_exr_from(std::io::Cursor::new(bytes), bytes.len() as u64, memory)
     }
 
     /// The text attributes in the header of an EXR file's first layer, by name.
@@ -234,7 +264,7 @@ impl Image {
         path: &Path,
     ) -> Result<std::collections::BTreeMap<String, String>, ImageError> {
         let meta = exr::meta::MetaData::read_from_file(path, false)
-            .map_err(|e| image_error(path, format!("cannot read EXR: {e}")))?;
+            .map_err(|e| image_error(path, format!("cannot read EXR: {}", clip_exr_error(&e))))?;
         let mut attributes = std::collections::BTreeMap::new();
         if let Some(header) = meta.headers.first() {
             for (name, value) in header
@@ -253,35 +283,101 @@ impl Image {
 
     /// Writes an 8-bit sRGB preview (values clamped to [0, 1]).
     pub fn write_png(&self, path: &Path) -> Result<(), ImageError> {
-        create_parent(path)?;
-        let file = std::fs::File::create(path).map_err(|e| image_error(path, e))?;
-        let mut encoder = png::Encoder::new(
-            std::io::BufWriter::new(file),
-            self.width as u32,
-            self.height as u32,
-        );
-        encoder.set_color(png::ColorType::Rgb);
-        encoder.set_depth(png::BitDepth::Eight);
-        let mut writer = encoder
-            .write_header()
-            .map_err(|e| image_error(path, format!("cannot write PNG: {e}")))?;
         let bytes: Vec<u8> = self
             .pixels
             .iter()
             .flat_map(|p| [srgb8(p.x), srgb8(p.y), srgb8(p.z)])
             .collect();
-        writer
-            .write_image_data(&bytes)
-            .map_err(|e| image_error(path, format!("cannot write PNG: {e}")))
+        output::write_atomically(path, |file| {
+            output::encode_rgb_png(file, self.width as u32, self.height as u32, &bytes)
+        })
+        .map_err(ImageError::from)
     }
 }
 
-fn create_parent(path: &Path) -> Result<(), ImageError> {
-    match path.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => {
-            std::fs::create_dir_all(dir).map_err(|e| image_error(path, e))
+/// The largest image `read_exr` reads: the largest a scene renders (16384 x 16384).
+pub const MAX_READ_PIXELS: u64 = 16384 * 16384;
+
+/// The smallest number of bytes a chunk of an EXR file takes: its entry in the offset table
+/// (8) and its header (the y coordinate and the data size, 4 each).
+const MIN_CHUNK_BYTES: u64 = 16;
+
+/// Reads the first RGB(A) layer from an EXR file of `len` bytes, after checking every layer's
+/// size in the header: at most `MAX_READ_PIXELS`, no more chunks than the file has room for,
+/// and the pixels' memory within `memory`.
+fn read_exr_from(
+    mut reader: impl Read + Seek,
+    len: u64,
+    memory: Option<crate::sysinfo::MemoryLimit>,
+) -> Result<Image, String> {
+    let meta = exr::meta::MetaData::read_from_buffered(&mut reader, false)
+        .map_err(|e| format!("cannot read EXR: {}", clip_exr_error(&e)))?;
+    for header in &meta.headers {
+        let (w, h) = (header.layer_size.width(), header.layer_size.height());
+        let pixels = (w as u64).saturating_mul(h as u64);
+        if pixels > MAX_READ_PIXELS {
+            return Err(format!(
+                "damaged or unsupported EXR: its header says {w}x{h} pixels, more than the \
+                 {MAX_READ_PIXELS} this reads"
+            ));
         }
-        _ => Ok(()),
+        // No compression packs more than 1:100000 (deflate stops near 1:1032), and a pixel
+        // takes at least 2 bytes (one half-float channel).
+        if pixels > len.saturating_mul(50_000) {
+            return Err(format!(
+                "damaged EXR: its header says {w}x{h} pixels, more than a file of {len} bytes \
+                 can hold"
+            ));
+        }
+        let needed = (header.chunk_count as u64).saturating_mul(MIN_CHUNK_BYTES);
+        if needed > len {
+            return Err(format!(
+                "damaged EXR: its header says {w}x{h} pixels in {} chunks, which need at \
+                 least {needed} bytes, but the file has {len}",
+                header.chunk_count
+            ));
+        }
+        // The image, and as much again while the reader decodes it.
+        crate::sysinfo::check_memory(
+            &format!("reading a {w}x{h} EXR"),
+            pixels.saturating_mul(2 * std::mem::size_of::<Vec3>() as u64),
+            memory,
+        )?;
+    }
+    reader
+        .seek(std::io::SeekFrom::Start(0))
+        .map_err(|e| format!("cannot read EXR: {e}"))?;
+    use exr::prelude::{ReadChannels, ReadLayers};
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(
+            |resolution, _| Image::new(resolution.width(), resolution.height()),
+            |image: &mut Image, position, (r, g, b, _a): (f32, f32, f32, f32)| {
+                let w = image.width;
+                if let Some(p) = image.pixels.get_mut(position.y() * w + position.x()) {
+                    *p = Vec3::new(r, g, b);
+                }
+            },
+        )
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(reader)
+        .map_err(|e| format!("cannot read EXR: {}", clip_exr_error(&e)))?;
+    Ok(image.layer_data.channel_data.pixels)
+}
+
+/// The exr crate's message, on one line and at most 300 characters.
+fn clip_exr_error(e: &exr::error::Error) -> String {
+    crate::scene::clip(&e.to_string(), 300)
+}
+
+impl From<output::OutputError> for ImageError {
+    fn from(e: output::OutputError) -> ImageError {
+        ImageError {
+            path: e.path,
+            message: e.message,
+        }
     }
 }
 

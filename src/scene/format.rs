@@ -184,10 +184,15 @@ impl TryFrom<[f32; 3]> for Reflectance {
     }
 }
 
-/// Emitted radiance: finite, non-negative, not all zero.
+/// Emitted radiance: finite, non-negative, not all zero, each channel at most
+/// `MAX_RADIANCE`.
 #[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(try_from = "[f32; 3]")]
 pub struct Radiance(pub Vec3);
+
+/// The largest radiance a channel may have: radiance times throughput (and, for light
+/// subpaths, times area) is carried in f32, and overflowed to a black image from about 1e34.
+pub const MAX_RADIANCE: f32 = 1e30;
 
 impl TryFrom<[f32; 3]> for Radiance {
     type Error = String;
@@ -195,6 +200,11 @@ impl TryFrom<[f32; 3]> for Radiance {
         if !v.iter().all(|c| c.is_finite() && *c >= 0.0) {
             Err(format!(
                 "emission radiance {v:?} must be finite and non-negative"
+            ))
+        } else if v.iter().any(|c| *c > MAX_RADIANCE) {
+            Err(format!(
+                "emission radiance {v:?} is too large: each channel must stay below \
+                 {MAX_RADIANCE:e} (f32 light transport overflows)"
             ))
         } else if v.iter().all(|c| *c == 0.0) {
             Err("emission radiance is zero: leave `emission` out instead".to_string())
@@ -399,10 +409,12 @@ impl<'de> Deserialize<'de> for MaterialTable {
             }
             fn visit_map<A: MapAccess<'de>>(self, mut map: A) -> Result<MaterialTable, A::Error> {
                 let mut table: Vec<(String, MaterialDesc)> = Vec::new();
+                let mut names = std::collections::HashSet::new();
                 while let Some(name) = map.next_key::<String>()? {
-                    if table.iter().any(|(n, _)| *n == name) {
+                    if !names.insert(name.clone()) {
                         return Err(A::Error::custom(format!(
-                            "material \"{name}\" is defined twice"
+                            "material \"{}\" is defined twice",
+                            super::echo(&name)
                         )));
                     }
                     let material = map.next_value()?;

@@ -4,6 +4,7 @@
 mod camera;
 pub use camera::Frustum;
 pub mod format;
+pub mod obj;
 pub mod parse;
 pub mod prepare;
 pub mod shapes;
@@ -159,22 +160,129 @@ fn location(line: Option<usize>, column: Option<usize>) -> String {
     }
 }
 
-/// Reads a RON scene and prepares it for rendering.
-pub fn load(path: &Path) -> Result<PreparedScene, SceneError> {
-    let text = std::fs::read_to_string(path).map_err(|e| SceneError {
+/// Coordinates (of every vertex after its transforms, and of the camera) must stay below this
+/// magnitude: beyond it, bounding-box areas, squared distances and the tree's costs overflow
+/// f32 (a quad of half-size 1e19 broke the BVH build).
+pub const MAX_COORDINATE: f64 = 1e12;
+
+/// The emitted power of a scene, pi x area x radiance summed over its emitters, must stay
+/// below this in every channel: light subpaths and photons carry it in f32, times geometry
+/// and BSDF factors (emission of 1e34 overflowed to a black image).
+pub const MAX_POWER: f64 = 1e30;
+
+/// Bytes a triangle costs while a scene is built, prepared and put in the tree, at most
+/// (mesh in f64, prepared columns, vertex normals, the BVH build and its leaves): what the
+/// memory estimate before meshing multiplies triangle counts by.
+pub const BYTES_PER_TRIANGLE: u64 = 400;
+
+/// What a scene may cost to load.
+#[derive(Clone, Copy, Debug)]
+pub struct Limits {
+    /// Memory the scene's triangles may take (estimated before meshing); None: no limit.
+    pub memory: Option<crate::sysinfo::MemoryLimit>,
+}
+
+impl Limits {
+    /// The memory this process may use (`sysinfo::memory_limit`).
+    pub fn of_this_machine() -> Limits {
+        Limits {
+            memory: crate::sysinfo::memory_limit(),
+        }
+    }
+}
+
+/// Most characters of a user's string (a name, a number) a message repeats.
+pub const ECHO_CHARS: usize = 60;
+
+/// A user's string as a message repeats it: control characters escaped, and at most
+/// `ECHO_CHARS` characters of it (then "... (N bytes)"), so a 1 MB name gives a short line.
+pub fn echo(s: &str) -> String {
+    clip(s, ECHO_CHARS)
+}
+
+/// A path as a message repeats it: at most 200 characters (a scene may name a mesh file with
+/// a path as long as itself).
+pub fn echo_path(path: &Path) -> String {
+    clip(&path.display().to_string(), 200)
+}
+
+/// `s` with control characters escaped, cut after `max_chars` characters (then
+/// "... (N bytes)").
+pub fn clip(s: &str, max_chars: usize) -> String {
+    let mut out = String::new();
+    for (count, c) in s.chars().enumerate() {
+        if count == max_chars {
+            out.push_str(&format!("... ({} bytes)", s.len()));
+            break;
+        }
+        if c.is_control() {
+            out.extend(c.escape_default());
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+fn file_error(path: &Path, message: String) -> SceneError {
+    SceneError {
         file: path.to_path_buf(),
         line: None,
         column: None,
-        message: format!("cannot read the scene file: {e}"),
-    })?;
-    load_from_str(path, &text)
+        message,
+    }
+}
+
+/// Reads a RON scene and prepares it for rendering.
+pub fn load(path: &Path) -> Result<PreparedScene, SceneError> {
+    load_with(path, &Limits::of_this_machine())
+}
+
+/// `load` within `limits`.
+pub fn load_with(path: &Path, limits: &Limits) -> Result<PreparedScene, SceneError> {
+    if std::fs::metadata(path).is_ok_and(|m| m.is_dir()) {
+        return Err(file_error(path, "is a folder, not a scene file".into()));
+    }
+    let bytes = std::fs::read(path)
+        .map_err(|e| file_error(path, format!("cannot read the scene file: {e}")))?;
+    let text = text_of(path, &bytes)?;
+    load_from_str_with(path, text, limits)
+}
+
+/// The scene file's bytes as text: UTF-8, or an error at the line and column of the first
+/// byte that is not (with its byte offset).
+pub fn text_of<'a>(path: &Path, bytes: &'a [u8]) -> Result<&'a str, SceneError> {
+    std::str::from_utf8(bytes).map_err(|e| {
+        let offset = e.valid_up_to();
+        // The prefix up to the bad byte is valid UTF-8.
+        let before = std::str::from_utf8(&bytes[..offset]).unwrap_or("");
+        let spot = parse::Positions::new(before).at(offset);
+        SceneError {
+            file: path.to_path_buf(),
+            line: Some(spot.line),
+            column: Some(spot.column),
+            message: format!(
+                "the scene file is not UTF-8 text: byte 0x{:02x} at byte offset {offset}",
+                bytes[offset]
+            ),
+        }
+    })
 }
 
 /// Prepares scene text as if read from `source` (named by errors; mesh paths are relative to
 /// its directory).
 pub fn load_from_str(source: &Path, text: &str) -> Result<PreparedScene, SceneError> {
+    load_from_str_with(source, text, &Limits::of_this_machine())
+}
+
+/// `load_from_str` within `limits`.
+pub fn load_from_str_with(
+    source: &Path,
+    text: &str,
+    limits: &Limits,
+) -> Result<PreparedScene, SceneError> {
     let parsed = parse(source, text)?;
-    let world = world::build(&parsed)?;
+    let world = world::build_with(&parsed, limits)?;
     prepare(&world)
 }
 

@@ -26,6 +26,8 @@ pub struct ParsedScene {
 
 /// Parses scene text; `source` names the file in errors and anchors relative mesh paths.
 pub fn parse(source: &Path, text: &str) -> Result<ParsedScene, SceneError> {
+    // A byte-order mark some editors write is not part of the text.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let file: SceneFile = ron::from_str(text).map_err(|e| ron_error(source, &e, None))?;
     // The camera and objects are parsed on their own below; they keep the file's extensions.
     let extensions = ron::Deserializer::from_str(text)
@@ -45,16 +47,19 @@ pub fn parse(source: &Path, text: &str) -> Result<ParsedScene, SceneError> {
             })
     };
 
+    // Positions are counted once through the file, not from its start for every object.
+    let mut positions = Positions::new(text);
     let camera_text = file.camera.get_ron();
     let camera_offset = offset_of(camera_text)?;
-    let camera = parse_located::<CameraDesc>(source, text, camera_text, camera_offset, &options)?;
+    let camera =
+        parse_located::<CameraDesc>(source, &mut positions, camera_text, camera_offset, &options)?;
     let mut objects = Vec::with_capacity(file.objects.len());
     for raw in &file.objects {
         let object_text = raw.get_ron();
         let offset = offset_of(object_text)?;
         objects.push(parse_located::<ObjectDesc>(
             source,
-            text,
+            &mut positions,
             object_text,
             offset,
             &options,
@@ -72,17 +77,17 @@ pub fn parse(source: &Path, text: &str) -> Result<ParsedScene, SceneError> {
 /// are moved to be positions in the whole file.
 fn parse_located<T: DeserializeOwned>(
     source: &Path,
-    text: &str,
+    positions: &mut Positions,
     part: &str,
     offset: usize,
     options: &ron::Options,
 ) -> Result<Located<T>, SceneError> {
-    let base = position_of(text, offset);
+    let base = positions.at(offset);
     let desc = options
         .from_str::<T>(part)
         .map_err(|e| ron_error(source, &e, Some(&base)))?;
     // The raw text may begin with comments: the declaration starts after them.
-    let spot = position_of(text, offset + skip_comments(part));
+    let spot = positions.at(offset + skip_comments(part));
     Ok(Located { desc, spot })
 }
 
@@ -98,18 +103,61 @@ fn ron_error(source: &Path, e: &SpannedError, base: Option<&SourceSpot>) -> Scen
         file: source.to_path_buf(),
         line: Some(line),
         column: Some(column),
-        message: e.code.to_string(),
+        message: clip_message(&e.code.to_string()),
     }
 }
 
-/// 1-based line and column (in characters, as ron counts them) of a byte offset.
-fn position_of(text: &str, offset: usize) -> SourceSpot {
-    let before = text.get(..offset).unwrap_or(text);
-    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
-    SourceSpot {
-        line: 1 + before.matches('\n').count(),
-        column: 1 + before[line_start..].chars().count(),
+/// A parser's message on one line, cut after 300 characters: ron's messages repeat what they
+/// found (an unknown field's name, a string), which may be as long as the file.
+fn clip_message(message: &str) -> String {
+    super::clip(message, 300)
+}
+
+/// 1-based lines and columns (in characters, as ron counts them) of byte offsets in a text,
+/// counted forward from the last offset asked for: asking in increasing order costs one pass
+/// over the text in all (an earlier offset starts over from the beginning).
+pub struct Positions<'a> {
+    text: &'a str,
+    offset: usize,
+    spot: SourceSpot,
+}
+
+impl<'a> Positions<'a> {
+    pub fn new(text: &'a str) -> Positions<'a> {
+        Positions {
+            text,
+            offset: 0,
+            spot: SourceSpot { line: 1, column: 1 },
+        }
     }
+
+    /// The position of byte `offset` (the end of the text if beyond it; the start of its
+    /// character if inside one).
+    pub fn at(&mut self, offset: usize) -> SourceSpot {
+        let mut offset = offset.min(self.text.len());
+        while !self.text.is_char_boundary(offset) {
+            offset -= 1;
+        }
+        if offset < self.offset {
+            *self = Positions::new(self.text);
+        }
+        for c in self.text[self.offset..offset].chars() {
+            if c == '\n' {
+                self.spot.line += 1;
+                self.spot.column = 1;
+            } else {
+                self.spot.column += 1;
+            }
+        }
+        self.offset = offset;
+        self.spot.clone()
+    }
+}
+
+/// 1-based line and column of a byte offset (one position; `Positions` for many).
+#[cfg(test)]
+fn position_of(text: &str, offset: usize) -> SourceSpot {
+    Positions::new(text).at(offset)
 }
 
 /// Byte length of the whitespace and comments that start `s` (RON block comments nest).

@@ -9,6 +9,7 @@ use crate::bsdf::Material;
 use crate::math::luminance;
 use glam::{DVec3, Vec3};
 use hecs::Entity;
+use std::collections::{HashMap, HashSet};
 use std::f64::consts::PI;
 
 /// A triangle whose doubled area is below this fraction of its longest squared edge is
@@ -50,29 +51,32 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     let mut material_query = world.query::<(Entity, &MaterialInfo, &Material)>();
     let mut declared: Vec<_> = material_query.iter().collect();
     declared.sort_by_key(|m| m.1.order);
+    let used: HashSet<Entity> = objects.iter().map(|o| o.4.0).collect();
     let mut materials = Vec::new();
-    let mut material_index = Vec::new(); // (entity, index into `materials`)
-    let mut warnings = Vec::new();
+    let mut material_index = HashMap::new(); // entity -> index into `materials`
+    let mut warnings = scene.warnings.clone();
     for &(entity, info, material) in &declared {
-        if objects.iter().any(|o| o.4.0 == entity) {
-            material_index.push((entity, materials.len() as u32));
+        if used.contains(&entity) {
+            material_index.insert(entity, materials.len() as u32);
             materials.push(*material);
         } else {
-            warnings.push(format!("material \"{}\" is not used", info.name));
+            warnings.push(format!(
+                "material \"{}\" is not used",
+                super::echo(&info.name)
+            ));
         }
     }
+    let mut power = DVec3::ZERO;
 
     let mut triangles = TriangleColumns::default();
     let mut emitters = Emitters::default();
     for (info, spot, shape, transform, material, emission, flip) in objects {
         let describe = || match &info.name {
-            Some(name) => format!("object \"{name}\" (line {})", spot.line),
+            Some(name) => format!("object \"{}\" (line {})", super::echo(name), spot.line),
             None => format!("object #{} (line {})", info.order + 1, spot.line),
         };
-        let material = material_index
-            .iter()
-            .find(|(e, _)| *e == material.0)
-            .map(|&(_, i)| i)
+        let material = *material_index
+            .get(&material.0)
             .ok_or_else(|| error(Some(spot), "object's material entity is missing".into()))?;
         let mesh = &shape.0;
         let affine = transform.0;
@@ -92,6 +96,24 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             return Err(error(
                 Some(spot),
                 format!("{}: transformed vertices are not finite", describe()),
+            ));
+        }
+        // In f64, before rounding: a vertex beyond f32's range is caught here too.
+        if let Some(far) = mesh
+            .positions
+            .iter()
+            .map(|&p| affine.transform_point3(p))
+            .find(|p| p.abs().max_element() >= super::MAX_COORDINATE)
+        {
+            return Err(error(
+                Some(spot),
+                format!(
+                    "{}: vertex {:?} is too far out: coordinates (after the transforms) must \
+                     stay below {:e} in magnitude",
+                    describe(),
+                    far.as_vec3().to_array(),
+                    super::MAX_COORDINATE
+                ),
             ));
         }
         let normals: Option<Vec<Vec3>> = mesh.normals.as_ref().map(|normals| {
@@ -120,7 +142,12 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                 .max(e2.length_squared())
                 .max(e3.length_squared());
             // Positions are finite here, so the comparison is never NaN; equal points give 0 <= 0.
-            if doubled_area <= MIN_RELATIVE_AREA * longest {
+            // An emitter's area must also be a normal f32: light sampling divides by it (a
+            // light of side 2e-23 has an f32 area of 0).
+            let area = (0.5 * doubled_area) as f32;
+            if doubled_area <= MIN_RELATIVE_AREA * longest
+                || (emission.is_some() && area < f32::MIN_POSITIVE)
+            {
                 dropped += 1;
                 continue;
             }
@@ -151,7 +178,8 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                     triangles.emitter.push(emitters.triangle.len() as u32);
                     emitters.triangle.push(id);
                     emitters.radiance.push(*radiance);
-                    emitters.area.push((0.5 * doubled_area) as f32);
+                    emitters.area.push(area);
+                    power += PI * area as f64 * radiance.as_dvec3();
                     emitting += 1;
                 }
                 None => triangles.emitter.push(NO_EMITTER),
@@ -173,6 +201,19 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                 ),
             ));
         }
+        if power.max_element() > super::MAX_POWER {
+            return Err(error(
+                Some(spot),
+                format!(
+                    "{}: the emitted power (pi x area x radiance, summed over the lights so \
+                     far) reaches {:.3e}: it must stay below {:e} (f32 light transport \
+                     overflows)",
+                    describe(),
+                    power.max_element(),
+                    super::MAX_POWER
+                ),
+            ));
+        }
     }
     if triangles.is_empty() {
         return Err(error(None, "the scene has no triangles".to_string()));
@@ -181,6 +222,12 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         warnings.push("no object emits light: the image will be black".to_string());
     }
     build_distribution(&mut emitters);
+    if emitters.cdf.len() != emitters.triangle.len() {
+        return Err(error(
+            None,
+            "the lights' power is not a positive finite number: no light can be sampled".into(),
+        ));
+    }
 
     let all_points = || {
         triangles

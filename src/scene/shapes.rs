@@ -161,71 +161,11 @@ pub fn torus(major_radius: f64, minor_radius: f64, nu: u32, nv: u32) -> Mesh {
     }
 }
 
-/// Reads a Wavefront OBJ file (polygons triangulated, every group merged into one mesh).
-/// Vertex normals are kept only where the file gives them. The error names the file.
+/// Reads a Wavefront OBJ file (`super::obj`: polygons triangulated, every group merged into
+/// one mesh, vertex normals kept where the file gives them); its warnings are dropped. The
+/// error names the file and line.
 pub fn load_obj(path: &Path) -> Result<Mesh, String> {
-    let text = std::fs::read(path)
-        .map_err(|e| format!("cannot read mesh file {}: {e}", path.display()))?;
-    let options = tobj::LoadOptions {
-        triangulate: true,
-        single_index: true,
-        ..Default::default()
-    };
-    // Materials come from the scene file: any `mtllib` is ignored.
-    let (models, _) =
-        tobj::load_obj_buf(&mut text.as_slice(), &options, |_| Ok(Default::default()))
-            .map_err(|e| format!("mesh file {} is malformed: {e}", path.display()))?;
-
-    let mut mesh = Mesh::default();
-    let mut any_normals = false;
-    let mut normals = Vec::new();
-    for model in &models {
-        let m = &model.mesh;
-        let base = mesh.positions.len();
-        let vertex_count = m.positions.len() / 3;
-        for p in m.positions.chunks_exact(3) {
-            let p = DVec3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            if !p.is_finite() {
-                return Err(format!(
-                    "mesh file {} has a non-finite vertex position",
-                    path.display()
-                ));
-            }
-            mesh.positions.push(p);
-        }
-        // With `single_index` normals share the position indices; a model without them (or
-        // with a partial set) is shaded flat.
-        if m.normals.len() == m.positions.len() && !m.normals.is_empty() {
-            any_normals = true;
-            normals.extend(m.normals.chunks_exact(3).map(|n| {
-                let n = DVec3::new(n[0] as f64, n[1] as f64, n[2] as f64);
-                n.try_normalize().unwrap_or(DVec3::ZERO)
-            }));
-        } else {
-            normals.extend(std::iter::repeat_n(DVec3::ZERO, vertex_count));
-        }
-        for face in m.indices.chunks(3) {
-            let [a, b, c] = face else {
-                return Err(format!(
-                    "mesh file {} has a face with fewer than 3 vertices",
-                    path.display()
-                ));
-            };
-            if [a, b, c].iter().any(|&&i| i as usize >= vertex_count) {
-                return Err(format!(
-                    "mesh file {} has a face referring to a missing vertex",
-                    path.display()
-                ));
-            }
-            let base = base as u32;
-            mesh.triangles.push([base + a, base + b, base + c]);
-        }
-    }
-    if mesh.triangles.is_empty() {
-        return Err(format!("mesh file {} has no faces", path.display()));
-    }
-    mesh.normals = any_normals.then_some(normals);
-    Ok(mesh)
+    super::obj::load_obj(path).map(|m| m.mesh)
 }
 
 #[cfg(test)]

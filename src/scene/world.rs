@@ -8,6 +8,7 @@ use super::{Camera, ParsedScene, SceneError};
 use crate::bsdf::Material;
 use glam::{DAffine3, DQuat, Vec3};
 use hecs::{Entity, EntityBuilder, World};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 /// A scene's entities, before preparation.
@@ -15,6 +16,8 @@ pub struct SceneWorld {
     pub world: World,
     /// The scene file, named by errors.
     pub source: PathBuf,
+    /// Messages found while building (e.g. a mesh file's unusable normals).
+    pub warnings: Vec<String>,
 }
 
 /// Where an entity was declared in the scene file (1-based), for messages.
@@ -59,8 +62,14 @@ pub struct FlipNormals;
 
 /// Spawns the camera, the materials and the objects of a parsed scene.
 pub fn build(parsed: &ParsedScene) -> Result<SceneWorld, SceneError> {
+    build_with(parsed, &super::Limits::of_this_machine())
+}
+
+/// `build` within `limits`: the triangles' memory is estimated before each shape is meshed.
+pub fn build_with(parsed: &ParsedScene, limits: &super::Limits) -> Result<SceneWorld, SceneError> {
     let source = parsed.source.clone();
     let mut world = World::new();
+    let mut warnings = Vec::new();
 
     let camera = make_camera(&parsed.camera.desc).map_err(|message| SceneError {
         file: source.clone(),
@@ -70,7 +79,7 @@ pub fn build(parsed: &ParsedScene) -> Result<SceneWorld, SceneError> {
     })?;
     world.spawn((camera, parsed.camera.spot.clone()));
 
-    let materials: Vec<(String, Entity)> = parsed
+    let materials: HashMap<&str, Entity> = parsed
         .materials
         .iter()
         .enumerate()
@@ -79,9 +88,10 @@ pub fn build(parsed: &ParsedScene) -> Result<SceneWorld, SceneError> {
                 name: name.clone(),
                 order: order as u32,
             };
-            (name.clone(), world.spawn((info, make_material(desc))))
+            (name.as_str(), world.spawn((info, make_material(desc))))
         })
         .collect();
+    let mut triangles_so_far: u64 = 0;
 
     let base_dir = source.parent().unwrap_or(Path::new("")).to_path_buf();
     for (order, object) in parsed.objects.iter().enumerate() {
@@ -93,22 +103,29 @@ pub fn build(parsed: &ParsedScene) -> Result<SceneWorld, SceneError> {
         };
         let desc = &object.desc;
         let material = materials
-            .iter()
-            .find(|(name, _)| *name == desc.material)
-            .map(|&(_, entity)| entity)
+            .get(desc.material.as_str())
+            .copied()
             .ok_or_else(|| {
-                let known: Vec<&str> = materials.iter().map(|(n, _)| n.as_str()).collect();
                 error(format!(
                     "unknown material \"{}\" (defined: {})",
-                    desc.material,
-                    if known.is_empty() {
-                        "none".to_string()
-                    } else {
-                        known.join(", ")
-                    }
+                    super::echo(&desc.material),
+                    defined_names(&parsed.materials)
                 ))
             })?;
-        let mesh = make_mesh(&desc.shape, &base_dir).map_err(error)?;
+        // Procedural shapes are counted before they are meshed, OBJ meshes once read.
+        let memory_check = |triangles: u64| {
+            crate::sysinfo::check_memory(
+                &format!("the scene's {triangles} triangles"),
+                triangles.saturating_mul(super::BYTES_PER_TRIANGLE),
+                limits.memory,
+            )
+        };
+        if let Some(count) = triangle_count(&desc.shape) {
+            memory_check(triangles_so_far.saturating_add(count)).map_err(error)?;
+        }
+        let mesh = make_mesh(&desc.shape, &base_dir, &mut warnings).map_err(error)?;
+        triangles_so_far = triangles_so_far.saturating_add(mesh.triangles.len() as u64);
+        memory_check(triangles_so_far).map_err(error)?;
         let mut entity = EntityBuilder::new();
         entity.add_bundle((
             ObjectInfo {
@@ -129,13 +146,54 @@ pub fn build(parsed: &ParsedScene) -> Result<SceneWorld, SceneError> {
         }
         world.spawn(entity.build());
     }
-    Ok(SceneWorld { world, source })
+    Ok(SceneWorld {
+        world,
+        source,
+        warnings,
+    })
+}
+
+/// The defined material names for a message: the first few, and how many more.
+fn defined_names(materials: &[(String, MaterialDesc)]) -> String {
+    const SHOWN: usize = 8;
+    if materials.is_empty() {
+        return "none".to_string();
+    }
+    let mut names: Vec<String> = materials
+        .iter()
+        .take(SHOWN)
+        .map(|(n, _)| super::echo(n))
+        .collect();
+    if materials.len() > SHOWN {
+        names.push(format!("and {} more", materials.len() - SHOWN));
+    }
+    names.join(", ")
+}
+
+/// The number of triangles a procedural shape will have (None for an OBJ file: counted when
+/// read).
+fn triangle_count(shape: &ShapeDesc) -> Option<u64> {
+    Some(match shape {
+        ShapeDesc::Quad(..) => 2,
+        ShapeDesc::Triangle(..) => 1,
+        ShapeDesc::Box { .. } => 12,
+        ShapeDesc::Icosphere { level, .. } => 20u64 << (2 * level.0),
+        ShapeDesc::Torus { nu, nv, .. } => 2 * nu.0 as u64 * nv.0 as u64,
+        ShapeDesc::Obj(_) => return None,
+    })
 }
 
 /// The camera frame: forward = normalize(look_at - position), right = normalize(forward x up),
 /// up = right x forward.
 fn make_camera(desc: &CameraDesc) -> Result<Camera, String> {
     let position = desc.position.0;
+    if position.abs().max_element() >= super::MAX_COORDINATE {
+        return Err(format!(
+            "camera position {:?} is too far out: coordinates must stay below {:e} in magnitude",
+            position.to_array(),
+            super::MAX_COORDINATE
+        ));
+    }
     let forward = (desc.look_at.0 - position)
         .try_normalize()
         .ok_or("camera position and look_at are the same point")?;
@@ -175,7 +233,12 @@ fn make_material(desc: &MaterialDesc) -> Material {
     }
 }
 
-fn make_mesh(shape: &ShapeDesc, base_dir: &Path) -> Result<Mesh, String> {
+/// The mesh of a shape; an OBJ file's warnings go to `warnings`.
+fn make_mesh(
+    shape: &ShapeDesc,
+    base_dir: &Path,
+    warnings: &mut Vec<String>,
+) -> Result<Mesh, String> {
     Ok(match shape {
         ShapeDesc::Quad(a, b, c, d) => shapes::quad(a.0, b.0, c.0, d.0),
         ShapeDesc::Triangle(a, b, c) => shapes::triangle(a.0, b.0, c.0),
@@ -196,7 +259,11 @@ fn make_mesh(shape: &ShapeDesc, base_dir: &Path) -> Result<Mesh, String> {
             nu,
             nv,
         } => shapes::torus(major_radius.0, minor_radius.0, nu.0, nv.0),
-        ShapeDesc::Obj(file) => shapes::load_obj(&base_dir.join(file))?,
+        ShapeDesc::Obj(file) => {
+            let obj = super::obj::load_obj(&base_dir.join(file))?;
+            warnings.extend(obj.warnings);
+            obj.mesh
+        }
     })
 }
 

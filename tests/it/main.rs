@@ -11,10 +11,15 @@ mod cli;
 mod compare;
 mod determinism;
 mod film_precision;
+mod fuzz;
+#[path = "../fuzz/targets.rs"]
+mod fuzz_targets;
 mod graph;
+mod hostile;
 mod mlt;
 mod photon_mapping;
 mod photons;
+mod properties;
 mod pt_furnace;
 mod reference;
 mod scene_crosscheck;
