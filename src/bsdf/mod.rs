@@ -67,7 +67,7 @@ pub struct BsdfSample {
 /// the sample carries nothing (no sample, `pdf <= 0`) or leaves through the wrong geometric
 /// side: reflection must leave on wo's side of the geometric surface and refraction on the
 /// other, which shading normals alone would not ensure (light would leak through surfaces).
-#[inline]
+#[inline(always)]
 pub fn sample_direction(
     material: &Material,
     frame: &crate::math::Frame,
@@ -140,7 +140,9 @@ impl Material {
         }
     }
 
-    /// Samples wi given wo; `None` when the sample carries no energy.
+    /// Samples wi given wo; `None` when the sample carries no energy. Inlined so that each
+    /// shading system's loop, which sees one material kind, keeps only that kind's arm hot.
+    #[inline(always)]
     pub fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         match *self {
             Material::Diffuse { reflectance } => diffuse::sample(reflectance, wo, u),

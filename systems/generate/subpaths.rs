@@ -56,20 +56,18 @@ crate::system! {
             }
         };
         let multiplexed = !multiplex.is_empty();
-        sample_pixel[..n]
-            .par_iter_mut()
-            .zip(chosen_s[..n].par_iter_mut())
-            .enumerate()
-            .with_min_len(crate::components::CHUNK)
-            .for_each(|(k, (pixel, s))| {
-                *pixel = raster_of(k).2 as u32;
-                if multiplexed {
+        if multiplexed {
+            chosen_s[..n]
+                .par_iter_mut()
+                .enumerate()
+                .with_min_len(crate::components::CHUNK)
+                .for_each(|(k, s)| {
                     let strategies = multiplex[k] + 2;
                     let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
                     let u = sampler.get(key, CONNECTION_DIM_STRATEGY);
                     *s = ((u * strategies as f32) as u32).min(strategies - 1) as u16;
-                }
-            });
+                });
+        }
         // Vertices each subpath of sample k may have (camera, light) for a multiplexed one.
         let lengths = |k: usize| {
             let s = chosen_s[k] as u32;
@@ -80,14 +78,18 @@ crate::system! {
         let views = vertices[0].chunks_mut(0..n);
         let camera_walkers = walkers.chunks_mut(0..n);
         let camera_rays = rays.chunks_mut(0..n);
+        // Chunks of CHUNK items from 0, as the stores' `chunks_mut` cut them.
+        let sample_pixels = sample_pixel[..n].par_chunks_mut(crate::components::CHUNK);
         views
             .into_par_iter()
             .zip(camera_walkers)
             .zip(camera_rays)
-            .for_each(|((v, wk), r)| {
-                for i in 0..v.len() {
+            .zip(sample_pixels)
+            .for_each(|(((v, wk), r), sample_pixel)| {
+                for (i, sample_pixel) in sample_pixel.iter_mut().enumerate() {
                     let k = v.start + i;
-                    let (key, raster, _) = raster_of(k);
+                    let (key, raster, pixel) = raster_of(k);
+                    *sample_pixel = pixel as u32;
                     let dir = cam.direction(raster);
                     // A multiplexed sample with t = 1 needs only the camera vertex.
                     let walks = !multiplexed || lengths(k).0 >= 2;

@@ -28,6 +28,16 @@ crate::system! {
     }
     run(this) {
         let range = ranges.of(this.0);
-        scatter_paths(data, sampler, hits, surfaces, rays, paths, range)
+        match this.0 {
+            MaterialKind::Diffuse => scatter_paths::<{ MaterialKind::Diffuse as u8 }>(
+                data, sampler, hits, surfaces, rays, paths, range,
+            ),
+            MaterialKind::Dielectric => scatter_paths::<{ MaterialKind::Dielectric as u8 }>(
+                data, sampler, hits, surfaces, rays, paths, range,
+            ),
+            MaterialKind::Conductor => scatter_paths::<{ MaterialKind::Conductor as u8 }>(
+                data, sampler, hits, surfaces, rays, paths, range,
+            ),
+        }
     }
 }
