@@ -40,7 +40,7 @@ pub enum Command {
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
     Bench {
         scene: PathBuf,
-        #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+        #[arg(long, default_value = "pt", value_parser = IntegratorParser)]
         integrator: IntegratorKind,
         /// Samples per pixel of each timed run.
         #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u64).range(1..))]
@@ -56,7 +56,7 @@ pub enum Command {
     /// each reads and writes.
     Graph {
         scene: PathBuf,
-        #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+        #[arg(long, default_value = "pt", value_parser = IntegratorParser)]
         integrator: IntegratorKind,
         /// The graph without final gathering (pm).
         #[arg(long)]
@@ -65,8 +65,38 @@ pub enum Command {
 }
 
 /// Parses an integrator name: unknown names and planned-but-unbuilt ones are clear errors.
-fn parse_integrator(s: &str) -> std::result::Result<IntegratorKind, String> {
-    IntegratorKind::from_name(s).map_err(|e| e.to_string())
+/// Parses an integrator name; `--help` lists the registry's integrators with their
+/// descriptions.
+#[derive(Clone)]
+struct IntegratorParser;
+
+impl clap::builder::TypedValueParser for IntegratorParser {
+    type Value = IntegratorKind;
+
+    fn parse_ref(
+        &self,
+        cmd: &clap::Command,
+        arg: Option<&clap::Arg>,
+        value: &std::ffi::OsStr,
+    ) -> std::result::Result<IntegratorKind, clap::Error> {
+        let name = value.to_string_lossy();
+        IntegratorKind::from_name(&name).map_err(|e| {
+            let arg = arg.map_or_else(|| "--integrator".to_string(), |a| a.to_string());
+            clap::Error::raw(
+                clap::error::ErrorKind::InvalidValue,
+                format!("invalid value '{name}' for '{arg}': {e}\n"),
+            )
+            .with_cmd(cmd)
+        })
+    }
+
+    fn possible_values(
+        &self,
+    ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
+        Some(Box::new(IntegratorKind::all().into_iter().map(|k| {
+            clap::builder::PossibleValue::new(k.as_str()).help(k.description())
+        })))
+    }
 }
 
 fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
@@ -77,7 +107,7 @@ fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
 pub struct RenderArgs {
     /// Scene file (RON).
     pub scene: PathBuf,
-    #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+    #[arg(long, default_value = "pt", value_parser = IntegratorParser)]
     pub integrator: IntegratorKind,
     /// Samples per pixel (default 64 unless --time is given). A pass is one sample per
     /// pixel, so this is also the number of passes (ppm, sppm).
@@ -248,7 +278,7 @@ pub struct ReferenceArgs {
     /// Scene file (RON).
     pub scene: PathBuf,
     /// An unbiased integrator: pt or bdpt.
-    #[arg(long, default_value = "pt", value_parser = parse_integrator)]
+    #[arg(long, default_value = "pt", value_parser = IntegratorParser)]
     pub integrator: IntegratorKind,
     /// Total samples per pixel, over all runs (default 4096 unless --time is given).
     #[arg(long, conflicts_with = "time", value_parser = clap::value_parser!(u64).range(1..))]
@@ -306,9 +336,8 @@ pub struct CompareArgs {
     /// resumed from there, at --reference-spp).
     #[arg(long, conflicts_with = "preset")]
     pub reference: Option<PathBuf>,
-    /// Integrators to compare, comma-separated (default: every integrator built; built: pt;
-    /// planned: bdpt, pm, ppm, sppm, mlt).
-    #[arg(long, value_delimiter = ',', value_parser = parse_integrator, conflicts_with = "preset")]
+    /// Integrators to compare, comma-separated (default: every integrator listed below).
+    #[arg(long, value_delimiter = ',', value_parser = IntegratorParser, conflicts_with = "preset")]
     pub integrators: Vec<IntegratorKind>,
     /// Budgets, comma-separated and strictly increasing, in --budget-unit.
     #[arg(long, value_delimiter = ',', value_parser = parse_budget, default_value = "1,2,4,8",

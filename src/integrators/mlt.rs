@@ -118,6 +118,16 @@ impl MltSettings {
         3 * bdpt::stream_dims(self.max_depth)
     }
 
+    /// Numbers the evaluations of seed group `group` can read: in mmlt, those of a path of
+    /// depth `group` (the BDPT streams read no further for that depth); all in pssmlt.
+    pub fn dims_of_group(&self, group: u32) -> u32 {
+        if self.multiplexed {
+            3 * bdpt::stream_dims(group.min(self.max_depth))
+        } else {
+            self.dims()
+        }
+    }
+
     /// Chains for a `pixels`-pixel image: the mutations / `STEPS_PER_CHAIN`, within
     /// [`MIN_CHAINS`, `MAX_CHAINS`], unless given.
     pub fn chain_count(&self, pixels: u64) -> usize {

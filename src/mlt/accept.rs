@@ -143,24 +143,26 @@ fn emit(out: &mut Vec<Splat>, state: &Contributions, chain: usize, weight: f32) 
 }
 
 /// System `commit_accepted`: accepted chains take their proposal (vector and contributions)
-/// as their current state. One column at a time, parallel over fixed chunks.
+/// as their current state: the numbers each uses, in parallel over fixed chunks of chains.
 pub fn commit_accepted(chains: &mut ChainStates) {
     let accepted = &chains.accepted;
-    for dim in 0..chains.current.dims() {
-        chains
-            .current
-            .column_mut(dim)
-            .par_chunks_mut(CHUNK)
-            .zip(chains.proposal.column(dim).par_chunks(CHUNK))
-            .zip(accepted.par_chunks(CHUNK))
-            .for_each(|((current, proposal), accepted)| {
-                for ((x, &p), &accept) in current.iter_mut().zip(proposal).zip(accepted) {
-                    if accept {
+    let proposal = &chains.proposal;
+    chains
+        .current
+        .blocks_mut(CHUNK)
+        .into_par_iter()
+        .for_each(|block| {
+            let first = block.first;
+            for (dim, current) in block.columns.into_iter().enumerate() {
+                let dim = dim as u32;
+                let proposed = &proposal.column(dim)[first..first + current.len()];
+                for (local, (x, &p)) in current.iter_mut().zip(proposed).enumerate() {
+                    if accepted[first + local] && dim < block.used[local] {
                         *x = p;
                     }
                 }
-            });
-    }
+            }
+        });
     let proposal = &chains.proposal_contributions;
     let stride = proposal.stride();
     chains

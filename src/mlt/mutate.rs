@@ -135,8 +135,9 @@ impl MutationSettings {
 }
 
 /// System `propose_mutations`: for step `step`, every chain's key, large/small choice and
-/// proposal vector. Eager (every dimension of every chain, a whole column at a time) and
-/// parallel over fixed `CHUNK`s of chains, so bit-identical for any thread count.
+/// proposal vector (the numbers its evaluation can read: `PrimarySamples::used`). One
+/// parallel loop over fixed `CHUNK`s of chains, each writing its chains' columns, so
+/// bit-identical for any thread count.
 pub fn propose_mutations(
     chains: &mut ChainStates,
     settings: &MutationSettings,
@@ -144,33 +145,34 @@ pub fn propose_mutations(
     step: u64,
 ) {
     let p_large = settings.large_step_probability;
+    let small = PreparedSmallStep::new(settings.small_step);
+    let current = &chains.current;
     chains
-        .step_key
-        .par_chunks_mut(CHUNK)
+        .proposal
+        .blocks_mut(CHUNK)
+        .into_par_iter()
+        .zip(chains.step_key.par_chunks_mut(CHUNK))
         .zip(chains.large_step.par_chunks_mut(CHUNK))
-        .enumerate()
-        .for_each(|(c, (keys, large))| {
-            for (local, (key, large)) in keys.iter_mut().zip(large).enumerate() {
-                *key = step_key(seed, c * CHUNK + local, step);
+        .for_each(|((block, keys), large)| {
+            let first = block.first;
+            for (local, (key, large)) in keys.iter_mut().zip(large.iter_mut()).enumerate() {
+                *key = step_key(seed, first + local, step);
                 *large = key.get(LANE_LARGE_STEP) < p_large;
             }
-        });
-
-    let small = PreparedSmallStep::new(settings.small_step);
-    let (keys, large) = (&chains.step_key, &chains.large_step);
-    for dim in 0..chains.current.dims() {
-        let lane = dimension_lane(dim);
-        chains
-            .proposal
-            .column_mut(dim)
-            .par_chunks_mut(CHUNK)
-            .zip(chains.current.column(dim).par_chunks(CHUNK))
-            .zip(keys.par_chunks(CHUNK))
-            .zip(large.par_chunks(CHUNK))
-            .for_each(|(((proposal, current), keys), large)| {
-                for (((p, &x), key), &large) in
-                    proposal.iter_mut().zip(current).zip(keys).zip(large)
+            for (dim, proposal) in block.columns.into_iter().enumerate() {
+                let dim = dim as u32;
+                let lane = dimension_lane(dim);
+                let current = &current.column(dim)[first..first + proposal.len()];
+                for ((((p, &x), key), &large), &used) in proposal
+                    .iter_mut()
+                    .zip(current)
+                    .zip(keys.iter())
+                    .zip(large.iter())
+                    .zip(block.used)
                 {
+                    if dim >= used {
+                        continue;
+                    }
                     let u0 = key.get(lane);
                     *p = if large {
                         u0
@@ -178,8 +180,8 @@ pub fn propose_mutations(
                         small.perturb(x, u0, key.get(lane + 1))
                     };
                 }
-            });
-    }
+            }
+        });
 }
 
 #[cfg(test)]

@@ -11,7 +11,7 @@ mod primary;
 pub mod roulette;
 mod sampler;
 mod sobol;
-pub use primary::PrimarySamples;
+pub use primary::{PrimarySamples, SampleBlock};
 pub use sampler::{
     DEFAULT_LOG2_SPP, MAX_LOG2_RES, MAX_LOG2_SPP, PRIMARY_STREAMS, Sampler, SamplerKind, Stream,
     UnknownSampler,

@@ -20,7 +20,8 @@ use crate::components::CHUNK;
 use crate::integrators::Wave;
 use crate::integrators::bdpt::Numbers;
 use crate::integrators::mlt::{
-    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MltState, TIMED_MUTATIONS_PER_PIXEL,
+    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MltSettings, MltState,
+    TIMED_MUTATIONS_PER_PIXEL,
 };
 use crate::mlt::{MIN_BOOTSTRAP_SAMPLES, bootstrap_error, needs_more_bootstrap};
 use crate::pipeline::Flow;
@@ -28,17 +29,28 @@ use crate::sampling::PrimarySamples;
 use rayon::prelude::*;
 
 /// Fills slots `0..items.len()` of `store` with the vectors of bootstrap evaluations `items`.
-fn fill_vectors(store: &mut PrimarySamples, seed: u64, items: &[u64]) {
-    for dim in 0..store.dims() {
-        store.column_mut(dim)[..items.len()]
-            .par_chunks_mut(CHUNK)
-            .zip(items.par_chunks(CHUNK))
-            .for_each(|(out, items)| {
-                for (x, &item) in out.iter_mut().zip(items) {
-                    *x = MltState::bootstrap_number(seed, item, dim);
-                }
-            });
+/// Slot k of `store` gets bootstrap item `items[k]`'s vector: its length from the item's
+/// group, its numbers a pure function of (seed, item, dimension).
+fn fill_vectors(store: &mut PrimarySamples, settings: &MltSettings, items: &[u64]) {
+    let groups = settings.groups() as u64;
+    for (slot, &item) in items.iter().enumerate() {
+        store.set_used(slot, settings.dims_of_group((item % groups) as u32));
     }
+    store
+        .blocks_mut(CHUNK)
+        .into_par_iter()
+        .take(items.len().div_ceil(CHUNK))
+        .for_each(|block| {
+            let items = &items[block.first..items.len().min(block.first + CHUNK)];
+            for (dim, column) in block.columns.into_iter().enumerate() {
+                let dim = dim as u32;
+                for ((x, &item), &used) in column.iter_mut().zip(items).zip(block.used) {
+                    if dim < used {
+                        *x = MltState::bootstrap_number(settings.seed, item, dim);
+                    }
+                }
+            }
+        });
 }
 
 pub struct BeginBootstrapWave;
@@ -60,7 +72,7 @@ crate::system! {
         }
         let first = bootstrap.evaluated;
         let items: Vec<u64> = (first..first + len).collect();
-        fill_vectors(store, settings.seed, &items);
+        fill_vectors(store, settings, &items);
         let groups = settings.groups() as u64;
         multiplex.clear();
         if settings.multiplexed {
@@ -155,7 +167,8 @@ crate::system! {
             .zip(&selection.group)
             .map(|(&j, &g)| j as u64 * groups + g as u64)
             .collect();
-        fill_vectors(&mut chains.current, settings.seed, &items);
+        fill_vectors(&mut chains.current, settings, &items);
+        chains.proposal.clone_from(&chains.current);
         let Numbers::Primary { store, .. } = numbers else {
             unreachable!("MLT evaluates primary samples")
         };
