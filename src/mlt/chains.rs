@@ -176,8 +176,8 @@ fn push_entry(
 pub struct ChainStates {
     /// Current primary-sample vectors (dimension-major).
     pub current: PrimarySamples,
-    /// Proposed vectors of the step under way: every dimension rewritten each step, so a
-    /// rejection needs no restore.
+    /// Proposed vectors of the step under way: every number a chain uses is rewritten each
+    /// step, so a rejection needs no restore.
     pub proposal: PrimarySamples,
     pub current_contributions: Contributions,
     pub proposal_contributions: Contributions,

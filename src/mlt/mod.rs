@@ -20,9 +20,9 @@
 //!    key gave) and evaluates it into `chains.current_contributions`.
 //!
 //! Graph `mutations`, per step `step` (one step = one mutation of every chain):
-//! 1. `propose_mutations(&mut chains, &settings, seed, step)`: `chains.proposal`, a whole
-//!    dimension column for all chains at a time (large step: fresh uniforms; small step:
-//!    `SmallStep` on every dimension);
+//! 1. `propose_mutations(&mut chains, &settings, seed, step)`: `chains.proposal`, every
+//!    number each chain uses (`PrimarySamples::used`; large step: fresh uniforms; small step:
+//!    `SmallStep` on each);
 //! 2. the evaluation systems (BDPT at the chain's `group` depth for MMLT) read their numbers
 //!    from `chains.proposal` instead of the hash, and write per chain the target c (luminance)
 //!    and the (pixel, RGB) contributions into `chains.proposal_contributions`

@@ -1,5 +1,5 @@
 //! Primary-sample mutations: the system `propose_mutations` writes every chain's proposal
-//! vector from its current one, one dimension column at a time.
+//! vector from its current one, the numbers the chain uses and no more.
 //!
 //! Every number is a pure function of (seed, chain, step, lane) through `SampleKey`, keyed by
 //! the CHAIN: chains resampled from one heavy seed start equal but draw different proposals at
