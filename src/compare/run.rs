@@ -92,6 +92,9 @@ pub fn compare(o: &CompareOptions) -> Result<i32> {
     }
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
+    for &k in &plan.integrators {
+        crate::commands::check_render_memory(k, &plan.settings, &data, pool.current_num_threads())?;
+    }
     let comparison = match compare_scene(
         scene,
         data,
