@@ -20,7 +20,7 @@ use crate::components::CHUNK;
 use crate::integrators::Wave;
 use crate::integrators::bdpt::Numbers;
 use crate::integrators::mlt::{
-    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MltSettings, MltState,
+    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MltSettings, MltState, NONZERO_SEEDS_PER_CHAIN,
     TIMED_MUTATIONS_PER_PIXEL,
 };
 use crate::mlt::{MIN_BOOTSTRAP_SAMPLES, bootstrap_error, needs_more_bootstrap};
@@ -107,6 +107,7 @@ crate::system! {
             }
         }
         bootstrap.evaluated += n as u64;
+        bootstrap.nonzero += contributions.target[..n].iter().filter(|&&t| t > 0.0).count() as u64;
         let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
         bootstrap.done = match settings.bootstrap {
             Some(per_group) => bootstrap.evaluated >= per_group * groups,
@@ -119,9 +120,10 @@ crate::system! {
                 // Never more evaluations than the mutations asked for (nor the cap): beyond
                 // that the bootstrap would take most of the render.
                 let cap = MAX_BOOTSTRAP_EVALUATIONS.min(floor.max(m as u64 * pixels));
+                let seeds_enough = bootstrap.nonzero as f64 >= NONZERO_SEEDS_PER_CHAIN * chains as f64;
                 bootstrap.evaluated >= cap
                     || (bootstrap.evaluated >= floor
-                        && (black || !needs_more_bootstrap(&weights, m)))
+                        && (black || (seeds_enough && !needs_more_bootstrap(&weights, m))))
             }
         };
         let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
