@@ -106,28 +106,81 @@ crate::system! {
                 }
             }
         }
+        let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
         bootstrap.evaluated += n as u64;
-        bootstrap.nonzero += contributions.target[..n].iter().filter(|&&t| t > 0.0).count() as u64;
+        bootstrap.nonzero += found as u64;
         let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
         bootstrap.done = match settings.bootstrap {
             Some(per_group) => bootstrap.evaluated >= per_group * groups,
             None => {
-                let m = settings
-                    .mutations_per_pixel
-                    .unwrap_or(TIMED_MUTATIONS_PER_PIXEL) as f64;
-                let floor = (BOOTSTRAP_PER_CHAIN * chains).max(MIN_BOOTSTRAP_SAMPLES as u64 * groups);
-                let black = bootstrap_error(&weights).normalisation <= 0.0;
-                // Never more evaluations than the mutations asked for (nor the cap): beyond
-                // that the bootstrap would take most of the render.
-                let cap = MAX_BOOTSTRAP_EVALUATIONS.min(floor.max(m as u64 * pixels));
-                let seeds_enough = bootstrap.nonzero as f64 >= NONZERO_SEEDS_PER_CHAIN * chains as f64;
-                bootstrap.evaluated >= cap
-                    || (bootstrap.evaluated >= floor
-                        && (black || (seeds_enough && !needs_more_bootstrap(&weights, m))))
+                let m = settings.mutations_per_pixel.unwrap_or(TIMED_MUTATIONS_PER_PIXEL);
+                automatic_bootstrap_done(&weights, bootstrap.nonzero, chains, m, pixels)
             }
         };
-        let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
         Flow::new(n, found)
+    }
+}
+
+/// The automatic bootstrap rule, given the weights so far (per group) and how many are
+/// non-zero: at least `BOOTSTRAP_PER_CHAIN` evaluations per chain (and `MIN_BOOTSTRAP_SAMPLES`
+/// per group), then more until b's relative error is below `BOOTSTRAP_NOISE_FRACTION` of the
+/// image noise at `mutations_per_pixel` and the non-zero evaluations number
+/// `NONZERO_SEEDS_PER_CHAIN` per chain; never more than `MAX_BOOTSTRAP_EVALUATIONS`, nor more
+/// than the mutations asked for (beyond that the bootstrap would take most of the render). A
+/// black scene stops at the floor.
+pub fn automatic_bootstrap_done(
+    weights: &[&[f32]],
+    nonzero: u64,
+    chains: u64,
+    mutations_per_pixel: u64,
+    pixels: u64,
+) -> bool {
+    let evaluated: u64 = weights.iter().map(|w| w.len() as u64).sum();
+    let groups = weights.len() as u64;
+    let floor = (BOOTSTRAP_PER_CHAIN * chains).max(MIN_BOOTSTRAP_SAMPLES as u64 * groups);
+    let cap = MAX_BOOTSTRAP_EVALUATIONS.min(floor.max(mutations_per_pixel * pixels));
+    let black = bootstrap_error(weights).normalisation <= 0.0;
+    let seeds_enough = nonzero as f64 >= NONZERO_SEEDS_PER_CHAIN * chains as f64;
+    evaluated >= cap
+        || (evaluated >= floor
+            && (black
+                || (seeds_enough && !needs_more_bootstrap(weights, mutations_per_pixel as f64))))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `n` weights per group, one in `every` of them 1, the rest 0.
+    fn weights(groups: usize, n: usize, every: usize) -> Vec<Vec<f32>> {
+        let w: Vec<f32> = (0..n).map(|i| (i % every == 0) as u8 as f32).collect();
+        vec![w; groups]
+    }
+
+    fn done(w: &[Vec<f32>], chains: u64, m: u64, pixels: u64) -> bool {
+        let views: Vec<&[f32]> = w.iter().map(Vec::as_slice).collect();
+        let nonzero = w.iter().flatten().filter(|&&x| x > 0.0).count() as u64;
+        automatic_bootstrap_done(&views, nonzero, chains, m, pixels)
+    }
+
+    #[test]
+    fn bootstrap_goes_on_while_seeds_are_scarce() {
+        // 1024 chains: the floor is 16k evaluations. One mutation per pixel of 1M pixels: b's
+        // error may be up to half the (large) image noise, and the cap is 1M evaluations.
+        let (chains, m, pixels) = (1024, 1, 1 << 20);
+        // Light in one evaluation of 4: past the floor, plenty of seeds, b known: done.
+        assert!(done(&weights(2, 1 << 14, 4), chains, m, pixels));
+        // Light in one of 256: b is known well enough, but 128 non-zero evaluations for 1024
+        // chains are too few seeds, so it goes on ...
+        assert!(!done(&weights(2, 1 << 14, 256), chains, m, pixels));
+        // ... until there are a quarter as many as chains,
+        assert!(done(&weights(2, 1 << 17, 256), chains, m, pixels));
+        // or the cap: no more evaluations than the mutations asked for (here 2 x 16k).
+        assert!(done(&weights(2, 1 << 14, 256), chains, m, 1 << 15));
+        // A black scene stops at the floor.
+        let black = |n: usize| vec![vec![0.0f32; n]; 2];
+        assert!(done(&black(1 << 13), chains, m, pixels));
+        assert!(!done(&black(1 << 12), chains, m, pixels));
     }
 }
 
