@@ -276,18 +276,28 @@ impl MltState {
                 ),
             ),
         ];
-        if let Some(sel) = &self.selection
-            && self.settings.multiplexed
-        {
-            let per_depth: Vec<String> = sel
-                .normalisation
-                .iter()
-                .zip(&sel.chains_per_group)
-                .enumerate()
-                .filter(|(_, (b, _))| **b > 0.0)
-                .map(|(k, (b, n))| format!("{k}: {b:.4}/{n}"))
-                .collect();
-            lines.push(("b_k/chains by depth", per_depth.join(", ")));
+        if let Some(sel) = &self.selection {
+            let seeds = sel.distinct_seeds();
+            lines.push((
+                "seeds",
+                format!(
+                    "{} distinct for {} chains",
+                    seeds.iter().sum::<usize>(),
+                    self.chains.chains()
+                ),
+            ));
+            if self.settings.multiplexed {
+                let per_depth: Vec<String> = sel
+                    .normalisation
+                    .iter()
+                    .zip(&sel.chains_per_group)
+                    .zip(&seeds)
+                    .enumerate()
+                    .filter(|(_, ((b, _), _))| **b > 0.0)
+                    .map(|(k, ((b, n), s))| format!("{k}: {b:.4}/{n}/{s}"))
+                    .collect();
+                lines.push(("b_k/chains/seeds by depth", per_depth.join(", ")));
+            }
         }
         lines
     }

@@ -153,6 +153,25 @@ impl SeedSelection {
         self.normalisation.iter().sum()
     }
 
+    /// Per group, the number of distinct seeds its chains start from. Far fewer seeds than
+    /// chains means correlated chains (they start on the same path): a sign that the
+    /// bootstrap found little light, or that one heavy evaluation took a group's whole share.
+    pub fn distinct_seeds(&self) -> Vec<usize> {
+        let mut pairs: Vec<(u32, u32)> = self
+            .group
+            .iter()
+            .copied()
+            .zip(self.candidate.iter().copied())
+            .collect();
+        pairs.sort_unstable();
+        pairs.dedup();
+        let mut seeds = vec![0; self.chains_per_group.len()];
+        for (g, _) in pairs {
+            seeds[g as usize] += 1;
+        }
+        seeds
+    }
+
     /// The factor on every splat of group `group`'s chains: b_k / chains_k. With it, the image
     /// is the film's splat sums x pixels / steps per chain, and its mean luminance is b.
     pub fn splat_scale(&self, group: usize) -> f64 {
