@@ -163,8 +163,6 @@ pub struct Bootstrap {
     /// Per group, one weight per evaluation (the target: luminance, MIS-weighted in mmlt).
     pub weights: Vec<Vec<f32>>,
     pub evaluated: u64,
-    /// Evaluations with a non-zero weight.
-    pub nonzero: u64,
     pub done: bool,
     /// Per group, the evaluations' contributions summed per pixel (with `bootstrap_image`).
     pub images: Vec<Vec<DVec3>>,

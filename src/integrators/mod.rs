@@ -50,6 +50,17 @@ fn graph_report<S: IntegratorState>(data: &SceneData, settings: &S::Settings) ->
     }
 }
 
+/// The `render` options of PPM and SPPM.
+const PROGRESSIVE_OPTIONS: &[&str] = &["--photons-per-pass", "--alpha", "--radius"];
+/// The `render` options of the Metropolis integrators.
+const MLT_OPTIONS: &[&str] = &[
+    "--large-step",
+    "--sigma",
+    "--bootstrap",
+    "--chains",
+    "--mis",
+];
+
 /// Every integrator built into this binary, in the order reports list them.
 pub static REGISTRY: [IntegratorInfo; 7] = [
     IntegratorInfo {
@@ -93,7 +104,7 @@ pub static REGISTRY: [IntegratorInfo; 7] = [
         name: "ppm",
         description: "progressive photon mapping (visible points found once)",
         unbiased: false,
-        options: &["--photons-per-pass", "--alpha", "--radius"],
+        options: PROGRESSIVE_OPTIONS,
         render: |data, s, budget, control, _| {
             let settings = sppm::ProgressiveSettings::from_render(s, false);
             driver::render_passes::<sppm::ProgressiveState>(data, settings, budget, control)
@@ -107,7 +118,7 @@ pub static REGISTRY: [IntegratorInfo; 7] = [
         name: "sppm",
         description: "stochastic progressive photon mapping",
         unbiased: false,
-        options: &["--photons-per-pass", "--alpha", "--radius"],
+        options: PROGRESSIVE_OPTIONS,
         render: |data, s, budget, control, _| {
             let settings = sppm::ProgressiveSettings::from_render(s, true);
             driver::render_passes::<sppm::ProgressiveState>(data, settings, budget, control)
@@ -122,13 +133,7 @@ pub static REGISTRY: [IntegratorInfo; 7] = [
         description: "Kelemen primary-sample-space MLT over full BDPT",
         // Consistent: b is estimated by the bootstrap, and a render does not resume.
         unbiased: false,
-        options: &[
-            "--large-step",
-            "--sigma",
-            "--bootstrap",
-            "--chains",
-            "--mis",
-        ],
+        options: MLT_OPTIONS,
         render: |data, s, budget, control, _| {
             mlt::render(
                 data,
@@ -145,13 +150,7 @@ pub static REGISTRY: [IntegratorInfo; 7] = [
         name: "mmlt",
         description: "multiplexed MLT: one BDPT strategy per evaluation (pbrt-v4's mlt)",
         unbiased: false,
-        options: &[
-            "--large-step",
-            "--sigma",
-            "--bootstrap",
-            "--chains",
-            "--mis",
-        ],
+        options: MLT_OPTIONS,
         render: |data, s, budget, control, _| {
             mlt::render(
                 data,

@@ -43,11 +43,6 @@ impl PrimarySamples {
         self.used[slot]
     }
 
-    /// Every slot's length.
-    pub fn used_all(&self) -> &[u32] {
-        &self.used
-    }
-
     /// Sets slot `slot`'s length (at most `dims`).
     pub fn set_used(&mut self, slot: usize, used: u32) {
         assert!(

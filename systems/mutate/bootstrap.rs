@@ -108,21 +108,19 @@ crate::system! {
         }
         let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
         bootstrap.evaluated += n as u64;
-        bootstrap.nonzero += found as u64;
         let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
         bootstrap.done = match settings.bootstrap {
             Some(per_group) => bootstrap.evaluated >= per_group * groups,
             None => {
                 let m = settings.mutations_per_pixel.unwrap_or(TIMED_MUTATIONS_PER_PIXEL);
-                automatic_bootstrap_done(&weights, bootstrap.nonzero, chains, m, pixels)
+                automatic_bootstrap_done(&weights, chains, m, pixels)
             }
         };
         Flow::new(n, found)
     }
 }
 
-/// The automatic bootstrap rule, given the weights so far (per group) and how many are
-/// non-zero: at least `BOOTSTRAP_PER_CHAIN` evaluations per chain (and `MIN_BOOTSTRAP_SAMPLES`
+/// The automatic bootstrap rule, given the weights so far (per group): at least `BOOTSTRAP_PER_CHAIN` evaluations per chain (and `MIN_BOOTSTRAP_SAMPLES`
 /// per group), then more until b's relative error is below `BOOTSTRAP_NOISE_FRACTION` of the
 /// image noise at `mutations_per_pixel` and the non-zero evaluations number
 /// `NONZERO_SEEDS_PER_CHAIN` per chain; never more than `MAX_BOOTSTRAP_EVALUATIONS`, nor more
@@ -130,12 +128,16 @@ crate::system! {
 /// black scene stops at the floor.
 pub fn automatic_bootstrap_done(
     weights: &[&[f32]],
-    nonzero: u64,
     chains: u64,
     mutations_per_pixel: u64,
     pixels: u64,
 ) -> bool {
     let evaluated: u64 = weights.iter().map(|w| w.len() as u64).sum();
+    let nonzero = weights
+        .iter()
+        .flat_map(|w| w.iter())
+        .filter(|&&x| x > 0.0)
+        .count();
     let groups = weights.len() as u64;
     let floor = (BOOTSTRAP_PER_CHAIN * chains).max(MIN_BOOTSTRAP_SAMPLES as u64 * groups);
     let cap = MAX_BOOTSTRAP_EVALUATIONS.min(floor.max(mutations_per_pixel * pixels));
@@ -159,8 +161,7 @@ mod tests {
 
     fn done(w: &[Vec<f32>], chains: u64, m: u64, pixels: u64) -> bool {
         let views: Vec<&[f32]> = w.iter().map(Vec::as_slice).collect();
-        let nonzero = w.iter().flatten().filter(|&&x| x > 0.0).count() as u64;
-        automatic_bootstrap_done(&views, nonzero, chains, m, pixels)
+        automatic_bootstrap_done(&views, chains, m, pixels)
     }
 
     #[test]

@@ -134,6 +134,10 @@ fn scatter_chunk<const KIND: u8>(
         // The material queue holds only this kind; saying so lets the compiler drop the
         // other kinds' arms of the inlined BSDF sample.
         if surf.material.kind() as u8 != KIND {
+            debug_assert!(
+                false,
+                "a path of another material kind in this kind's queue"
+            );
             p.flags[i].set(PathFlags::DEAD, true);
             continue;
         }
