@@ -146,7 +146,7 @@ pub struct RenderArgs {
     pub quiet: bool,
 }
 
-/// Options of the Metropolis integrators (pssmlt, mmlt).
+/// Options of the Metropolis integrators (pssmlt, mmlt, mlt).
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct MltArgs {
     /// Probability of a large step, in [0, 1] (pssmlt, mmlt; default 0.3).
@@ -162,6 +162,18 @@ pub struct MltArgs {
     /// Markov chains (default: the mutations / 64, between 256 and 32768).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1 << 15))]
     pub chains: Option<u64>,
+    /// Direct illumination rendered apart by path tracing at this many samples per pixel
+    /// (mlt; default 16, 0: the chains render it too).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(0..=1 << 16))]
+    pub direct_spp: Option<u32>,
+    /// The path-space mutations to use, comma-separated from bidir, lens, caustic,
+    /// multichain (mlt; default all). bidir alone can reach every path; the perturbations
+    /// cannot, so a list without bidir is refused.
+    #[arg(long, value_parser = parse_mutations)]
+    pub mutations: Option<u8>,
+    /// The lens perturbation's smallest raster offset in pixels (mlt; default 0.1).
+    #[arg(long, value_parser = parse_lens_min)]
+    pub lens_min: Option<f32>,
 }
 
 impl MltArgs {
@@ -171,6 +183,9 @@ impl MltArgs {
             sigma: self.sigma,
             bootstrap: self.bootstrap,
             chains: self.chains,
+            direct_spp: self.direct_spp,
+            mutations: self.mutations,
+            lens_min: self.lens_min,
         }
     }
 }
@@ -179,6 +194,31 @@ fn parse_probability(s: &str) -> std::result::Result<f32, String> {
     match s.parse::<f32>() {
         Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
         _ => Err(format!("expected a probability in [0, 1], not {s}")),
+    }
+}
+
+fn parse_mutations(s: &str) -> std::result::Result<u8, String> {
+    use crate::mlt::path_chains::MutationKind;
+    let mut bits = 0u8;
+    for name in s.split(',').map(str::trim) {
+        let kind = MutationKind::parse(name).ok_or_else(|| {
+            format!("unknown mutation {name:?}; expected bidir, lens, caustic or multichain")
+        })?;
+        bits |= 1 << kind as u8;
+    }
+    if bits & (1 << MutationKind::Bidirectional as u8) == 0 {
+        return Err(
+            "the mutations must include bidir: the perturbations alone cannot reach every path"
+                .into(),
+        );
+    }
+    Ok(bits)
+}
+
+fn parse_lens_min(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
+        _ => Err(format!("expected a positive number of pixels, not {s}")),
     }
 }
 

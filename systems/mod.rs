@@ -41,10 +41,18 @@ pub mod connect {
     pub mod strategies;
 }
 
-/// Metropolis chains: the bootstrap and its seeds, proposals, acceptance and splats.
+/// Metropolis chains: the bootstrap and its seeds, proposals, acceptance and splats; for
+/// path-space MLT the mutations, one file each, and their acceptance.
 pub mod mutate {
     pub mod accept;
+    pub mod bidirectional;
     pub mod bootstrap;
+    pub mod caustic_perturbation;
+    pub mod lens_perturbation;
+    pub mod multichain_perturbation;
+    pub mod path_accept;
+    pub mod path_mutation;
+    pub mod path_seeds;
     pub mod propose;
 }
 

@@ -89,28 +89,16 @@ pub fn thesis_biased(scene: &str, label: &str) -> Option<[f64; 2]> {
         .map(|r| r.2)
 }
 
-/// The integrator that runs a study algorithm's rows: the study's MLT rows run `mmlt` until
-/// the path-space `mlt` is built.
-pub fn runs_as(integrator: &str) -> &str {
-    match integrator {
-        "mlt" if IntegratorKind::from_name("mlt").is_err() => "mmlt",
-        other => other,
-    }
-}
-
 /// The unbiased integrators of the study this binary has.
 pub fn unbiased_built() -> Vec<IntegratorKind> {
     UNBIASED
         .iter()
-        .filter_map(|n| IntegratorKind::from_name(runs_as(n)).ok())
+        .filter_map(|n| IntegratorKind::from_name(n).ok())
         .collect()
 }
 
 fn display_name(integrator: &str) -> String {
-    match runs_as(integrator) {
-        run if run != integrator => format!("{} ({run})", integrator.to_ascii_uppercase()),
-        _ => integrator.to_ascii_uppercase(),
-    }
+    integrator.to_ascii_uppercase()
 }
 
 fn thousands(photons: u64) -> String {
@@ -124,7 +112,7 @@ pub struct SceneResult<'a> {
 }
 
 /// The preset's summary.md: the study's two tables with our seconds and relMSE beside its
-/// seconds, algorithms not built yet listed as missing.
+/// seconds.
 pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: &[u64]) -> String {
     let mut s = String::new();
     let mut sizes: Vec<String> = scenes
@@ -181,7 +169,7 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
         for integrator in UNBIASED {
             let thesis = thesis_unbiased(scene.key, integrator);
             let _ = write!(s, "| {label} | {} |", display_name(integrator));
-            let built = IntegratorKind::from_name(runs_as(integrator)).ok();
+            let built = IntegratorKind::from_name(integrator).ok();
             if built.is_none() && !missing.contains(&integrator.to_string()) {
                 missing.push(integrator.to_string());
             }
@@ -224,7 +212,7 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
         for (integrator, passes, row) in BIASED {
             let thesis = thesis_biased(scene.key, row);
             let _ = write!(s, "| {label} | {row} |");
-            let built = IntegratorKind::from_name(runs_as(integrator)).ok();
+            let built = IntegratorKind::from_name(integrator).ok();
             if built.is_none() && !missing.contains(&integrator.to_string()) {
                 missing.push(integrator.to_string());
             }

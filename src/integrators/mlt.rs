@@ -82,6 +82,8 @@ pub struct MltSettings {
     pub mutations_per_pixel: Option<u64>,
     /// Keep the bootstrap's own image (tests).
     pub bootstrap_image: bool,
+    /// Depths below this get no weight (path-space MLT renders them apart).
+    pub min_depth: u32,
 }
 
 impl MltSettings {
@@ -107,6 +109,7 @@ impl MltSettings {
             chains: s.mlt.chains.map(|c| c as usize),
             mutations_per_pixel: None,
             bootstrap_image: false,
+            min_depth: 0,
         }
     }
 
@@ -310,32 +313,39 @@ fn evaluation() -> Node<MltState> {
     )
 }
 
+/// The bootstrap's nodes: waves of BDPT evaluations with fresh numbers and their weights,
+/// then the seeds chosen by weight, replayed and adopted. Path-space MLT runs them too.
+pub fn bootstrap_nodes() -> Vec<Node<MltState>> {
+    use mutate::bootstrap;
+    vec![
+        Node::Loop {
+            name: "bootstrap_waves",
+            queue_len: |s: &MltState| !s.bootstrap.done as usize,
+            body: vec![
+                Node::system(bootstrap::BeginBootstrapWave),
+                evaluation(),
+                Node::system(gather::chain_contributions::GatherChainContributions),
+                Node::system(bootstrap::CollectBootstrapWeights),
+            ],
+        },
+        Node::system(bootstrap::SelectSeeds),
+        Node::system(bootstrap::ReplaySeeds),
+        evaluation(),
+        Node::system(gather::chain_contributions::GatherChainContributions),
+        Node::system(bootstrap::AdoptSeeds),
+    ]
+}
+
 /// The MLT graph (the same for pssmlt and mmlt; the settings choose).
 pub fn graph() -> Graph<MltState> {
-    use mutate::{accept, bootstrap, propose};
+    use mutate::{accept, propose};
     Graph::new(
         "mlt",
         vec![
             Node::Once {
                 name: "bootstrap",
                 needed: |s: &MltState| !s.bootstrap.done,
-                body: vec![
-                    Node::Loop {
-                        name: "bootstrap_waves",
-                        queue_len: |s: &MltState| !s.bootstrap.done as usize,
-                        body: vec![
-                            Node::system(bootstrap::BeginBootstrapWave),
-                            evaluation(),
-                            Node::system(gather::chain_contributions::GatherChainContributions),
-                            Node::system(bootstrap::CollectBootstrapWeights),
-                        ],
-                    },
-                    Node::system(bootstrap::SelectSeeds),
-                    Node::system(bootstrap::ReplaySeeds),
-                    evaluation(),
-                    Node::system(gather::chain_contributions::GatherChainContributions),
-                    Node::system(bootstrap::AdoptSeeds),
-                ],
+                body: bootstrap_nodes(),
             },
             Node::Loop {
                 name: "mutation_steps",

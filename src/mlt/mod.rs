@@ -40,6 +40,8 @@
 mod accept;
 mod chains;
 mod mutate;
+pub mod path_chains;
+pub mod path_space;
 mod seeds;
 
 pub use accept::{

@@ -99,7 +99,8 @@ crate::system! {
         for k in 0..n {
             let item = bootstrap.evaluated + k as u64;
             let g = (item % groups) as usize;
-            bootstrap.weights[g].push(contributions.target[k]);
+            let below = settings.multiplexed && (g as u32) < settings.min_depth;
+            bootstrap.weights[g].push(if below { 0.0 } else { contributions.target[k] });
             if let Some(image) = bootstrap.images.get_mut(g) {
                 for (pixel, value) in contributions.entries(k) {
                     image[pixel as usize] += value.as_dvec3();

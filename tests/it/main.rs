@@ -17,6 +17,7 @@ mod fuzz_targets;
 mod graph;
 mod hostile;
 mod mlt;
+mod path_mlt;
 mod photon_mapping;
 mod photons;
 mod properties;

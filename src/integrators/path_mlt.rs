@@ -1,0 +1,380 @@
+//! Veach's path-space Metropolis light transport (`--integrator mlt`, Veach and Guibas 1997, as
+//! Mitsuba 0.5's `mlt`, the study's): each chain's state is a path of vertices in path-vertex
+//! columns (`crate::mlt::path_chains`), and mutations change part of it: the bidirectional
+//! mutation, the lens, caustic and multi-chain perturbations (systems/mutate/, one file each;
+//! the path-space functions in `crate::mlt::path_space`). Per chain and step one mutation is
+//! chosen uniformly among the enabled ones suitable for its path, and accepted with
+//! a = min(1, f(y) T(y -> x) / (f(x) T(x -> y))).
+//!
+//! Direct illumination (paths of depth 0 and 1) is rendered apart by path tracing at
+//! `--direct-spp` samples per pixel (16, as Mitsuba) and added, so the chains spend their
+//! mutations on indirect light; `--direct-spp 0` leaves every depth to the chains.
+//!
+//! The graph (one run per pass; a pass is `steps_per_pass` steps of every chain):
+//!
+//! ```text
+//! once direct_illumination: render_direct_illumination
+//! once bootstrap: [mmlt bootstrap, balance heuristic] -> adopt_seed_paths
+//! loop mutation_steps:
+//!     choose_mutations -> bidirectional_mutation -> lens_perturbation -> caustic_perturbation
+//!     -> multichain_perturbation -> accept_path_proposals -> splat_path_expected_values
+//!     -> commit_path_proposals
+//! ```
+//!
+//! The caustic and multi-chain perturbations are in the graph only for scenes with a specular
+//! material (they apply to nothing else). Paths are at most `MLT_MAX_DEPTH` deep, as in the
+//! primary-sample MLTs (the bootstrap's bound).
+
+use crate::bsdf::MaterialKind;
+use crate::film::Film;
+use crate::integrators::driver::{IntegratorState, PassState, render_passes};
+use crate::integrators::mlt::{self, MltSettings, MltState};
+use crate::integrators::pt::PtSettings;
+use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
+use crate::mlt::Splat;
+use crate::mlt::path_chains::{MutationKind, MutationSet, PathChains};
+use crate::path::MisHeuristic;
+use crate::pipeline::{Flow, Graph, Node};
+use crate::systems::mutate::{
+    bidirectional, caustic_perturbation, lens_perturbation, multichain_perturbation, path_accept,
+    path_mutation, path_seeds,
+};
+use glam::DVec3;
+use std::sync::Arc;
+
+/// Mitsuba's samples per pixel for the direct illumination rendered apart.
+pub const DEFAULT_DIRECT_SPP: u32 = 16;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PathMltSettings {
+    pub seed: u64,
+    pub max_depth: u32,
+    pub mutations: MutationSet,
+    /// Direct illumination rendered apart at this many samples per pixel (0: none).
+    pub direct_spp: u32,
+    /// The bootstrap's settings (multiplexed BDPT, balance heuristic).
+    pub bootstrap: MltSettings,
+}
+
+impl PathMltSettings {
+    pub fn from_render(data: &SceneData, s: &RenderSettings) -> PathMltSettings {
+        let cam = data.scene.camera;
+        let direct_spp = s.mlt.direct_spp.unwrap_or(DEFAULT_DIRECT_SPP);
+        let mut mutations = MutationSet::new(cam.width, cam.height, s.mlt.lens_min.unwrap_or(0.1));
+        if let Some(m) = s.mlt.mutations {
+            mutations.enabled = m;
+        }
+        let mut bootstrap = MltSettings::from_render(s, true);
+        bootstrap.mis = MisHeuristic::Balance;
+        if direct_spp == 0 {
+            mutations.min_vertices = 2;
+        } else {
+            bootstrap.min_depth = 2;
+        }
+        mutations.max_vertices = bootstrap.max_depth as usize + 2;
+        PathMltSettings {
+            seed: s.seed,
+            max_depth: bootstrap.max_depth,
+            mutations,
+            direct_spp,
+            bootstrap,
+        }
+    }
+}
+
+/// Proposals and acceptances per mutation kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct MutationCounts {
+    pub proposed: [u64; 4],
+    pub accepted: [u64; 4],
+    /// Proposals with f = 0 (impossible or black paths).
+    pub zero: [u64; 4],
+}
+
+impl std::ops::Add for MutationCounts {
+    type Output = MutationCounts;
+    fn add(mut self, o: MutationCounts) -> MutationCounts {
+        for k in 0..4 {
+            self.proposed[k] += o.proposed[k];
+            self.accepted[k] += o.accepted[k];
+            self.zero[k] += o.zero[k];
+        }
+        self
+    }
+}
+
+/// The state of a path-space MLT render.
+pub struct PathMltState {
+    pub data: Arc<SceneData>,
+    pub settings: PathMltSettings,
+    pub pixels: u64,
+    pub steps_per_pass: u64,
+    /// The multiplexed BDPT bootstrap that seeds the chains.
+    pub seeding: MltState,
+    pub seeded: bool,
+    pub seed_mismatches: usize,
+    pub chains: PathChains,
+    /// What every splat of a step is worth: b / chains.
+    pub splat_scale: f32,
+    pub step: u64,
+    pub steps_left: u64,
+    pub counts: MutationCounts,
+    pub splats: Vec<Vec<Splat>>,
+    /// Splat sums per pixel, in chain order (f64).
+    pub splat_sums: Vec<DVec3>,
+    pub nonfinite: u64,
+    /// The direct illumination's film, once rendered.
+    pub direct: Option<Film>,
+}
+
+struct RenderDirectIllumination;
+
+crate::system! {
+    RenderDirectIllumination = "render_direct_illumination";
+    on PathMltState {
+        read data, settings;
+        write direct;
+    }
+    run {
+        let pt = PtSettings {
+            max_depth: 1,
+            ..PtSettings::new(crate::sampling::mix64(settings.seed ^ DIRECT_DOMAIN), 1)
+        };
+        let outcome = crate::integrators::driver::render_waves::<crate::integrators::pt::PtState>(
+            data.clone(),
+            pt,
+            Budget::SamplesPerPixel(settings.direct_spp as u64),
+            &Control {
+                stop: &std::sync::atomic::AtomicBool::new(false),
+                progress: &|_, _| {},
+            },
+            None,
+        );
+        let n = outcome.film.width * outcome.film.height;
+        *direct = Some(outcome.film);
+        Flow::new(n, n)
+    }
+}
+
+/// Separates the direct image's numbers from the chains'.
+const DIRECT_DOMAIN: u64 = 0x6469_7265_6374_5f6c;
+
+/// The graph for a scene: the perturbations that can apply to its paths.
+pub fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState> {
+    let specular = data
+        .scene
+        .materials
+        .iter()
+        .any(|m| m.kind() == MaterialKind::Dielectric);
+    let set = &settings.mutations;
+    let mut step: Vec<Node<PathMltState>> = vec![Node::system(path_mutation::ChooseMutations)];
+    if set.has(MutationKind::Bidirectional) {
+        step.push(Node::system(bidirectional::BidirectionalMutation));
+    }
+    if set.has(MutationKind::Lens) {
+        step.push(Node::system(lens_perturbation::LensPerturbation));
+    }
+    if specular && set.has(MutationKind::Caustic) {
+        step.push(Node::system(caustic_perturbation::CausticPerturbation));
+    }
+    if specular && set.has(MutationKind::MultiChain) {
+        step.push(Node::system(
+            multichain_perturbation::MultiChainPerturbation,
+        ));
+    }
+    step.extend([
+        Node::system(path_accept::AcceptPathProposals),
+        Node::system(path_accept::SplatPathExpectedValues),
+        Node::system(path_accept::CommitPathProposals),
+    ]);
+    let mut nodes = Vec::new();
+    if settings.direct_spp > 0 {
+        nodes.push(Node::Once {
+            name: "direct_illumination",
+            needed: |s: &PathMltState| s.direct.is_none(),
+            body: vec![Node::system(RenderDirectIllumination)],
+        });
+    }
+    nodes.push(Node::Once {
+        name: "bootstrap",
+        needed: |s: &PathMltState| !s.seeded,
+        body: vec![
+            Node::nested(
+                Graph::new("mmlt_bootstrap", mlt::bootstrap_nodes()),
+                "seeding",
+                |s: &mut PathMltState| &mut s.seeding,
+                <MltState as IntegratorState>::INPUTS,
+            ),
+            Node::system(path_seeds::AdoptSeedPaths),
+        ],
+    });
+    nodes.push(Node::Loop {
+        name: "mutation_steps",
+        queue_len: |s: &PathMltState| s.steps_left as usize,
+        body: step,
+    });
+    Graph::new("mlt", nodes)
+}
+
+impl IntegratorState for PathMltState {
+    type Settings = PathMltSettings;
+    const INPUTS: &'static [&'static str] = &[
+        "data",
+        "settings",
+        "pixels",
+        "steps_per_pass",
+        "seeding",
+        "seeded",
+        "seed_mismatches",
+        "chains",
+        "splat_scale",
+        "step",
+        "steps_left",
+        "counts",
+        "splats",
+        "splat_sums",
+        "nonfinite",
+        "direct",
+    ];
+    fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState> {
+        graph(data, settings)
+    }
+}
+
+impl PassState for PathMltState {
+    fn new(data: Arc<SceneData>, settings: PathMltSettings) -> PathMltState {
+        let cam = data.scene.camera;
+        let pixels = cam.width as u64 * cam.height as u64;
+        let seeding = <MltState as PassState>::new(data.clone(), settings.bootstrap);
+        let chains = seeding.chains.chains();
+        PathMltState {
+            steps_per_pass: settings.bootstrap.steps_per_pass(pixels),
+            seeding,
+            seeded: false,
+            seed_mismatches: 0,
+            chains: PathChains::new(chains),
+            splat_scale: 0.0,
+            step: 0,
+            steps_left: 0,
+            counts: MutationCounts::default(),
+            splats: Vec::new(),
+            splat_sums: vec![DVec3::ZERO; pixels as usize],
+            nonfinite: 0,
+            direct: None,
+            data,
+            settings,
+            pixels,
+        }
+    }
+
+    fn begin_pass(&mut self, _pass: u64) {
+        self.steps_left = self.steps_per_pass;
+    }
+
+    fn report(&self) -> Vec<(&'static str, String)> {
+        let c = &self.counts;
+        let total: u64 = c.proposed.iter().sum();
+        let accepted: u64 = c.accepted.iter().sum();
+        let per_kind: Vec<String> = MutationKind::ALL
+            .iter()
+            .filter(|&&k| c.proposed[k as usize] > 0)
+            .map(|&k| {
+                let i = k as usize;
+                format!(
+                    "{} {:.1}% of {} ({:.1}% zero)",
+                    k.name(),
+                    100.0 * c.accepted[i] as f64 / c.proposed[i] as f64,
+                    c.proposed[i],
+                    100.0 * c.zero[i] as f64 / c.proposed[i] as f64
+                )
+            })
+            .collect();
+        let mut lines = vec![
+            (
+                "mutations",
+                format!(
+                    "{} ({} chains x {} steps), {:.1}% accepted",
+                    total,
+                    self.chains.chains(),
+                    self.step,
+                    100.0 * accepted as f64 / total.max(1) as f64
+                ),
+            ),
+            ("acceptance by mutation", per_kind.join(", ")),
+        ];
+        let mut inner = self.seeding.report_lines();
+        inner.retain(|(k, _)| *k == "bootstrap" || *k == "seeds");
+        lines.extend(inner);
+        lines.push((
+            "seed paths",
+            format!("{} not rebuilt", self.seed_mismatches),
+        ));
+        lines.push((
+            "direct illumination",
+            if self.settings.direct_spp > 0 {
+                format!("{} spp of path tracing, added", self.settings.direct_spp)
+            } else {
+                "in the chains".into()
+            },
+        ));
+        lines
+    }
+
+    fn finish(self, _passes: u64) -> (Film, usize, usize) {
+        let (w, h) = (
+            self.data.scene.camera.width as usize,
+            self.data.scene.camera.height as usize,
+        );
+        let scale = if self.step == 0 {
+            0.0
+        } else {
+            self.pixels as f64 / self.step as f64
+        };
+        let mut sums: Vec<DVec3> = self.splat_sums.iter().map(|v| *v * scale).collect();
+        let mut nonfinite = self.nonfinite;
+        if let Some(direct) = &self.direct {
+            let image = direct.image();
+            for (s, v) in sums.iter_mut().zip(&image.pixels) {
+                *s += v.as_dvec3();
+            }
+            nonfinite += direct.nonfinite;
+        }
+        let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), nonfinite)
+            .expect("the image's size");
+        film.nonfinite = nonfinite;
+        let chains = self.chains.chains();
+        (film, PathChains::bytes_per_chain(), chains)
+    }
+}
+
+/// Renders with path-space MLT: `--spp M` is M mutations per pixel (rounded up to whole
+/// passes), a time budget ends at a pass boundary.
+pub fn render(
+    data: Arc<SceneData>,
+    mut settings: PathMltSettings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let budget = match budget {
+        Budget::SamplesPerPixel(m) => {
+            settings.bootstrap.mutations_per_pixel = Some(m);
+            Budget::SamplesPerPixel(settings.bootstrap.passes_for(pixels, m))
+        }
+        b => b,
+    };
+    let b = &settings.bootstrap;
+    let mutations_per_pass = b.steps_per_pass(pixels) * b.chain_count(pixels) as u64;
+    let mut outcome = render_passes::<PathMltState>(data, settings, budget, control);
+    outcome.samples = outcome.passes * mutations_per_pass;
+    let wall = outcome.wall.as_secs_f64().max(1e-9);
+    outcome.notes.insert(
+        0,
+        (
+            "mutations/s",
+            crate::report::mega(outcome.samples as f64 / wall),
+        ),
+    );
+    outcome
+}

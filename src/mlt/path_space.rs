@@ -1,0 +1,425 @@
+//! Path space for Veach's MLT (`--integrator mlt`): a path as a list of vertices from the light
+//! (x_0, on an emitter) to the camera (x_{n-1}), its measurement contribution f(x), the area
+//! densities with which a subpath sampler would make each vertex, and the scalar sampling and
+//! tracing the mutations (systems/mutate/) regrow paths with.
+//!
+//! Delta lobes (the smooth dielectric) follow one convention everywhere, as in Veach's thesis
+//! and pbrt's BDPT: the Dirac factor is left out of both the BSDF and the density. At a
+//! specular vertex f(x) holds the lobe's weight (F, or (1 - F) / eta^2 for radiance through a
+//! refraction) and a sampler's "density" is the lobe's discrete probability; f(y) / T(x -> y)
+//! is then finite and right, because a mutation samples every specular vertex it regrows
+//! through the same lobe (the connecting edge never touches one).
+//!
+//! f(x) = Le(x_0 -> x_1) * prod_i [fs(x_i) |wi . ns_i|] * prod_edges [|cos at the edge's light
+//! end (geometric)| / d^2] * W(x_{n-2}), with W the camera's importance times its cosine
+//! (`Frustum::project`): the estimator of the whole film's mean, as a path tracer's sample is,
+//! so an image is splats x pixels / mutations.
+
+use crate::accel::Accel;
+use crate::bsdf::dielectric::fresnel;
+use crate::bsdf::{Material, TransportMode, sample_direction};
+use crate::components::CAMERA_VERTEX;
+use crate::geometry::{offset_ray_origin, spawn_ray_to, surface_point};
+use crate::math::Frame;
+use crate::path::{PathContext, Vertex, VertexKind, local_frame, to_area};
+use crate::sampling::{SampleKey, cosine_hemisphere};
+use crate::scene::SceneData;
+use glam::{DVec3, Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// Most vertices a path may have (storage per chain): depth `MLT_MAX_DEPTH` plus both ends.
+pub const MAX_VERTICES: usize = crate::integrators::mlt::MLT_MAX_DEPTH as usize + 2;
+
+/// A path, light first.
+pub type Path = Vec<Vertex>;
+
+/// Random numbers of one chain's step: dimension after dimension of its key.
+pub struct StepNumbers {
+    key: SampleKey,
+    next: u32,
+}
+
+impl StepNumbers {
+    pub fn new(key: SampleKey, first: u32) -> StepNumbers {
+        StepNumbers { key, next: first }
+    }
+    #[inline]
+    pub fn get(&mut self) -> f32 {
+        let u = self.key.get(self.next);
+        self.next += 1;
+        u
+    }
+    #[inline]
+    pub fn get2(&mut self) -> Vec2 {
+        Vec2::new(self.get(), self.get())
+    }
+}
+
+/// What the path-space functions need of the scene.
+#[derive(Clone, Copy)]
+pub struct PathSpace<'a> {
+    pub ctx: PathContext<'a>,
+    pub accel: &'a Accel,
+    pub data: &'a SceneData,
+}
+
+/// The unit direction from `a` to `b`.
+#[inline]
+pub fn dir(a: &Vertex, b: &Vertex) -> Vec3 {
+    (b.p - a.p).normalize_or_zero()
+}
+
+impl<'a> PathSpace<'a> {
+    pub fn new(data: &'a SceneData) -> PathSpace<'a> {
+        PathSpace {
+            ctx: PathContext::new(&data.scene),
+            accel: &data.accel,
+            data,
+        }
+    }
+
+    /// The camera vertex.
+    pub fn camera_vertex(&self) -> Vertex {
+        let cam = &self.ctx.camera;
+        Vertex {
+            kind: VertexKind::Camera,
+            p: cam.position,
+            p_error: Vec3::ZERO,
+            ng: cam.forward,
+            ns: cam.forward,
+            triangle: CAMERA_VERTEX,
+            beta: Vec3::ZERO,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+        }
+    }
+
+    /// Whether `v` scatters only by a delta lobe.
+    #[inline]
+    pub fn is_specular(&self, v: &Vertex) -> bool {
+        v.kind != VertexKind::Camera && matches!(self.ctx.material(v), Material::Dielectric { .. })
+    }
+
+    /// The surface vertex of a point on triangle `triangle` given its position (the light
+    /// vertices BDPT stores carry the geometric normal as shading normal; a path vertex
+    /// carries the surface's own, whatever role it plays).
+    pub fn reshade(&self, v: &Vertex) -> Vertex {
+        if v.kind == VertexKind::Camera {
+            return *v;
+        }
+        let tris = &self.data.scene.triangles;
+        let i = v.triangle as usize;
+        let (p0, p1, p2) = (tris.p0[i], tris.p1[i], tris.p2[i]);
+        let n = (p1 - p0).cross(p2 - p0);
+        let area2 = n.length_squared();
+        if area2 == 0.0 {
+            return *v;
+        }
+        let b1 = (v.p - p0).cross(p2 - p0).dot(n) / area2;
+        let b2 = (p1 - p0).cross(v.p - p0).dot(n) / area2;
+        let sp = surface_point(tris, v.triangle, b1, b2);
+        let ns = if sp.ns.dot(sp.ng) < 0.0 {
+            -sp.ns
+        } else {
+            sp.ns
+        };
+        Vertex { ns, ..*v }
+    }
+
+    /// Sets every vertex's kind from its place: light, surfaces, camera.
+    pub fn fix_kinds(path: &mut [Vertex]) {
+        let n = path.len();
+        for (i, v) in path.iter_mut().enumerate() {
+            v.kind = if i + 1 == n {
+                VertexKind::Camera
+            } else if i == 0 {
+                VertexKind::Light
+            } else {
+                VertexKind::Surface
+            };
+        }
+    }
+
+    /// f(x) and the pixel the path lands in; `None` when it carries nothing (or leaves the
+    /// image). Visibility is not tested here: every edge of a path a mutation makes was traced
+    /// or tested when made.
+    /// f is kept in f64: a product of many 1 / d^2 (scenes in millimetres) leaves f32's range.
+    pub fn contribution(&self, path: &[Vertex]) -> Option<(DVec3, u32)> {
+        let n = path.len();
+        if n < 2 || path[n - 1].kind != VertexKind::Camera || path[0].kind != VertexKind::Light {
+            return None;
+        }
+        let cam = &path[n - 1];
+        let (pixel, importance) = self.ctx.camera.project(dir(cam, &path[n - 2]))?;
+        let le = self.ctx.emitted(&path[0], dir(&path[0], &path[1]));
+        let mut f = le.as_dvec3() * f64::from(importance);
+        if f == DVec3::ZERO {
+            return None;
+        }
+        for i in 0..n - 1 {
+            let (a, b) = (&path[i], &path[i + 1]);
+            let d = b.p - a.p;
+            let dist2 = d.length_squared();
+            if dist2 == 0.0 {
+                return None;
+            }
+            f *= f64::from(a.ng.dot(d).abs()) / (f64::from(dist2) * f64::from(dist2).sqrt());
+        }
+        for i in 1..n - 1 {
+            let v = &path[i];
+            let wo = dir(v, &path[i + 1]);
+            let wi = dir(v, &path[i - 1]);
+            f *= self
+                .scatter_weight(v, wo, wi, TransportMode::Radiance)
+                .as_dvec3();
+            if f == DVec3::ZERO {
+                return None;
+            }
+        }
+        (f.is_finite() && f.max_element() > 0.0).then_some((f, pixel as u32))
+    }
+
+    /// fs(wo, wi) |wi . ns| at a surface vertex (`wo` towards the camera side for radiance),
+    /// the delta factor left out at a specular vertex.
+    pub fn scatter_weight(&self, v: &Vertex, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
+        match self.ctx.material(v) {
+            Material::Dielectric { ior } => match specular_lobe(v, wo, wi) {
+                Some(reflect) => {
+                    let f = fresnel(wo.dot(v.ns), ior);
+                    if reflect {
+                        Vec3::splat(f)
+                    } else {
+                        let eta = if wo.dot(v.ns) >= 0.0 { ior } else { 1.0 / ior };
+                        let scale = match mode {
+                            TransportMode::Radiance => 1.0 / (eta * eta),
+                            TransportMode::Importance => 1.0,
+                        };
+                        Vec3::splat((1.0 - f) * scale)
+                    }
+                }
+                None => Vec3::ZERO,
+            },
+            _ => self.ctx.f(v, wo, wi, mode) * wi.dot(v.ns).abs(),
+        }
+    }
+
+    /// Solid-angle density with which a subpath at `v`, arrived from direction `wo` (towards
+    /// its previous vertex), samples `wi`; at a specular vertex the lobe's probability.
+    pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
+        if v.kind == VertexKind::Surface
+            && let Material::Dielectric { ior } = self.ctx.material(v)
+        {
+            return match specular_lobe(v, wo, wi) {
+                Some(true) => fresnel(wo.dot(v.ns), ior),
+                Some(false) => 1.0 - fresnel(wo.dot(v.ns), ior),
+                None => 0.0,
+            };
+        }
+        self.ctx.pdf_dir(v, wo, wi)
+    }
+
+    /// Area density at `path[to]` of sampling it from `path[from]` (adjacent), the sampler
+    /// having reached `path[from]` from its other neighbour: light-side samplers move up the
+    /// indices, camera-side ones down. `path[0]` as a light-side origin is sampled on the
+    /// emitters.
+    pub fn density(&self, path: &[Vertex], from: Option<usize>, to: usize) -> f32 {
+        let Some(from) = from else {
+            return self.ctx.pdf_light_origin(&path[to]);
+        };
+        let v = &path[from];
+        let wi = dir(v, &path[to]);
+        let pdf = if to > from {
+            // Light side.
+            match v.kind {
+                VertexKind::Light => return self.ctx.pdf_light_dir(v, &path[to]),
+                _ => self.pdf_dir(v, dir(v, &path[from - 1]), wi),
+            }
+        } else {
+            match v.kind {
+                VertexKind::Camera => self.ctx.camera.pdf_dir(wi),
+                _ => self.pdf_dir(v, dir(v, &path[from + 1]), wi),
+            }
+        };
+        to_area(pdf, v, &path[to])
+    }
+
+    /// Density of the vertices `path[lo..lo + count]` (the rest kept) had a light subpath made
+    /// the first `s` of them from `path[lo - 1]` (or from an emitter when lo = 0) and a camera
+    /// subpath the others from `path[lo + count]`, joined by one edge; 0 where that split
+    /// cannot make the path (a joint at a specular vertex).
+    pub fn split_density(&self, path: &[Vertex], lo: usize, count: usize, s: usize) -> f64 {
+        let joint_light = (lo + s).checked_sub(1);
+        let joint_camera = lo + s;
+        if let Some(a) = joint_light
+            && (!self.ctx.is_connectible(&path[a]) || !self.ctx.is_connectible(&path[joint_camera]))
+        {
+            return 0.0;
+        }
+        let mut d = 1.0f64;
+        for i in lo..lo + s {
+            d *= f64::from(self.density(path, i.checked_sub(1), i));
+        }
+        for i in (lo + s..lo + count).rev() {
+            d *= f64::from(self.density(path, Some(i + 1), i));
+        }
+        d
+    }
+
+    /// The first surface along `dir` from `from`, as a vertex.
+    pub fn trace(&self, from: &Vertex, dir: Vec3) -> Option<Vertex> {
+        let origin = match from.kind {
+            VertexKind::Camera => from.p,
+            _ => offset_ray_origin(from.p, from.p_error, from.ng, dir),
+        };
+        let hit = self.accel.closest_hit(origin, dir, f32::INFINITY)?;
+        let sp = surface_point(&self.data.scene.triangles, hit.triangle, hit.b1, hit.b2);
+        let ns = if sp.ns.dot(sp.ng) < 0.0 {
+            -sp.ns
+        } else {
+            sp.ns
+        };
+        Some(Vertex {
+            kind: VertexKind::Surface,
+            p: sp.p,
+            p_error: sp.p_error,
+            ng: sp.ng,
+            ns,
+            triangle: hit.triangle,
+            beta: Vec3::ZERO,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+        })
+    }
+
+    /// Whether nothing lies between `a` and `b`.
+    pub fn visible(&self, a: &Vertex, b: &Vertex) -> bool {
+        let (origin, d, t_max) = spawn_ray_to(a.p, a.p_error, a.ng, b.p, b.p_error, b.ng);
+        !self.accel.any_hit(origin, d, t_max)
+    }
+
+    /// A point on an emitter (by power, uniform on it).
+    pub fn sample_light_origin(&self, u_pick: f32, u_point: Vec2) -> Option<Vertex> {
+        if self.data.scene.emitters.triangle.is_empty() {
+            return None;
+        }
+        let e = self.data.scene.sample_emitter(u_pick, u_point);
+        let sp = e.point;
+        let ns = if sp.ns.dot(sp.ng) < 0.0 {
+            -sp.ns
+        } else {
+            sp.ns
+        };
+        Some(Vertex {
+            kind: VertexKind::Light,
+            p: sp.p,
+            p_error: sp.p_error,
+            ng: sp.ng,
+            ns,
+            triangle: e.triangle,
+            beta: Vec3::ZERO,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+        })
+    }
+
+    /// A direction out of `v` as a subpath would sample it (the camera's ray with the raster
+    /// position uniform, the light's cosine lobe, or the BSDF, arrived from `wo`) and the
+    /// solid-angle density the sampler reports for it (a delta lobe's probability).
+    pub fn sample_direction(
+        &self,
+        v: &Vertex,
+        wo: Vec3,
+        u: Vec2,
+        mode: TransportMode,
+    ) -> Option<(Vec3, f32)> {
+        match v.kind {
+            VertexKind::Camera => {
+                let cam = &self.ctx.camera;
+                let raster = Vec2::new(u.x * cam.width as f32, u.y * cam.height as f32);
+                let w = cam.direction(raster);
+                Some((w, cam.pdf_dir(w)))
+            }
+            VertexKind::Light => {
+                let local = cosine_hemisphere(u);
+                (local.z > 0.0).then(|| {
+                    (
+                        Frame::from_normal(v.ng).to_world(local).normalize(),
+                        local.z * std::f32::consts::FRAC_1_PI,
+                    )
+                })
+            }
+            VertexKind::Surface => {
+                let material = self.ctx.material(v);
+                let (frame, ng) = local_frame(&material, v, wo);
+                let (bs, wi) =
+                    sample_direction(&material, &frame, ng, wo, frame.to_local(wo), u, mode)?;
+                (bs.value.max_element() > 0.0).then_some((wi, bs.pdf))
+            }
+        }
+    }
+
+    /// The direction a specular vertex sends `wo` to by reflection (`reflect`) or refraction;
+    /// `None` under total internal reflection or where the shading normal would send it
+    /// through the wrong geometric side.
+    pub fn follow_specular(&self, v: &Vertex, wo: Vec3, reflect: bool) -> Option<Vec3> {
+        let Material::Dielectric { ior } = self.ctx.material(v) else {
+            return None;
+        };
+        let frame = Frame::from_normal(v.ns);
+        let w = frame.to_local(wo);
+        let local = if reflect {
+            Vec3::new(-w.x, -w.y, w.z)
+        } else {
+            let outside = w.z >= 0.0;
+            let eta = if outside { ior } else { 1.0 / ior };
+            let sin2_t = (w.x * w.x + w.y * w.y) / (eta * eta);
+            if sin2_t >= 1.0 {
+                return None;
+            }
+            let cos_t = (1.0 - sin2_t).sqrt();
+            Vec3::new(-w.x / eta, -w.y / eta, if outside { -cos_t } else { cos_t })
+        };
+        let wi = frame.to_world(local).normalize();
+        ((wi.dot(v.ng) * wo.dot(v.ng) > 0.0) == reflect).then_some(wi)
+    }
+
+    /// Luminance of f (Rec. 709, as `math::luminance`), the chains' target.
+    #[inline]
+    pub fn target(f: DVec3) -> f64 {
+        0.2126 * f.x + 0.7152 * f.y + 0.0722 * f.z
+    }
+}
+
+/// Whether `wi` leaves a specular vertex by reflection (`Some(true)`) or refraction, judged by
+/// the geometric sides of `wo` and `wi`.
+#[inline]
+pub fn specular_lobe(v: &Vertex, wo: Vec3, wi: Vec3) -> Option<bool> {
+    let (a, b) = (wo.dot(v.ng), wi.dot(v.ng));
+    if a == 0.0 || b == 0.0 {
+        return None;
+    }
+    Some(a * b > 0.0)
+}
+
+/// A 2D offset of length log-uniform in [r_min, r_max] (density ~ 1/r^2 on the plane, as
+/// Veach's perturbations), any direction: symmetric, so its density cancels in acceptance.
+pub fn perturb_offset(u: Vec2, r_min: f32, r_max: f32) -> Vec2 {
+    let r = r_max * (r_min / r_max).powf(u.x);
+    let phi = 2.0 * PI * u.y;
+    Vec2::new(r * phi.cos(), r * phi.sin())
+}
+
+/// `w` (unit) turned by an angle log-uniform in [theta_min, theta_max] about a uniformly
+/// chosen axis: the density depends only on the angle, so it is symmetric.
+pub fn perturb_direction(w: Vec3, u: Vec2, theta_min: f32, theta_max: f32) -> Vec3 {
+    let theta = theta_max * (theta_min / theta_max).powf(u.x);
+    let phi = 2.0 * PI * u.y;
+    let frame = Frame::from_normal(w);
+    let (s, c) = theta.sin_cos();
+    frame
+        .to_world(Vec3::new(s * phi.cos(), s * phi.sin(), c))
+        .normalize()
+}

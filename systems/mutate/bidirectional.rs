@@ -1,0 +1,191 @@
+//! Veach's bidirectional mutation: delete a subpath of the current path (its length from a
+//! two-tailed geometric distribution about 2 edges, its place uniform), regrow a new one of a
+//! length drawn about the deleted one's, s vertices from the light end and the rest from the
+//! camera end, and join them by one edge. Its transition density sums the densities of every
+//! split s that could have made the new vertices (each chosen with probability 1 / (added
+//! edges)), times the discrete probabilities of the deletion and the added length.
+
+use crate::bsdf::TransportMode;
+use crate::integrators::path_mlt::PathMltState;
+use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
+use crate::mlt::path_space::{Path, PathSpace, StepNumbers, dir};
+use crate::path::{VertexKind, to_area};
+
+/// P(k) of a two-tailed geometric distribution about `center` (ratio 1/2), on [lo, hi].
+pub fn two_tailed(center: usize, lo: usize, hi: usize, k: usize) -> f64 {
+    if k < lo || k > hi {
+        return 0.0;
+    }
+    let w = |j: usize| 0.5f64.powi((j as i64 - center as i64).unsigned_abs() as i32);
+    w(k) / (lo..=hi).map(w).sum::<f64>()
+}
+
+/// A draw from `two_tailed(center, lo, hi, .)` (lo <= hi).
+pub fn sample_two_tailed(center: usize, lo: usize, hi: usize, u: f32) -> usize {
+    let mut acc = 0.0;
+    let u = f64::from(u);
+    for k in lo..hi {
+        acc += two_tailed(center, lo, hi, k);
+        if u < acc {
+            return k;
+        }
+    }
+    hi
+}
+
+/// The lengths one bidirectional mutation changes: edges l..l + deleted of the path are
+/// replaced by `added` edges (edge -1 is the virtual one before the light vertex).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Change {
+    /// Last vertex kept on the light side (-1: none).
+    pub l: isize,
+    pub deleted: usize,
+    pub added: usize,
+}
+
+/// The added lengths allowed when `kept` vertices stay: the new path's vertex count
+/// kept + added - 1 within the set's limits.
+fn added_range(set: &MutationSet, kept: usize) -> Option<(usize, usize)> {
+    let lo = (set.min_vertices + 1).saturating_sub(kept).max(1);
+    let hi = (set.max_vertices + 1).checked_sub(kept)?;
+    (lo <= hi).then_some((lo, hi))
+}
+
+/// T(x -> y) for the change `c` that turns x into y.
+pub fn transition(
+    ps: &PathSpace,
+    set: &MutationSet,
+    x: &[crate::path::Vertex],
+    y: &[crate::path::Vertex],
+    c: Change,
+) -> f64 {
+    let n = x.len();
+    if c.deleted == 0 || c.deleted > n || c.added == 0 {
+        return 0.0;
+    }
+    let positions = n - c.deleted + 1;
+    let kept = n - c.deleted + 1;
+    let Some((lo, hi)) = added_range(set, kept) else {
+        return 0.0;
+    };
+    let discrete = two_tailed(2, 1, n, c.deleted) / positions as f64
+        * two_tailed(c.deleted, lo, hi, c.added)
+        / c.added as f64;
+    let first_new = (c.l + 1) as usize;
+    let count = c.added - 1;
+    let sum: f64 = (0..c.added)
+        .map(|s| ps.split_density(y, first_new, count, s))
+        .sum();
+    discrete * sum
+}
+
+/// Proposes a mutation of `x`; `None` when the regrown path is impossible (a miss, a joint
+/// at a specular vertex, an occluded joint).
+pub fn propose(
+    ps: &PathSpace,
+    set: &MutationSet,
+    x: &[crate::path::Vertex],
+    u: &mut StepNumbers,
+) -> Option<Proposal> {
+    let n = x.len();
+    let deleted = sample_two_tailed(2, 1, n, u.get());
+    let positions = n - deleted + 1;
+    let l = ((u.get() * positions as f32) as usize).min(positions - 1) as isize - 1;
+    let m = (l + deleted as isize) as usize;
+    let kept = n - deleted + 1;
+    let (lo, hi) = added_range(set, kept)?;
+    let added = sample_two_tailed(deleted, lo, hi, u.get());
+    let count = added - 1;
+    let s = ((u.get() * added as f32) as usize).min(added - 1);
+    let t = count - s;
+    let mut sampled = two_tailed(2, 1, n, deleted) / positions as f64
+        * two_tailed(deleted, lo, hi, added)
+        / added as f64;
+
+    let mut light: Path = x[..(l + 1) as usize].to_vec();
+    for _ in 0..s {
+        let next = match light.last() {
+            None => {
+                let v = ps.sample_light_origin(u.get(), u.get2())?;
+                sampled *= f64::from(ps.ctx.pdf_light_origin(&v));
+                v
+            }
+            Some(v) => {
+                let wo = light
+                    .len()
+                    .checked_sub(2)
+                    .map_or(glam::Vec3::ZERO, |i| dir(v, &light[i]));
+                let (w, pdf) = ps.sample_direction(v, wo, u.get2(), TransportMode::Importance)?;
+                let next = ps.trace(v, w)?;
+                sampled *= f64::from(to_area(pdf, v, &next));
+                next
+            }
+        };
+        light.push(next);
+    }
+    // The camera side, camera first; kept vertices are all surfaces there.
+    let mut camera: Path = x[m..].iter().rev().copied().collect();
+    for v in camera.iter_mut().skip(1) {
+        v.kind = VertexKind::Surface;
+    }
+    for _ in 0..t {
+        let v = *camera.last().expect("the camera is kept");
+        let wo = camera
+            .len()
+            .checked_sub(2)
+            .map_or(glam::Vec3::ZERO, |i| dir(&v, &camera[i]));
+        let (w, pdf) = ps.sample_direction(&v, wo, u.get2(), TransportMode::Radiance)?;
+        let next = ps.trace(&v, w)?;
+        sampled *= f64::from(to_area(pdf, &v, &next));
+        camera.push(next);
+    }
+    if let Some(a) = light.last() {
+        let c = camera.last().expect("the camera is kept");
+        if !ps.ctx.is_connectible(a) || !ps.ctx.is_connectible(c) || !ps.visible(a, c) {
+            return None;
+        }
+    }
+    let mut y = light;
+    y.extend(camera.into_iter().rev());
+    PathSpace::fix_kinds(&mut y);
+    let change = Change { l, deleted, added };
+    let forward = transition(ps, set, x, &y, change);
+    let reverse = transition(
+        ps,
+        set,
+        &y,
+        x,
+        Change {
+            l,
+            deleted: added,
+            added: deleted,
+        },
+    );
+    let recomputed = two_tailed(2, 1, n, deleted) / positions as f64
+        * two_tailed(deleted, lo, hi, added)
+        / added as f64
+        * ps.split_density(&y, (l + 1) as usize, count, s);
+    Some(Proposal {
+        path: y,
+        ratio: if forward > 0.0 {
+            reverse / forward
+        } else {
+            0.0
+        },
+        sampled_density: sampled,
+        recomputed_density: recomputed,
+    })
+}
+
+pub struct BidirectionalMutation;
+
+crate::system! {
+    BidirectionalMutation = "bidirectional_mutation";
+    on PathMltState {
+        read data, settings;
+        write chains;
+    }
+    run {
+        super::path_mutation::run(data, &settings.mutations, chains, MutationKind::Bidirectional, propose)
+    }
+}
