@@ -351,7 +351,7 @@ fn bad_input_gives_one_clear_message_and_exit_1() {
 }
 
 #[test]
-fn the_thesis_tables_list_the_mlt_rows_as_mmlt() {
+fn the_thesis_tables_hold_the_studys_seconds_beside_ours() {
     use stagelight::compare::thesis::{SCENES, SceneResult, summary_markdown};
     let scenes: Vec<SceneResult> = SCENES
         .iter()
@@ -364,10 +364,9 @@ fn the_thesis_tables_list_the_mlt_rows_as_mmlt() {
     assert!(md.contains("## Unbiased algorithms, by samples per pixel"));
     assert!(md.contains("## Biased algorithms, by photons per pass"));
     assert!(md.contains("| 25 spp: s | thesis s | relMSE |"), "{md}");
-    // The thesis' own figures sit beside ours: MLT on the room took 38 s at 841 spp. Its
-    // rows run mmlt until the path-space mlt is built.
+    // The thesis' own figures sit beside ours: MLT on the room took 38 s at 841 spp.
     assert!(
-        md.contains("| room | MLT (mmlt) | not run | 4 | | not run | 20 | | not run | 38 | |"),
+        md.contains("| room | MLT | not run | 4 | | not run | 20 | | not run | 38 | |"),
         "{md}"
     );
     assert!(md.contains("| Cornell box | PPM, 75 passes |"), "{md}");
@@ -412,7 +411,7 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         }
     }
     let md = std::fs::read_to_string(out.join("summary.md")).unwrap();
-    // PT has our seconds and relMSE beside the thesis' 1, 17 and 37 s; MLT runs mmlt.
+    // PT has our seconds and relMSE beside the thesis' 1, 17 and 37 s; MLT is path-space mlt.
     let pt_row = md
         .lines()
         .find(|l| l.starts_with("| Cornell box | PT |"))
@@ -430,8 +429,8 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
     assert!(cells[5].parse::<f64>().is_ok(), "relMSE cell: {pt_row}");
     let mlt_row = md
         .lines()
-        .find(|l| l.starts_with("| room | MLT (mmlt) |"))
-        .expect("an MLT row, run by mmlt");
+        .find(|l| l.starts_with("| room | MLT |"))
+        .expect("an MLT row");
     assert!(!mlt_row.contains("missing"), "{mlt_row}");
     let bdpt_row = md
         .lines()
