@@ -1,4 +1,4 @@
-//! The `stagelight` command line: render, reference, compare, diff and bench.
+//! The `stagelight` command line: render, reference, merge, compare, diff and bench.
 
 use crate::commands::bench::BenchOptions;
 use crate::commands::reference::ReferenceOptions;
@@ -35,6 +35,9 @@ pub enum Command {
     /// Renders each integrator at each budget and writes a report folder of speed against
     /// error: results.csv, error_vs_time.png/.svg, grid.png, summary.md.
     Compare(CompareArgs),
+    /// Adds the partial films of shards (`render` or `reference` with --shard) into the
+    /// image one machine would have made; each PART.exr's film is PART.exr.checkpoint.
+    Merge(MergeArgs),
     /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
     Diff { image: PathBuf, reference: PathBuf },
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
@@ -103,6 +106,72 @@ fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
     s.parse::<SamplerKind>().map_err(|e| e.to_string())
 }
 
+/// Which passes of a render this run makes (a shard); see `commands::ShardChoice`.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct ShardArgs {
+    /// Render shard I of N (1 <= I <= N) of the --spp passes and write its partial film,
+    /// OUT.exr.checkpoint, beside the image, for `stagelight merge`.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard, conflicts_with_all = ["time", "pass_range"])]
+    pub shard: Option<(u64, u64)>,
+    /// Render passes FIRST..END (END excluded) of the --spp passes, as a shard.
+    #[arg(long, value_name = "FIRST..END", value_parser = parse_pass_range, conflicts_with = "time")]
+    pub pass_range: Option<(u64, u64)>,
+}
+
+impl ShardArgs {
+    pub fn choice(&self) -> Option<crate::commands::ShardChoice> {
+        use crate::commands::ShardChoice;
+        match (self.shard, self.pass_range) {
+            (Some((index, count)), _) => Some(ShardChoice::Shard { index, count }),
+            (None, Some((first, end))) => Some(ShardChoice::Range { first, end }),
+            (None, None) => None,
+        }
+    }
+}
+
+fn parse_shard(s: &str) -> std::result::Result<(u64, u64), String> {
+    let bad = || {
+        format!(
+            "expected I/N (shard I of N, 1 <= I <= N), not {}",
+            clip_word(s)
+        )
+    };
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (i, n): (u64, u64) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if i == 0 || i > n {
+        return Err(bad());
+    }
+    Ok((i, n))
+}
+
+fn parse_pass_range(s: &str) -> std::result::Result<(u64, u64), String> {
+    let bad = || format!("expected FIRST..END with FIRST < END, not {}", clip_word(s));
+    let (a, b) = s.split_once("..").ok_or_else(bad)?;
+    let (a, b): (u64, u64) = (
+        a.trim().parse().map_err(|_| bad())?,
+        b.trim().parse().map_err(|_| bad())?,
+    );
+    if a >= b {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
+
+/// `stagelight merge`.
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// The shards' images (the paths given to them with -o); each one's film is read from
+    /// PART.exr.checkpoint beside it.
+    #[arg(required = true, value_name = "PART.exr")]
+    pub parts: Vec<PathBuf>,
+    /// The merged EXR; a PNG preview goes beside it (and, for a reference, its checkpoint).
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
     /// Scene file (RON).
@@ -141,6 +210,8 @@ pub struct RenderArgs {
     /// Output EXR (default render/SCENE_INTEGRATOR.exr); a PNG preview is written beside it.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub shard: ShardArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -306,6 +377,8 @@ pub struct ReferenceArgs {
     /// Seconds between checkpoints (at most 1e9).
     #[arg(long, default_value = "30", value_parser = parse_checkpoint_seconds)]
     pub checkpoint_every: f64,
+    #[command(flatten)]
+    pub shard: ShardArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -490,6 +563,7 @@ fn run(cli: Cli) -> Result<i32> {
     match cli.command {
         Command::Render(args) => crate::commands::render::render(&args.options()),
         Command::Reference(args) => crate::commands::reference::reference(&args.options()),
+        Command::Merge(args) => crate::commands::merge::merge(&args.parts, &args.output),
         Command::Compare(args) if args.preset == Some(Preset::Thesis) => {
             crate::compare::thesis::run(&args.thesis_options())
         }
@@ -554,6 +628,7 @@ impl RenderArgs {
             },
             strategy_images: self.strategy_images.clone(),
             output,
+            shard: self.shard.choice(),
             threads: self.threads.map(|t| t as usize),
             quiet: self.quiet,
         }
@@ -589,6 +664,7 @@ impl ReferenceArgs {
                 .unwrap_or(std::time::Duration::from_secs(
                     MAX_CHECKPOINT_SECONDS as u64,
                 )),
+            shard: self.shard.choice(),
             threads: self.threads.map(|t| t as usize),
             quiet: self.quiet,
         }

@@ -4,6 +4,7 @@
 //! `compare::run` and `compare::thesis`.
 
 pub mod bench;
+pub mod merge;
 pub mod reference;
 pub mod render;
 
@@ -61,6 +62,26 @@ pub fn load_scene(path: &Path) -> Result<Arc<SceneData>> {
         eprintln!("warning: {w}");
     }
     Ok(Arc::new(SceneData::new(scene)))
+}
+
+/// Which passes a shard renders, as the command line said it (`--shard I/N` or
+/// `--pass-range FIRST..END`), before the render's pass count is known.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShardChoice {
+    Shard { index: u64, count: u64 },
+    Range { first: u64, end: u64 },
+}
+
+impl ShardChoice {
+    /// The passes of a render of `total` passes this shard makes.
+    pub fn range(self, total: u64) -> Result<crate::reference::PassRange> {
+        use crate::reference::PassRange;
+        match self {
+            ShardChoice::Shard { index, count } => PassRange::shard(index, count, total),
+            ShardChoice::Range { first, end } => PassRange::explicit(first, end, total),
+        }
+        .map_err(anyhow::Error::msg)
+    }
 }
 
 /// Checks, before any rendering, that every output can be written (`film::output::

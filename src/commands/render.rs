@@ -4,7 +4,8 @@ use super::{
     EXIT_INTERRUPTED, budget_bar, check_outputs, check_render_memory, check_samples, check_threads,
     exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool,
 };
-use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings};
+use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, Resume};
+use crate::reference::{Checkpoint, CheckpointHeader, checkpoint_path};
 use crate::sysinfo::cpu_seconds;
 use anyhow::{Result, bail};
 use std::path::PathBuf;
@@ -21,6 +22,9 @@ pub struct RenderOptions {
     pub strategy_images: Option<PathBuf>,
     /// Output EXR; the PNG preview goes beside it.
     pub output: PathBuf,
+    /// Only a shard of the passes (`--shard I/N` or `--pass-range`): its image and its
+    /// partial film (`OUT.exr.checkpoint`) for `stagelight merge`.
+    pub shard: Option<super::ShardChoice>,
     /// Worker threads (None: all cores).
     pub threads: Option<usize>,
     /// No progress bar.
@@ -46,9 +50,28 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     if let Budget::SamplesPerPixel(spp) = o.budget {
         check_samples("--spp", spp, &data)?;
     }
+    let shard = match (o.shard, o.budget) {
+        (None, _) => None,
+        (Some(_), _) if !o.integrator.is_unbiased() => bail!(
+            "--integrator {}: shards of a render are made by pt and bdpt (their films add \
+             exactly); the photon mappers and MLT are not split yet",
+            o.integrator
+        ),
+        (Some(_), _) if o.strategy_images.is_some() => {
+            bail!("--strategy-images are not made by shards: render them without --shard")
+        }
+        (Some(choice), Budget::SamplesPerPixel(spp)) => Some(choice.range(spp)?),
+        (Some(_), Budget::Seconds(_)) => {
+            bail!("--shard and --pass-range split --spp passes, not a --time budget")
+        }
+    };
     let png = output.with_extension("png");
+    let film_file = checkpoint_path(output);
     // Every output is checked before the render, not found unwritable after it.
     let mut outputs = vec![output.as_path(), png.as_path()];
+    if shard.is_some() {
+        outputs.push(&film_file);
+    }
     let strategy_probe = o.strategy_images.as_ref().map(|dir| dir.join("s1_t1.exr"));
     outputs.extend(strategy_probe.as_deref());
     check_outputs(&outputs, &[&o.scene])?;
@@ -69,11 +92,48 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         progress: &progress,
     };
     let cpu_start = cpu_seconds();
-    let outcome = pool.install(|| {
-        crate::integrators::render(o.integrator, data.clone(), &o.settings, budget, &control)
+    let mut outcome = pool.install(|| match shard {
+        None => {
+            crate::integrators::render(o.integrator, data.clone(), &o.settings, budget, &control)
+        }
+        Some(range) => {
+            let cam = data.scene.camera;
+            let start = Resume::shard_start(cam.width as usize, cam.height as usize, range.first);
+            let budget = Budget::SamplesPerPixel(range.end);
+            let settings = &o.settings;
+            crate::integrators::resume(
+                o.integrator,
+                data.clone(),
+                settings,
+                budget,
+                &control,
+                start,
+            )
+        }
     });
     let cpu = cpu_seconds() - cpu_start;
     bar.finish_and_clear();
+    if let Some(range) = shard {
+        // The report counts this shard's passes; its film lies beside the image.
+        let pixels = data.scene.camera.width as u64 * data.scene.camera.height as u64;
+        let header = CheckpointHeader {
+            passes: outcome.passes,
+            seconds: outcome.wall.as_secs_f64(),
+            nonfinite: outcome.film.nonfinite,
+            nonfinite_splats: outcome.film.nonfinite_splats,
+            made_by: "render".into(),
+            ..CheckpointHeader::start(&o.scene, &data, o.integrator, &o.settings, Some(range))
+        };
+        outcome.passes -= range.first;
+        outcome.samples -= range.first * pixels;
+        if outcome.passes > 0 {
+            Checkpoint {
+                header,
+                film: outcome.film.clone(),
+            }
+            .write(&film_file)?;
+        }
+    }
 
     if outcome.passes == 0 {
         // Nothing finished: an existing output is better than a black image.
@@ -94,6 +154,15 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     let mut report =
         crate::report::render_report(&o.scene, o.integrator, threads, &outcome, cpu, &data);
     report += &format!("wrote {} and {}\n", output.display(), png.display());
+    if let Some(range) = shard {
+        report += &format!(
+            "shard: passes {}..{} of {}; its film is {} (stagelight merge adds the shards)\n",
+            range.first,
+            range.first + outcome.passes,
+            range.total,
+            film_file.display()
+        );
+    }
     if outcome.interrupted {
         report += &format!(
             "interrupted: saved the {} finished passes ({} samples)\n",

@@ -1,14 +1,18 @@
-//! The film: per-pixel sums in f64 (so a million samples of a constant give that constant
-//! exactly), non-finite samples counted and never added, and images written as EXR (float32
-//! linear RGB, unscaled) and PNG (sRGB preview), each under a temporary name and renamed
-//! (`output`).
+//! The film: per-pixel sums held exactly (`exact`: a fixed-point integer that holds any sum of
+//! f32 samples without rounding, so the sum does not depend on the order of its samples and
+//! two films of disjoint samples add up to the film of all of them, bit for bit), non-finite
+//! samples counted and never added, and images written as EXR (float32 linear RGB, unscaled)
+//! and PNG (sRGB preview), each under a temporary name and renamed (`output`).
 //!
 //! A rejected (NaN or infinite) sample still counts in its pixel's sample count: it weighs as
 //! black in the pixel's mean, so a pixel with rejected samples is darkened by their share.
 //! Every integrator does the same (the photon mappers drop a non-finite estimate as zero),
 //! and the reports count them; `stagelight render` warns when their share is large.
 
+pub mod exact;
 pub mod output;
+
+use exact::ExactRgb;
 
 use glam::{DVec3, Vec3};
 use std::io::{Read, Seek};
@@ -19,12 +23,12 @@ use std::path::Path;
 pub struct Film {
     pub width: usize,
     pub height: usize,
-    sum: Vec<DVec3>,
+    sum: Vec<ExactRgb>,
     samples: Vec<u64>,
     /// Splatted contributions (light tracing): they land in any pixel, not the one sampled,
     /// and are divided by the number of passes (light paths per pixel), not by the pixel's
     /// own sample count. Empty until the first splat.
-    splat: Vec<DVec3>,
+    splat: Vec<ExactRgb>,
     /// Samples rejected because a channel was NaN or infinite (they count as black).
     pub nonfinite: u64,
     /// Splats rejected because a channel was NaN or infinite (counted apart from samples).
@@ -36,7 +40,7 @@ impl Film {
         Film {
             width,
             height,
-            sum: vec![DVec3::ZERO; width * height],
+            sum: vec![ExactRgb::ZERO; width * height],
             samples: vec![0; width * height],
             splat: Vec::new(),
             nonfinite: 0,
@@ -49,7 +53,7 @@ impl Film {
     pub fn add_sample(&mut self, pixel: usize, value: Vec3) {
         self.samples[pixel] += 1;
         if value.is_finite() {
-            self.sum[pixel] += value.as_dvec3();
+            self.sum[pixel].add_vec3(value);
         } else {
             self.nonfinite += 1;
         }
@@ -63,24 +67,49 @@ impl Film {
             return;
         }
         if self.splat.is_empty() {
-            self.splat = vec![DVec3::ZERO; self.width * self.height];
+            self.splat = vec![ExactRgb::ZERO; self.width * self.height];
         }
-        self.splat[pixel] += value.as_dvec3();
+        self.splat[pixel].add_vec3(value);
     }
 
-    /// Rebuilds a film from its per-pixel sums, sample counts and splat sums (e.g. a
-    /// checkpoint; `splat` may be empty for a film without splats); None when their lengths
-    /// do not match the size.
-    pub fn from_parts(
+    /// Adds another film of the same size (samples, splats and rejected counts): the film of
+    /// both sets of samples, exactly as if they had been added one by one. None when the
+    /// sizes differ.
+    pub fn add_film(&mut self, other: &Film) -> Option<()> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return None;
+        }
+        for (a, b) in self.sum.iter_mut().zip(&other.sum) {
+            a.add(b);
+        }
+        for (a, &b) in self.samples.iter_mut().zip(&other.samples) {
+            *a += b;
+        }
+        if !other.splat.is_empty() {
+            if self.splat.is_empty() {
+                self.splat = vec![ExactRgb::ZERO; self.width * self.height];
+            }
+            for (a, b) in self.splat.iter_mut().zip(&other.splat) {
+                a.add(b);
+            }
+        }
+        self.nonfinite += other.nonfinite;
+        self.nonfinite_splats += other.nonfinite_splats;
+        Some(())
+    }
+
+    /// Rebuilds a film from its exact per-pixel sums, sample counts and splat sums (a
+    /// checkpoint; `splat` may be empty); None when their lengths do not match the size.
+    pub fn from_exact_parts(
         width: usize,
         height: usize,
-        sum: Vec<DVec3>,
+        sum: Vec<ExactRgb>,
         samples: Vec<u64>,
-        splat: Vec<DVec3>,
+        splat: Vec<ExactRgb>,
         nonfinite: u64,
     ) -> Option<Film> {
         let pixels = width.checked_mul(height)?;
-        let splat = if splat.iter().all(|v| *v == DVec3::ZERO) {
+        let splat = if splat.iter().all(ExactRgb::is_zero) {
             Vec::new()
         } else {
             splat
@@ -99,14 +128,42 @@ impl Film {
             })
     }
 
-    /// Per-pixel splat sums (zero for every pixel of a film without splats).
-    pub fn splat_sum(&self, pixel: usize) -> DVec3 {
-        self.splat.get(pixel).copied().unwrap_or(DVec3::ZERO)
+    /// The exact per-pixel sums, row 0 first.
+    pub fn exact_sums(&self) -> &[ExactRgb] {
+        &self.sum
     }
 
-    /// Per-pixel sums of the finite samples, row 0 first.
-    pub fn sums(&self) -> &[DVec3] {
-        &self.sum
+    /// The exact per-pixel splat sums; empty for a film without splats.
+    pub fn exact_splats(&self) -> &[ExactRgb] {
+        &self.splat
+    }
+
+    /// Builds a film from f64 per-pixel sums, sample counts and splat sums (`splat` may be
+    /// empty for a film without splats), each sum rounded to the film's exact grid (units of
+    /// 2^-149); None when their lengths do not match the size. For films made from f64
+    /// images (the photon mappers, MLT).
+    pub fn from_parts(
+        width: usize,
+        height: usize,
+        sum: Vec<DVec3>,
+        samples: Vec<u64>,
+        splat: Vec<DVec3>,
+        nonfinite: u64,
+    ) -> Option<Film> {
+        let exact = |v: Vec<DVec3>| v.into_iter().map(ExactRgb::from_dvec3_rounded).collect();
+        Film::from_exact_parts(width, height, exact(sum), samples, exact(splat), nonfinite)
+    }
+
+    /// A pixel's splat sum, rounded to f64 (zero for a film without splats).
+    pub fn splat_sum(&self, pixel: usize) -> DVec3 {
+        self.splat
+            .get(pixel)
+            .map_or(DVec3::ZERO, ExactRgb::to_dvec3)
+    }
+
+    /// Per-pixel sums of the finite samples, rounded to f64, row 0 first.
+    pub fn sums(&self) -> Vec<DVec3> {
+        self.sum.iter().map(ExactRgb::to_dvec3).collect()
     }
 
     /// Per-pixel sample counts (rejected non-finite samples included).
@@ -128,11 +185,15 @@ impl Film {
             .zip(&self.samples)
             .enumerate()
             .map(|(i, (s, &n))| {
-                let mut v = if n == 0 { DVec3::ZERO } else { *s / n as f64 };
-                if let Some(&splat) = self.splat.get(i)
+                let mut v = if n == 0 {
+                    DVec3::ZERO
+                } else {
+                    s.to_dvec3() / n as f64
+                };
+                if let Some(splat) = self.splat.get(i)
                     && passes > 0.0
                 {
-                    v += splat / passes;
+                    v += splat.to_dvec3() / passes;
                 }
                 v.as_vec3()
             })

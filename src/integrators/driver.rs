@@ -81,7 +81,8 @@ pub fn render_waves<S: WaveState>(
         assert!(
             from.film.width == cam.width as usize
                 && from.film.height == cam.height as usize
-                && from.film.total_samples() == from.passes * pixels,
+                && from.first_pass <= from.passes
+                && from.film.total_samples() == (from.passes - from.first_pass) * pixels,
             "a resumed film must hold whole passes of this camera's image"
         );
         *state.film_mut() = from.film;

@@ -25,4 +25,5 @@ mod reference;
 mod scene_crosscheck;
 mod scene_errors;
 mod scene_loading;
+mod shards;
 mod stability;

@@ -55,6 +55,10 @@ fn header(width: usize, height: usize, passes: u64) -> impl Strategy<Value = Che
                     seconds,
                     nonfinite: 0,
                     nonfinite_splats: splats,
+                    first_pass: 0,
+                    shard: None,
+                    made_by: "reference".into(),
+                    settings: String::new(),
                 }
             },
         )
@@ -129,13 +133,12 @@ proptest! {
         for (i, s) in samples[..cut].iter().enumerate() {
             first.add_sample(i % n, *s);
         }
-        let splat: Vec<DVec3> = (0..n).map(|p| first.splat_sum(p)).collect();
-        let mut resumed = Film::from_parts(
+        let mut resumed = Film::from_exact_parts(
             w,
             h,
-            first.sums().to_vec(),
+            first.exact_sums().to_vec(),
             first.sample_counts().to_vec(),
-            splat,
+            first.exact_splats().to_vec(),
             first.nonfinite,
         )
         .unwrap();
@@ -203,6 +206,10 @@ proptest! {
                 seconds: 0.0,
                 nonfinite: part.film.nonfinite,
                 nonfinite_splats: part.film.nonfinite_splats,
+                first_pass: 0,
+                shard: None,
+                made_by: "reference".into(),
+                settings: String::new(),
             },
             film: part.film,
         };
@@ -213,7 +220,7 @@ proptest! {
             &settings,
             Budget::SamplesPerPixel(first + more),
             &control,
-            Resume { film, passes: first },
+            Resume { film, first_pass: 0, passes: first },
         );
         prop_assert_eq!(resumed.film.sums(), whole.film.sums());
         prop_assert_eq!(resumed.film.image(), whole.film.image());

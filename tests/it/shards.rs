@@ -1,0 +1,278 @@
+//! Shards and `stagelight merge`: a render split into pass ranges, each rendered by its own
+//! process, merges into the very bytes one process rendering every pass writes (EXR and PNG,
+//! as `cmp` would compare them); parts that do not belong together are refused, naming
+//! what is missing, overlapping or different.
+
+use crate::common::{shrunk_scene, stagelight, stderr, stdout, temp_dir};
+use std::path::{Path, PathBuf};
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Runs `stagelight` and fails the test, with its stderr, unless it exits 0.
+fn ok(args: &[&str]) -> String {
+    let o = stagelight(args);
+    assert_eq!(o.status.code(), Some(0), "{args:?}: {}", stderr(&o));
+    stdout(&o)
+}
+
+/// Runs `stagelight`, which must fail with exit 1 and one error line; returns that line.
+fn refused(args: &[&str]) -> String {
+    let o = stagelight(args);
+    assert_eq!(o.status.code(), Some(1), "{args:?}: {}", stdout(&o));
+    let err = stderr(&o);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.starts_with("error: "), "{err}");
+    err
+}
+
+/// The two files hold the same bytes (what `cmp` checks).
+fn assert_same_bytes(a: &Path, b: &Path) {
+    let (x, y) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    assert!(
+        x == y,
+        "{} and {} differ ({} and {} bytes)",
+        a.display(),
+        b.display(),
+        x.len(),
+        y.len()
+    );
+}
+
+/// Renders `command` (render or reference) whole, and as shards given by `shard_args` (each
+/// a list of extra arguments), merges the shards and compares the bytes.
+fn whole_against_merged(
+    name: &str,
+    command: &str,
+    common: &[&str],
+    shard_args: &[&[&str]],
+) -> PathBuf {
+    let dir = temp_dir(name);
+    let scene = shrunk_scene("cornell_box", 12, &dir.join("scene.ron"));
+    let whole = dir.join("whole.exr");
+    let mut args = vec![command, s(&scene), "-o", s(&whole), "--quiet"];
+    args.extend_from_slice(common);
+    ok(&args);
+    let mut parts = Vec::new();
+    for (i, extra) in shard_args.iter().enumerate() {
+        let part = dir.join(format!("part{i}.exr"));
+        let mut args = vec![command, s(&scene), "-o", s(&part), "--quiet"];
+        args.extend_from_slice(common);
+        args.extend_from_slice(extra);
+        // Each shard with another thread count: the film must not care.
+        let threads = (i % 3 + 1).to_string();
+        args.extend_from_slice(&["--threads", &threads]);
+        ok(&args);
+        assert!(
+            dir.join(format!("part{i}.exr.checkpoint")).exists(),
+            "the shard's film lies beside its image"
+        );
+        parts.push(part);
+    }
+    // Given in any order.
+    parts.reverse();
+    let merged = dir.join("merged.exr");
+    let mut args = vec!["merge"];
+    args.extend(parts.iter().map(|p| s(p)));
+    args.extend_from_slice(&["-o", s(&merged)]);
+    let out = ok(&args);
+    assert!(out.contains("merged"), "{out}");
+    assert_same_bytes(&whole, &merged);
+    assert_same_bytes(&whole.with_extension("png"), &merged.with_extension("png"));
+    dir
+}
+
+#[test]
+fn pt_shards_merge_into_the_single_render_byte_for_byte() {
+    whole_against_merged(
+        "shards-pt",
+        "render",
+        &["--spp", "10", "--seed", "3"],
+        &[
+            &["--shard", "1/3"],
+            &["--shard", "2/3"],
+            &["--shard", "3/3"],
+        ],
+    );
+}
+
+#[test]
+fn pt_sobol_shards_with_a_depth_cap_merge_byte_for_byte() {
+    whole_against_merged(
+        "shards-pt-sobol",
+        "render",
+        &["--spp", "7", "--sampler", "sobol", "--max-depth", "3"],
+        &[&["--pass-range", "0..1"], &["--pass-range", "1..7"]],
+    );
+}
+
+#[test]
+fn bdpt_shards_merge_into_the_single_render_byte_for_byte() {
+    // BDPT splats light tracing into other pixels: the splat sums merge exactly too.
+    whole_against_merged(
+        "shards-bdpt",
+        "render",
+        &["--integrator", "bdpt", "--spp", "6", "--seed", "5"],
+        &[
+            &["--pass-range", "0..2"],
+            &["--pass-range", "2..3"],
+            &["--pass-range", "3..6"],
+        ],
+    );
+}
+
+#[test]
+fn reference_shards_merge_into_the_single_reference_and_it_extends() {
+    let dir = whole_against_merged(
+        "shards-reference",
+        "reference",
+        &["--integrator", "bdpt", "--spp", "4", "--seed", "9"],
+        &[&["--shard", "1/2"], &["--shard", "2/2"]],
+    );
+    // The merged reference has the single reference's checkpoint: `reference` extends it
+    // to 6 spp exactly as it extends the single one.
+    let scene = dir.join("scene.ron");
+    for name in ["whole.exr", "merged.exr"] {
+        let out = ok(&[
+            "reference",
+            s(&scene),
+            "--integrator",
+            "bdpt",
+            "--spp",
+            "6",
+            "--seed",
+            "9",
+            "-o",
+            s(&dir.join(name)),
+            "--quiet",
+        ]);
+        assert!(out.contains("resumed from 4 spp"), "{out}");
+    }
+    assert_same_bytes(&dir.join("whole.exr"), &dir.join("merged.exr"));
+}
+
+#[test]
+fn merge_names_missing_overlapping_and_foreign_parts() {
+    let dir = temp_dir("shards-refused");
+    let scene = shrunk_scene("cornell_box", 6, &dir.join("scene.ron"));
+    let shard = |name: &str, extra: &[&str]| {
+        let out = dir.join(name);
+        let mut args = vec!["render", s(&scene), "--spp", "8", "-o", s(&out), "--quiet"];
+        args.extend_from_slice(extra);
+        ok(&args);
+        out
+    };
+    let a = shard("a.exr", &["--shard", "1/4"]);
+    let b = shard("b.exr", &["--shard", "2/4"]);
+    let d = shard("d.exr", &["--shard", "4/4"]);
+    let merged = dir.join("merged.exr");
+    let merge = |parts: &[&Path]| {
+        let mut args = vec!["merge"];
+        args.extend(parts.iter().map(|p| s(p)));
+        args.extend_from_slice(&["-o", s(&merged)]);
+        refused(&args)
+    };
+
+    let err = merge(&[&a, &b, &d]);
+    assert!(err.contains("passes 4..6 missing"), "{err}");
+    let err = merge(&[&a, &b]);
+    assert!(err.contains("passes 4..8 missing"), "{err}");
+
+    let wide = shard("wide.exr", &["--pass-range", "1..5"]);
+    let err = merge(&[&a, &wide, &d]);
+    assert!(err.contains("overlap in passes 1..2"), "{err}");
+    assert!(err.contains("wide.exr") && err.contains("a.exr"), "{err}");
+
+    let seeded = shard("seeded.exr", &["--shard", "3/4", "--seed", "1"]);
+    let err = merge(&[&a, &b, &seeded, &d]);
+    assert!(err.contains("seed 1") && err.contains("seed 0"), "{err}");
+
+    let bdpt = shard("bdpt.exr", &["--shard", "3/4", "--integrator", "bdpt"]);
+    let err = merge(&[&a, &b, &bdpt, &d]);
+    assert!(err.contains("integrator bdpt"), "{err}");
+
+    // A different scene (another image size here) is named too.
+    let other = shrunk_scene("cornell_box", 5, &dir.join("other.ron"));
+    let c5 = dir.join("c5.exr");
+    ok(&[
+        "render",
+        s(&other),
+        "--spp",
+        "8",
+        "--shard",
+        "3/4",
+        "-o",
+        s(&c5),
+        "--quiet",
+    ]);
+    let err = merge(&[&a, &b, &c5, &d]);
+    assert!(err.contains("image size 5x5"), "{err}");
+
+    // A part without a film, and a damaged film.
+    let plain = dir.join("plain.exr");
+    ok(&[
+        "render",
+        s(&scene),
+        "--spp",
+        "2",
+        "-o",
+        s(&plain),
+        "--quiet",
+    ]);
+    let err = merge(&[&a, &plain]);
+    assert!(
+        err.contains("plain.exr.checkpoint: no partial film"),
+        "{err}"
+    );
+    let film = dir.join("b.exr.checkpoint");
+    let mut bytes = std::fs::read(&film).unwrap();
+    let last = bytes.len() - 20;
+    bytes[last] ^= 1;
+    std::fs::write(&film, bytes).unwrap();
+    let err = merge(&[&a, &b, &d]);
+    assert!(
+        err.contains("b.exr.checkpoint") && err.contains("damaged"),
+        "{err}"
+    );
+    assert!(
+        !merged.exists(),
+        "nothing is written when parts are refused"
+    );
+
+    // Shards need a sample budget, and an unbiased integrator.
+    let o = stagelight(&[
+        "render",
+        s(&scene),
+        "--time",
+        "1",
+        "--shard",
+        "1/2",
+        "-o",
+        s(&merged),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--time"), "{}", stderr(&o));
+    let err = refused(&[
+        "render",
+        s(&scene),
+        "--spp",
+        "2",
+        "--shard",
+        "1/3",
+        "-o",
+        s(&merged),
+    ]);
+    assert!(err.contains("3 shards of 2 passes"), "{err}");
+    let err = refused(&[
+        "render",
+        s(&scene),
+        "--integrator",
+        "sppm",
+        "--shard",
+        "1/2",
+        "-o",
+        s(&merged),
+    ]);
+    assert!(err.contains("sppm"), "{err}");
+}
