@@ -38,6 +38,10 @@ pub enum Command {
     /// Adds the partial films of shards (`render` or `reference` with --shard) into the
     /// image one machine would have made; each PART.exr's film is PART.exr.checkpoint.
     Merge(MergeArgs),
+    /// Writes Slurm batch scripts that run a render or reference as a job array of shards
+    /// and a merge job after them, e.g. `stagelight slurm --shards 16 -o job -- reference
+    /// scenes/door_ajar.ron --spp 4096 -o ref.exr`, then `sh job/submit.sh`.
+    Slurm(SlurmArgs),
     /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
     Diff { image: PathBuf, reference: PathBuf },
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
@@ -170,6 +174,38 @@ pub struct MergeArgs {
     /// The merged EXR; a PNG preview goes beside it (and, for a reference, its checkpoint).
     #[arg(short, long)]
     pub output: PathBuf,
+}
+
+/// `stagelight slurm`.
+#[derive(clap::Args, Debug)]
+pub struct SlurmArgs {
+    /// Shards: the tasks of the job array.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub shards: u64,
+    /// Folder of the scripts (shards.sbatch, merge.sbatch, submit.sh), the shards' parts and
+    /// the logs.
+    #[arg(short, long, default_value = "slurm-job")]
+    pub output: PathBuf,
+    /// Slurm partition of the jobs.
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Time limit of each shard, as sbatch --time takes it (MINUTES, HH:MM:SS, D-HH:MM).
+    #[arg(long)]
+    pub time_limit: Option<String>,
+    /// CPUs of each shard (sbatch --cpus-per-task; the render's threads unless --threads).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub cpus_per_task: Option<u32>,
+    /// Seconds before a shard's time limit that Slurm stops it (it keeps its finished
+    /// passes; a reference's shard requeues and resumes).
+    #[arg(long, default_value_t = 300)]
+    pub signal_seconds: u32,
+    /// The stagelight binary the jobs run (default: this one).
+    #[arg(long)]
+    pub stagelight: Option<PathBuf>,
+    /// The command to shard, after `--`: `render ...` or `reference ...` with `--spp N` and
+    /// `-o OUT.exr` (where the merge job writes the merged image).
+    #[arg(last = true, required = true, value_name = "COMMAND")]
+    pub command: Vec<String>,
 }
 
 #[derive(clap::Args, Debug)]
@@ -564,6 +600,7 @@ fn run(cli: Cli) -> Result<i32> {
         Command::Render(args) => crate::commands::render::render(&args.options()),
         Command::Reference(args) => crate::commands::reference::reference(&args.options()),
         Command::Merge(args) => crate::commands::merge::merge(&args.parts, &args.output),
+        Command::Slurm(args) => crate::commands::slurm::write(&args.options()?),
         Command::Compare(args) if args.preset == Some(Preset::Thesis) => {
             crate::compare::thesis::run(&args.thesis_options())
         }
@@ -596,6 +633,61 @@ fn run(cli: Cli) -> Result<i32> {
             })?;
             Ok(0)
         }
+    }
+}
+
+impl SlurmArgs {
+    /// The options, after checking the command to shard as `stagelight` would parse it.
+    fn options(&self) -> Result<crate::commands::slurm::SlurmOptions> {
+        crate::commands::slurm::check_command(&self.command)?;
+        let shard = format!("1/{}", self.shards);
+        let line = ["stagelight"]
+            .into_iter()
+            .chain(self.command.iter().map(String::as_str))
+            .chain(["--shard", &shard]);
+        let parsed = Cli::try_parse_from(line).map_err(|e| {
+            let text = e.render().to_string();
+            anyhow::anyhow!(
+                "the command to shard: {}",
+                text.lines()
+                    .next()
+                    .unwrap_or_default()
+                    .trim_start_matches("error: ")
+            )
+        })?;
+        let spp = match parsed.command {
+            Command::Render(a) => a.spp.unwrap_or(64),
+            Command::Reference(a) => a.spp.unwrap_or(DEFAULT_REFERENCE_SPP),
+            _ => unreachable!("check_command lets render and reference through"),
+        };
+        if self.shards > spp {
+            anyhow::bail!(
+                "--shards {}: more shards than the command's {spp} passes",
+                self.shards
+            );
+        }
+        let binary = match &self.stagelight {
+            Some(b) => b.clone(),
+            None => std::env::current_exe().context("cannot find this stagelight binary")?,
+        };
+        let workdir = std::env::current_dir().context("cannot read the current folder")?;
+        let name = self
+            .command
+            .get(1)
+            .map(|scene| scene_stem(std::path::Path::new(scene)))
+            .unwrap_or_else(|| "stagelight".into());
+        Ok(crate::commands::slurm::SlurmOptions {
+            shards: self.shards,
+            dir: self.output.clone(),
+            command: self.command.clone(),
+            binary,
+            workdir,
+            partition: self.partition.clone(),
+            time_limit: self.time_limit.clone(),
+            cpus_per_task: self.cpus_per_task,
+            signal_seconds: self.signal_seconds,
+            name,
+        })
     }
 }
 

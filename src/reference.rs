@@ -1,15 +1,15 @@
 //! References: long renders that stop and resume without losing or changing a sample.
 //!
 //! A reference `REF.exr` is rendered in chunks of whole passes. After every chunk, the film's
-//! f64 sums and sample counts go to a checkpoint beside it, `REF.exr.checkpoint`, together
+//! exact sums and sample counts go to a checkpoint beside it, `REF.exr.checkpoint`, together
 //! with what produced them (integrator, seed, depth cap, a fingerprint of the prepared scene);
 //! then the EXR (float32, with its sample count and seed as header attributes) and a PNG
 //! preview are written. Both files are written to a temporary name and renamed, so an
 //! interruption at any moment leaves the previous complete pair.
 //!
 //! Running the same reference again continues from the checkpoint's passes. Samples are a pure
-//! function of (seed, pixel, sample index, dimension) and the film adds them in global sample
-//! order, so the result equals an uninterrupted render bit for bit. A checkpoint made with a
+//! function of (seed, pixel, sample index, dimension) and the film sums them exactly, so the
+//! result equals an uninterrupted render bit for bit. A checkpoint made with a
 //! different integrator, seed, depth cap or scene is refused rather than mixed in.
 //!
 //! The checkpoint file: the line `stagelight checkpoint 4`, one line of RON (the header

@@ -149,8 +149,12 @@ pub fn describe_reference(job: &ReferenceJob, o: &ReferenceOutcome) -> String {
     );
     if o.already_complete {
         format!("{file}: already complete with {what}; nothing rendered")
-    } else if o.passes_before > 0 {
-        format!("{file}: resumed from {} spp to {what}", o.passes_before)
+    } else if o.passes_before > job.shard.map_or(0, |r| r.first) {
+        let from = match job.shard {
+            Some(_) => format!("pass {}", o.passes_before),
+            None => format!("{} spp", o.passes_before),
+        };
+        format!("{file}: resumed from {from} to {what}")
     } else {
         format!("{file}: made with {what}")
     }

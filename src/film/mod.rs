@@ -59,6 +59,46 @@ impl Film {
         }
     }
 
+    /// Adds a wave of samples: `values[i]` is global sample `first_sample + i`, which lands in
+    /// pixel `(first_sample + i) % pixels` (as `add_sample` one by one would add them). The
+    /// sums are exact, so the pixels are shared out between threads in fixed blocks and the
+    /// film is the same for any thread count.
+    pub fn add_wave(&mut self, first_sample: u64, values: &[Vec3]) {
+        use rayon::prelude::*;
+        const BLOCK: usize = 1024;
+        let pixels = self.sum.len();
+        if pixels == 0 {
+            return;
+        }
+        // Sample i lands in pixel (offset + i) % pixels: pixel p's first sample is
+        // (p + pixels - offset) % pixels, then every `pixels` further.
+        let offset = (first_sample % pixels as u64) as usize;
+        self.nonfinite += self
+            .sum
+            .par_chunks_mut(BLOCK)
+            .zip(self.samples.par_chunks_mut(BLOCK))
+            .enumerate()
+            .map(|(block, (sums, counts))| {
+                let mut nonfinite = 0;
+                for (j, (sum, count)) in sums.iter_mut().zip(counts).enumerate() {
+                    let pixel = block * BLOCK + j;
+                    let mut i = (pixel + pixels - offset) % pixels;
+                    while i < values.len() {
+                        let value = values[i];
+                        *count += 1;
+                        if value.is_finite() {
+                            sum.add_vec3(value);
+                        } else {
+                            nonfinite += 1;
+                        }
+                        i += pixels;
+                    }
+                }
+                nonfinite
+            })
+            .sum::<u64>();
+    }
+
     /// Adds a splat to a pixel; a non-finite one is counted (in `nonfinite_splats`) instead.
     #[inline]
     pub fn add_splat(&mut self, pixel: usize, value: Vec3) {
@@ -471,6 +511,26 @@ mod tests {
         let img = film.image();
         assert_eq!(img.pixels[0], Vec3::splat(0.5));
         assert_eq!(img.pixels[1], Vec3::ZERO);
+    }
+
+    #[test]
+    fn a_wave_adds_as_its_samples_one_by_one() {
+        let values: Vec<Vec3> = (0..5000)
+            .map(|i| match i % 97 {
+                0 => Vec3::NAN,
+                k => Vec3::new(k as f32 * 0.37, 1.0 / k as f32, -(k as f32)),
+            })
+            .collect();
+        for (first, len) in [(0u64, 5000usize), (1234, 700), (2999, 4001), (7, 1)] {
+            let (mut one_by_one, mut wave) = (Film::new(37, 41), Film::new(37, 41));
+            for (i, &v) in values[..len].iter().enumerate() {
+                one_by_one.add_sample(((first + i as u64) % (37 * 41)) as usize, v);
+            }
+            wave.add_wave(first, &values[..len]);
+            assert_eq!(wave.exact_sums(), one_by_one.exact_sums());
+            assert_eq!(wave.sample_counts(), one_by_one.sample_counts());
+            assert_eq!(wave.nonfinite, one_by_one.nonfinite);
+        }
     }
 
     #[test]

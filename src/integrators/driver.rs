@@ -3,8 +3,9 @@
 //!
 //! - `render_waves` drives sample-based integrators (PT, BDPT): global sample ids in waves of
 //!   up to the state's wavefront, whole passes per wave where they fit. Samples are a pure
-//!   function of (seed, pixel, sample index, dimension) and the film adds them in sample
-//!   order, so a render can resume from the film of its finished passes, bit for bit.
+//!   function of (seed, pixel, sample index, dimension) and the film sums them exactly, so
+//!   a render can resume from the film of its finished passes, and shards of disjoint pass
+//!   ranges add up to one render's film, bit for bit.
 //! - `render_passes` drives pass-based integrators (the photon mappers, MLT): one graph run
 //!   per pass, the image made from the state at the end.
 

@@ -276,3 +276,103 @@ fn merge_names_missing_overlapping_and_foreign_parts() {
     ]);
     assert!(err.contains("sppm"), "{err}");
 }
+
+/// Runs a generated batch script with bash, as a Slurm node would (`SLURM_ARRAY_TASK_ID` set
+/// for array tasks), and fails the test unless it exits 0.
+#[cfg(unix)]
+fn run_script(script: &Path, task: Option<u64>) {
+    let mut command = std::process::Command::new("bash");
+    command.arg(script);
+    if let Some(task) = task {
+        command.env("SLURM_ARRAY_TASK_ID", task.to_string());
+    }
+    let o = command.output().expect("bash runs");
+    assert_eq!(
+        o.status.code(),
+        Some(0),
+        "{}: {}{}",
+        script.display(),
+        stdout(&o),
+        stderr(&o)
+    );
+}
+
+#[cfg(unix)]
+#[test]
+fn slurm_scripts_run_by_hand_merge_into_the_single_render() {
+    let dir = temp_dir("shards-slurm");
+    let scene = shrunk_scene("cornell_box", 8, &dir.join("scene.ron"));
+    let whole = dir.join("whole.exr");
+    ok(&[
+        "reference",
+        s(&scene),
+        "--spp",
+        "5",
+        "-o",
+        s(&whole),
+        "--quiet",
+    ]);
+    let job = dir.join("job");
+    let merged = dir.join("merged.exr");
+    let out = ok(&[
+        "slurm",
+        "--shards",
+        "3",
+        "--cpus-per-task",
+        "1",
+        "-o",
+        s(&job),
+        "--",
+        "reference",
+        s(&scene),
+        "--spp",
+        "5",
+        "-o",
+        s(&merged),
+    ]);
+    assert!(out.contains("submit.sh"), "{out}");
+    // The array's tasks, then the merge job, without Slurm.
+    for task in 1..=3 {
+        run_script(&job.join("shards.sbatch"), Some(task));
+    }
+    run_script(&job.join("merge.sbatch"), None);
+    assert_same_bytes(&whole, &merged);
+
+    // More shards than passes, or a command that is not render or reference, are refused
+    // before anything is written.
+    let err = refused(&[
+        "slurm",
+        "--shards",
+        "6",
+        "-o",
+        s(&job),
+        "--",
+        "reference",
+        s(&scene),
+        "--spp",
+        "5",
+        "-o",
+        s(&merged),
+    ]);
+    assert!(
+        err.contains("more shards than the command's 5 passes"),
+        "{err}"
+    );
+    let err = refused(&[
+        "slurm",
+        "--shards",
+        "2",
+        "-o",
+        s(&job),
+        "--",
+        "reference",
+        s(&scene),
+        "--spp",
+        "5",
+        "--sampler",
+        "halton",
+        "-o",
+        s(&merged),
+    ]);
+    assert!(err.contains("the command to shard"), "{err}");
+}
