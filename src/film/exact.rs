@@ -319,7 +319,8 @@ mod tests {
 
     #[test]
     fn rounding_to_f64_is_to_nearest() {
-        // 2^60 + 1 + 2^-10: the 1 alone would be a tie (to even: down); the 2^-10 tips it up.
+        // 2^53 + 1 lies halfway between two f64s: a tie, rounded to even (down); a further
+        // 2^-100 tips it up.
         let mut s = ExactSum::from_f64_exact(2f64.powi(53)).unwrap();
         s.add(&ExactSum::from_f64_exact(1.0).unwrap());
         assert_eq!(s.to_f64(), 2f64.powi(53));
