@@ -376,3 +376,73 @@ fn slurm_scripts_run_by_hand_merge_into_the_single_render() {
     ]);
     assert!(err.contains("the command to shard"), "{err}");
 }
+
+/// The generated shard script passes Slurm's signal to the render and requeues a reference
+/// shard only when stopped before its time limit (SIGINT), not when cancelled (SIGTERM).
+/// `scontrol` is a stand-in that records its arguments.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_shard_script_passes_the_signal_on_and_requeues_only_before_its_limit() {
+    use std::os::unix::fs::PermissionsExt;
+    let dir = temp_dir("shards-slurm-signal");
+    let scene = shrunk_scene("cornell_box", 8, &dir.join("scene.ron"));
+    let fake = dir.join("bin");
+    std::fs::create_dir_all(&fake).unwrap();
+    let scontrol = fake.join("scontrol");
+    let recorded = dir.join("scontrol.args");
+    std::fs::write(
+        &scontrol,
+        format!("#!/bin/sh\necho \"$@\" >> '{}'\n", recorded.display()),
+    )
+    .unwrap();
+    std::fs::set_permissions(&scontrol, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let path = format!("{}:{}", fake.display(), std::env::var("PATH").unwrap());
+    for (signal, requeued) in [("INT", true), ("TERM", false)] {
+        let job = dir.join(format!("job-{signal}"));
+        ok(&[
+            "slurm",
+            "--shards",
+            "2",
+            "-o",
+            s(&job),
+            "--",
+            "reference",
+            s(&scene),
+            // Minutes of work: only the signal ends it in time.
+            "--spp",
+            "4000000",
+            "--threads",
+            "1",
+            "-o",
+            s(&dir.join(format!("ref-{signal}.exr"))),
+        ]);
+        let checkpoint = job.join("parts/part-1.exr.checkpoint");
+        let mut child = std::process::Command::new("bash")
+            .arg(job.join("shards.sbatch"))
+            .env("SLURM_ARRAY_TASK_ID", "1")
+            .env("SLURM_ARRAY_JOB_ID", "77")
+            .env("PATH", &path)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        crate::common::wait_until(&mut child, "the shard's first checkpoint", || {
+            checkpoint.exists()
+        });
+        let sent = std::process::Command::new("kill")
+            .args([&format!("-{signal}"), &child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(sent.success());
+        let o = child.wait_with_output().unwrap();
+        assert_eq!(o.status.code(), Some(130), "SIG{signal}: {}", stderr(&o));
+        assert!(stdout(&o).contains("shard 1/2: exit 130"), "{}", stdout(&o));
+        let args = std::fs::read_to_string(&recorded).unwrap_or_default();
+        assert_eq!(
+            args.contains("requeue 77_1"),
+            requeued,
+            "SIG{signal}: {args:?}"
+        );
+        let _ = std::fs::remove_file(&recorded);
+    }
+}
