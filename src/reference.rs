@@ -1,25 +1,25 @@
 //! References: long renders that stop and resume without losing or changing a sample.
 //!
 //! A reference `REF.exr` is rendered in chunks of whole passes. After every chunk, the film's
-//! exact sums and sample counts go to a checkpoint beside it, `REF.exr.checkpoint`, together
+//! fixed-point sums and sample counts go to a checkpoint beside it, `REF.exr.checkpoint`, together
 //! with what produced them (integrator, seed, depth cap, a fingerprint of the prepared scene);
 //! then the EXR (float32, with its sample count and seed as header attributes) and a PNG
 //! preview are written. Both files are written to a temporary name and renamed, so an
 //! interruption at any moment leaves the previous complete pair.
 //!
 //! Running the same reference again continues from the checkpoint's passes. Samples are a pure
-//! function of (seed, pixel, sample index, dimension) and the film sums them exactly, so the
-//! result equals an uninterrupted render bit for bit. A checkpoint made with a
+//! function of (seed, pixel, sample index, dimension) and the film's fixed-point sums do not
+//! depend on the order of their samples, so the result equals an uninterrupted render bit for bit. A checkpoint made with a
 //! different integrator, seed, depth cap or scene is refused rather than mixed in.
 //!
 //! The checkpoint file: the line `stagelight checkpoint 4`, one line of RON (the header
 //! below, unknown fields refused, every value checked), then per pixel, row 0 first, the
-//! film's exact sums of the three channels (each `film::exact::LIMBS` u64 words), the u64
-//! sample count and, when the header says `splats: true`, the exact splat sums (light
-//! tracing's), all little-endian, then an FNV-1a 64 checksum of everything before it, the
+//! film's sums of the three channels (each an i128 in units of 2^-64, `film::fixed`), the u64
+//! sample count and, when the pixel data's length says so, the splat sums (light tracing's;
+//! three more i128), all little-endian, then an FNV-1a 64 checksum of everything before it, the
 //! first line and the header included (u64, little-endian). Version 3 files (f64 sums and
 //! splat sums, 56 bytes a pixel) and version 2 files (whose checksum covered the pixels only)
-//! are still read, their f64 sums taken over exactly.
+//! are still read, their f64 sums rounded to the unit (exact for samples of 2^-41 and more).
 //!
 //! A checkpoint may hold a range of passes, `first_pass..passes`: the partial film of a
 //! shard (`render` or `reference` with `--shard I/N`), which `stagelight merge` adds to the
@@ -29,7 +29,7 @@
 //! go when the process ends however it ends): a second run on the same output is refused
 //! instead of mixing its passes in.
 
-use crate::film::exact::{ExactRgb, LIMBS};
+use crate::film::fixed::{FIXED_RGB_BYTES, FixedRgb};
 use crate::film::{Film, Image};
 use crate::integrators::{
     Budget, Control, IntegratorKind, RenderSettings, Resume, SceneData, resume,
@@ -47,9 +47,6 @@ const MAGIC: &str = "stagelight checkpoint 4\n";
 const MAGIC_V3: &str = "stagelight checkpoint 3\n";
 /// Version 2: f64 sums, the checksum over the pixel data only.
 const MAGIC_V2: &str = "stagelight checkpoint 2\n";
-
-/// Bytes of one pixel's exact RGB sums.
-const EXACT_RGB_BYTES: usize = 3 * LIMBS * 8;
 
 /// Bytes per pixel in a version 2 or 3 checkpoint: the sum (3 x f64), the sample count (u64)
 /// and the splat sum (3 x f64, light tracing's contributions), little-endian.
@@ -111,6 +108,9 @@ pub struct CheckpointHeader {
     /// Non-finite splats (light tracing) rejected so far (absent from version 2 files).
     #[serde(default)]
     pub nonfinite_splats: u64,
+    /// Samples and splats rejected as beyond the film's range (`Film::out_of_range`).
+    #[serde(default)]
+    pub out_of_range: u64,
     /// The first pass in the film: the film holds passes `first_pass..passes` (a shard's
     /// range; 0 for a whole render).
     #[serde(default)]
@@ -167,6 +167,7 @@ impl CheckpointHeader {
             seconds: 0.0,
             nonfinite: 0,
             nonfinite_splats: 0,
+            out_of_range: 0,
             first_pass,
             shard: shard.map(|r| ShardRange {
                 end_pass: r.end,
@@ -177,15 +178,31 @@ impl CheckpointHeader {
         }
     }
 
+    /// Whether the film is of an unbiased integrator: sums of its samples, one per pixel and
+    /// pass. A biased integrator's shard (`render --shard`) holds its image times its weight
+    /// (MLT: its mutations; the photon mappers: its passes x pixels) in every pixel, with
+    /// the weight as every pixel's count, so that adding films averages the shards' images
+    /// weighted by it (`commands::merge`).
+    pub fn is_unbiased(&self) -> bool {
+        IntegratorKind::all()
+            .into_iter()
+            .any(|k| k.is_unbiased() && k.as_str() == self.integrator)
+    }
+
     /// Checks every value (the checksum vouches for the bytes, this for their sense).
     fn validate(&self) -> Result<(), String> {
-        let known = IntegratorKind::all()
+        let Some(kind) = IntegratorKind::all()
             .into_iter()
-            .any(|k| k.is_unbiased() && k.as_str() == self.integrator);
-        if !known {
+            .find(|k| k.as_str() == self.integrator)
+        else {
             return Err(format!(
-                "integrator \"{}\" is not one that makes references",
+                "integrator \"{}\" is not one stagelight has",
                 crate::scene::echo(&self.integrator)
+            ));
+        };
+        if !kind.is_unbiased() && (self.shard.is_none() || self.made_by != "render") {
+            return Err(format!(
+                "integrator {kind} is biased: its films are only the shards of a render"
             ));
         }
         let max = crate::scene::format::MAX_IMAGE_SIZE as usize;
@@ -233,7 +250,7 @@ impl CheckpointHeader {
         }
         let samples =
             (self.passes - self.first_pass).checked_mul((self.width * self.height) as u64);
-        if samples.is_none_or(|n| self.nonfinite > n) {
+        if self.is_unbiased() && samples.is_none_or(|n| self.nonfinite > n) {
             return Err(format!(
                 "{} rejected samples of {} passes",
                 self.nonfinite, self.passes
@@ -319,22 +336,18 @@ impl Checkpoint {
 
     /// The checkpoint file's bytes.
     pub fn to_bytes(&self) -> Result<Vec<u8>, String> {
-        let splats = self.film.exact_splats();
+        let splats = self.film.fixed_splats();
         let header = ron::to_string(&self.header).map_err(|e| e.to_string())?;
         let pixels = self.film.width * self.film.height;
-        let per_pixel = EXACT_RGB_BYTES * (1 + usize::from(!splats.is_empty())) + 8;
+        let per_pixel = FIXED_RGB_BYTES * (1 + usize::from(!splats.is_empty())) + 8;
         let mut bytes = Vec::with_capacity(MAGIC.len() + header.len() + 1 + pixels * per_pixel + 8);
         bytes.extend_from_slice(MAGIC.as_bytes());
         bytes.extend_from_slice(header.as_bytes());
         bytes.push(b'\n');
-        let put = |bytes: &mut Vec<u8>, rgb: &ExactRgb| {
-            for word in rgb.0.iter().flat_map(|c| c.0) {
-                bytes.extend_from_slice(&word.to_le_bytes());
-            }
-        };
+        let put = |bytes: &mut Vec<u8>, rgb: &FixedRgb| bytes.extend_from_slice(&rgb.to_le_bytes());
         for (i, (sum, &count)) in self
             .film
-            .exact_sums()
+            .fixed_sums()
             .iter()
             .zip(self.film.sample_counts())
             .enumerate()
@@ -393,7 +406,7 @@ impl Checkpoint {
             .ok_or_else(|| damaged("image size"))?;
         // Version 4 pixels hold splat sums or not, which their length says.
         let sizes: &[usize] = if version == 4 {
-            &[EXACT_RGB_BYTES + 8, 2 * EXACT_RGB_BYTES + 8]
+            &[FIXED_RGB_BYTES + 8, 2 * FIXED_RGB_BYTES + 8]
         } else {
             &[PIXEL_BYTES_V3]
         };
@@ -415,7 +428,7 @@ impl Checkpoint {
                 data_len_of(sizes[0])?
             )));
         };
-        let has_splats = pixel_bytes == 2 * EXACT_RGB_BYTES + 8;
+        let has_splats = pixel_bytes == 2 * FIXED_RGB_BYTES + 8;
         let data_len = payload.len() - 8;
         let (data, checksum) = payload.split_at(data_len);
         let mut hash = Fnv1a::new();
@@ -440,51 +453,38 @@ impl Checkpoint {
         let mut samples = Vec::with_capacity(pixels);
         let mut splat = Vec::new();
         if version == 4 {
-            let exact = |chunk: &[u8], first: usize| {
-                let mut rgb = ExactRgb::ZERO;
-                for (c, channel) in rgb.0.iter_mut().enumerate() {
-                    for (k, limb) in channel.0.iter_mut().enumerate() {
-                        *limb = u64::from_le_bytes(word(chunk, first + c * LIMBS + k));
-                    }
-                }
-                rgb
-            };
+            const COUNT: usize = FIXED_RGB_BYTES;
             for chunk in data.chunks_exact(pixel_bytes) {
-                sum.push(exact(chunk, 0));
-                samples.push(u64::from_le_bytes(word(chunk, 3 * LIMBS)));
+                sum.push(FixedRgb::from_le_bytes(&chunk[..COUNT]));
+                samples.push(u64::from_le_bytes(word(&chunk[COUNT..], 0)));
                 if has_splats {
-                    splat.push(exact(chunk, 3 * LIMBS + 1));
+                    splat.push(FixedRgb::from_le_bytes(&chunk[COUNT + 8..]));
                 }
             }
         } else {
-            // f64 sums of f32 samples are whole numbers of the exact film's units; one that
-            // is not was never made by a render.
-            let exact = |v: DVec3| {
-                ExactRgb::from_dvec3_exact(v)
-                    .ok_or_else(|| damaged("a pixel sum that no render makes"))
+            let fixed = |v: DVec3| {
+                FixedRgb::from_dvec3(v)
+                    .ok_or_else(|| damaged("a pixel sum beyond the film's range (+-2^63)"))
             };
             for chunk in data.chunks_exact(PIXEL_BYTES_V3) {
                 let f = |i| f64::from_le_bytes(word(chunk, i));
-                sum.push(exact(DVec3::new(f(0), f(1), f(2)))?);
+                sum.push(fixed(DVec3::new(f(0), f(1), f(2)))?);
                 samples.push(u64::from_le_bytes(word(chunk, 3)));
-                splat.push(exact(DVec3::new(f(4), f(5), f(6)))?);
+                splat.push(fixed(DVec3::new(f(4), f(5), f(6)))?);
             }
         }
-        let in_film = header.passes - header.first_pass;
+        let in_film = if header.is_unbiased() {
+            header.passes - header.first_pass
+        } else {
+            // A biased shard's weight, the same in every pixel.
+            samples.first().copied().unwrap_or(0).max(1)
+        };
         if let Some(&n) = samples.iter().find(|&&n| n != in_film) {
             return Err(damaged(&format!(
-                "a pixel with {n} samples where {in_film} passes were recorded",
+                "a pixel with {n} samples where {in_film} were recorded",
             )));
         }
-        // No sample exceeds f32's range: a larger sum was never rendered.
-        let largest_sum = f32::MAX as f64 * in_film as f64;
-        if sum
-            .iter()
-            .any(|s| s.to_dvec3().abs().max_element() > largest_sum)
-        {
-            return Err(damaged("a pixel sum larger than its samples can make"));
-        }
-        let mut film = Film::from_exact_parts(
+        let mut film = Film::from_fixed_parts(
             header.width,
             header.height,
             sum,
@@ -494,6 +494,7 @@ impl Checkpoint {
         )
         .ok_or_else(|| damaged("image size"))?;
         film.nonfinite_splats = header.nonfinite_splats;
+        film.out_of_range = header.out_of_range;
         Ok(Checkpoint { header, film })
     }
 }
@@ -603,6 +604,17 @@ pub struct PassRange {
 }
 
 impl PassRange {
+    /// The seed of a shard of a biased integrator (MLT, the photon mappers), which is an
+    /// independent run: the render's own seed for the shard that starts at pass 0 (so it is
+    /// the plain render of its passes), a hash of the seed and the first pass for the others.
+    pub fn independent_seed(&self, seed: u64) -> u64 {
+        if self.first == 0 {
+            seed
+        } else {
+            crate::sampling::mix64(seed ^ crate::sampling::mix64(self.first))
+        }
+    }
+
     /// Shard `index` of `count` (1-based) of `total` passes: the passes split as evenly as
     /// whole passes allow, earlier shards never larger than later ones.
     pub fn shard(index: u64, count: u64, total: u64) -> Result<PassRange, String> {
@@ -757,6 +769,7 @@ pub fn render_reference(
         header.seconds += wall;
         header.nonfinite = film.nonfinite;
         header.nonfinite_splats = film.nonfinite_splats;
+        header.out_of_range = film.out_of_range;
         seconds_this_run += wall;
         if new_passes > 0 {
             Checkpoint {

@@ -5,8 +5,12 @@
 //! Each part's film is its checkpoint, `PART.exr.checkpoint`, which records the integrator,
 //! seed, sampler, depth cap, settings, scene fingerprint and pass range it was made with. The
 //! parts must agree on all of these and their passes must cover the render's, each pass once;
-//! every problem found is named. The film sums samples exactly (`film::exact`), so the merged
-//! film, and the EXR written from it, are bit for bit those of one uninterrupted render.
+//! every problem found is named. For the unbiased integrators (PT, BDPT) the film's
+//! fixed-point sums do not depend on the order of their samples (`film::fixed`), so the merged
+//! film, and the EXR written from it, are bit for bit those of one uninterrupted render. The
+//! shards of the biased ones (MLT, the photon mappers) are independent runs, each with its own
+//! seed, whose films hold their images times their weights (mutations, or passes x pixels):
+//! adding them averages the images weighted by those.
 
 use super::{check_outputs, print_out};
 use crate::film::Film;
@@ -211,17 +215,19 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
         seconds: 0.0,
         nonfinite: 0,
         nonfinite_splats: 0,
+        out_of_range: 0,
         ..first
     };
     for part in &read {
         film.add_film(&part.checkpoint.film)
-            .expect("parts of one image size");
+            .map_err(|e| anyhow::anyhow!("{}: {e}", part.name()))?;
         let h = part.header();
         header.passes = header.passes.max(h.passes);
         header.seconds += h.seconds;
     }
     header.nonfinite = film.nonfinite;
     header.nonfinite_splats = film.nonfinite_splats;
+    header.out_of_range = film.out_of_range;
 
     if is_reference {
         // A merged reference is a reference: its checkpoint lets `reference` extend it.
@@ -246,6 +252,16 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
         header.seconds,
         header.scene
     );
+    if !header.is_unbiased() {
+        report += &format!(
+            "the parts are independent runs: the image is their average, weighted by {}\n",
+            if header.integrator.contains("mlt") {
+                "their mutations"
+            } else {
+                "their passes"
+            }
+        );
+    }
     report += &format!("wrote {} and {}", output.display(), png.display());
     if is_reference {
         report += &format!(" and {}", merged_film_path.display());

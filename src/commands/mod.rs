@@ -123,9 +123,9 @@ pub fn check_samples(option: &str, spp: u64, data: &SceneData) -> Result<()> {
     Ok(())
 }
 
-/// Bytes per pixel of the film and the images written from it (the exact sums, 3 x 48
+/// Bytes per pixel of the film and the images written from it (the fixed-point sums, 3 x 16
 /// bytes, the count, the image and its encoding).
-const FILM_BYTES_PER_PIXEL: u64 = 192;
+const FILM_BYTES_PER_PIXEL: u64 = 88;
 /// Bytes per emitted photon of the photon mappers (the photons stored at each bounce and
 /// their index).
 const PHOTON_BYTES: u64 = 200;
@@ -145,7 +145,7 @@ pub fn render_memory(
     let state = match kind.as_str() {
         // Wavefronts of at most 2^18 (pt) and 2^15 (bdpt) paths; bdpt's film has splats.
         "pt" => (1u64 << 18) * 300,
-        "bdpt" => (1u64 << 15) * 4200 + pixels.saturating_mul(144),
+        "bdpt" => (1u64 << 15) * 4200 + pixels.saturating_mul(48),
         // The photon mappers keep state per pixel, and photons.
         "pm" => pixels
             .saturating_mul(800)

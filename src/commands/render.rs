@@ -4,6 +4,7 @@ use super::{
     EXIT_INTERRUPTED, budget_bar, check_outputs, check_render_memory, check_samples, check_threads,
     exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool,
 };
+use crate::film::Film;
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, Resume};
 use crate::reference::{Checkpoint, CheckpointHeader, checkpoint_path};
 use crate::sysinfo::cpu_seconds;
@@ -52,11 +53,6 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     }
     let shard = match (o.shard, o.budget) {
         (None, _) => None,
-        (Some(_), _) if !o.integrator.is_unbiased() => bail!(
-            "--integrator {}: shards of a render are made by pt and bdpt (their films add \
-             exactly); the photon mappers and MLT are not split yet",
-            o.integrator
-        ),
         (Some(_), _) if o.strategy_images.is_some() => {
             bail!("--strategy-images are not made by shards: render them without --shard")
         }
@@ -92,9 +88,19 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         progress: &progress,
     };
     let cpu_start = cpu_seconds();
+    let unbiased = o.integrator.is_unbiased();
     let mut outcome = pool.install(|| match shard {
         None => {
             crate::integrators::render(o.integrator, data.clone(), &o.settings, budget, &control)
+        }
+        Some(range) if !unbiased => {
+            // An independent run of the shard's share, with its own seed.
+            let settings = RenderSettings {
+                seed: range.independent_seed(o.settings.seed),
+                ..o.settings
+            };
+            let budget = Budget::SamplesPerPixel(range.end - range.first);
+            crate::integrators::render(o.integrator, data.clone(), &settings, budget, &control)
         }
         Some(range) => {
             let cam = data.scene.camera;
@@ -113,25 +119,39 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     });
     let cpu = cpu_seconds() - cpu_start;
     bar.finish_and_clear();
+    let mut shard_end = 0;
     if let Some(range) = shard {
         // The report counts this shard's passes; its film lies beside the image.
         let pixels = data.scene.camera.width as u64 * data.scene.camera.height as u64;
+        let (film, passes) = if unbiased {
+            outcome.passes -= range.first;
+            outcome.samples -= range.first * pixels;
+            (outcome.film.clone(), range.first + outcome.passes)
+        } else {
+            // Its image weighted by its mutations (MLT) or passes x pixels (the photon
+            // mappers), the weight as each pixel's count: adding such films averages
+            // the images by weight. Passes here are the --spp unit (mutations per pixel
+            // for MLT), of which an interrupted run has done fewer.
+            let done = if outcome.interrupted {
+                (outcome.samples / pixels).min(range.end - range.first)
+            } else {
+                range.end - range.first
+            };
+            let film = weighted_film(&outcome.film.image(), outcome.samples, &outcome.film);
+            (film, range.first + done)
+        };
+        shard_end = passes;
         let header = CheckpointHeader {
-            passes: outcome.passes,
+            passes,
             seconds: outcome.wall.as_secs_f64(),
-            nonfinite: outcome.film.nonfinite,
-            nonfinite_splats: outcome.film.nonfinite_splats,
+            nonfinite: film.nonfinite,
+            nonfinite_splats: film.nonfinite_splats,
+            out_of_range: film.out_of_range,
             made_by: "render".into(),
             ..CheckpointHeader::start(&o.scene, &data, o.integrator, &o.settings, Some(range))
         };
-        outcome.passes -= range.first;
-        outcome.samples -= range.first * pixels;
         if outcome.passes > 0 {
-            Checkpoint {
-                header,
-                film: outcome.film.clone(),
-            }
-            .write(&film_file)?;
+            Checkpoint { header, film }.write(&film_file)?;
         }
     }
 
@@ -156,12 +176,18 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     report += &format!("wrote {} and {}\n", output.display(), png.display());
     if let Some(range) = shard {
         report += &format!(
-            "shard: passes {}..{} of {}; its film is {} (stagelight merge adds the shards)\n",
+            "shard: passes {}..{shard_end} of {}; its film is {} (stagelight merge adds the \
+             shards)\n",
             range.first,
-            range.first + outcome.passes,
             range.total,
             film_file.display()
         );
+        if !unbiased {
+            report += &format!(
+                "shard: an independent run with seed {} (merge averages the shards' images)\n",
+                range.independent_seed(o.settings.seed)
+            );
+        }
     }
     if outcome.interrupted {
         report += &format!(
@@ -174,4 +200,27 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         eprintln!("warning: {warning}");
     }
     Ok(exit_code(outcome.interrupted))
+}
+
+/// A biased integrator's shard film: `image` times `weight` in every pixel, with `weight` as
+/// every pixel's count (see `CheckpointHeader::is_unbiased`), and `film`'s rejected counts.
+fn weighted_film(image: &crate::film::Image, weight: u64, film: &Film) -> Film {
+    let n = image.pixels.len();
+    let sums = image
+        .pixels
+        .iter()
+        .map(|p| p.as_dvec3() * weight as f64)
+        .collect();
+    let mut weighted = Film::from_parts(
+        image.width,
+        image.height,
+        sums,
+        vec![weight; n],
+        Vec::new(),
+        film.nonfinite,
+    )
+    .expect("one sum and count per pixel");
+    weighted.nonfinite_splats = film.nonfinite_splats;
+    weighted.out_of_range += film.out_of_range;
+    weighted
 }

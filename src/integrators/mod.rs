@@ -392,11 +392,17 @@ impl Resume {
     }
 }
 
-/// The settings of an unbiased integrator that change its image besides the seed, sampler and
-/// depth cap, as text: empty when they are the defaults (so checkpoints made before this was
-/// recorded still match), else e.g. `mis=balance`. Shards must agree on it to be merged.
+/// The settings of an integrator that change its image besides the seed, sampler and depth
+/// cap, as text; shards must agree on it to be merged. For the unbiased ones: empty when they
+/// are the defaults (so checkpoints made before this was recorded still match), else e.g.
+/// `mis=balance`; for the others, all their options (`--photons`, `--alpha`, `--sigma`, ...).
 pub fn film_settings(kind: IntegratorKind, settings: &RenderSettings) -> String {
-    if kind.info().options.contains(&"--mis") && settings.mis != crate::path::MisHeuristic::Power {
+    let options = kind.info().options;
+    if options.contains(&"--large-step") {
+        format!("{:?}", settings.mlt)
+    } else if options.contains(&"--photons") || options.contains(&"--photons-per-pass") {
+        format!("{:?}", settings.photons)
+    } else if options.contains(&"--mis") && settings.mis != crate::path::MisHeuristic::Power {
         format!("mis={:?}", settings.mis).to_ascii_lowercase()
     } else {
         String::new()

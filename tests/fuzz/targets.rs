@@ -245,8 +245,8 @@ pub fn checkpoint(data: &[u8]) -> String {
             let bytes = c.to_bytes().expect("a checkpoint read is written");
             let again = Checkpoint::from_bytes(&bytes).expect("a checkpoint written reads back");
             assert_eq!(again.header, c.header);
-            assert_eq!(again.film.exact_sums(), c.film.exact_sums());
-            assert_eq!(again.film.exact_splats(), c.film.exact_splats());
+            assert_eq!(again.film.fixed_sums(), c.film.fixed_sums());
+            assert_eq!(again.film.fixed_splats(), c.film.fixed_splats());
             assert_eq!(again.film.image(), c.film.image());
             "ok".to_string()
         }

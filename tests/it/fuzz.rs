@@ -750,6 +750,7 @@ fn write_binary_fuzz_seeds() {
         seconds: 1.5,
         nonfinite: 1,
         nonfinite_splats: 0,
+        out_of_range: 0,
         first_pass: 0,
         shard: None,
         made_by: "reference".into(),

@@ -264,17 +264,143 @@ fn merge_names_missing_overlapping_and_foreign_parts() {
         s(&merged),
     ]);
     assert!(err.contains("3 shards of 2 passes"), "{err}");
-    let err = refused(&[
+}
+
+/// Mean over pixels of |L - 2| and the mean L (the green channel), in the furnace, where every
+/// pixel is exactly 2.
+fn furnace_error(image: &stagelight::film::Image) -> (f64, f64) {
+    let n = image.pixels.len() as f64;
+    let dev = image
+        .pixels
+        .iter()
+        .map(|p| (p.y as f64 - 2.0).abs())
+        .sum::<f64>()
+        / n;
+    let mean = image.pixels.iter().map(|p| p.y as f64).sum::<f64>() / n;
+    (dev, mean)
+}
+
+/// Shards of the biased integrators are independent runs: shard 1 (from pass 0) is the
+/// plain render of its passes with the render's seed, the other has its own seed, and merge
+/// averages their images weighted by mutations (MLT) or passes x pixels (SPPM). Checked in
+/// the furnace (every pixel exactly 2): the weighted average recomputed here from the shards'
+/// EXRs, the merged mean against 2, and less per-pixel error than the worse shard's.
+#[test]
+fn biased_shards_are_independent_runs_averaged_by_their_weights() {
+    use stagelight::film::Image;
+    use stagelight::reference::Checkpoint;
+    let dir = temp_dir("shards-biased");
+    let scene = shrunk_scene("furnace", 8, &dir.join("scene.ron"));
+    let pixels = 64u64;
+    for (integrator, spp, extra, tolerance) in [
+        ("pssmlt", 256u64, &[][..], 0.03),
+        ("mmlt", 256, &[][..], 0.03),
+        ("sppm", 6, &["--photons-per-pass", "20000"][..], 0.03),
+    ] {
+        let render = |name: &str, spp: u64, more: &[&str]| {
+            let spp_text = spp.to_string();
+            let out = dir.join(format!("{integrator}-{name}.exr"));
+            let mut args = vec![
+                "render",
+                s(&scene),
+                "--integrator",
+                integrator,
+                "--spp",
+                &spp_text,
+                "--seed",
+                "4",
+                "-o",
+                s(&out),
+                "--quiet",
+            ];
+            args.extend_from_slice(extra);
+            args.extend_from_slice(more);
+            ok(&args);
+            out
+        };
+        let a = render("a", spp, &["--shard", "1/2"]);
+        let b = render("b", spp, &["--shard", "2/2"]);
+        // Shard 1 is the plain render of its half of the passes, seed 4.
+        let plain = render("plain", spp / 2, &[]);
+        assert_same_bytes(&plain, &a);
+        let merged = dir.join(format!("{integrator}-merged.exr"));
+        let out = ok(&["merge", s(&b), s(&a), "-o", s(&merged)]);
+        assert!(out.contains("independent runs"), "{out}");
+
+        let read = |p: &Path| Image::read_exr(p).unwrap();
+        let (ia, ib, im) = (read(&a), read(&b), read(&merged));
+        assert!(
+            ia.pixels != ib.pixels,
+            "{integrator}: shard 2 has its own seed"
+        );
+        let weight = |p: &Path| {
+            let film = Checkpoint::read(&p.with_extension("exr.checkpoint"))
+                .unwrap()
+                .film;
+            film.sample_counts()[0]
+        };
+        let (wa, wb) = (weight(&a), weight(&b));
+        for (w, passes) in [(wa, spp / 2), (wb, spp - spp / 2)] {
+            if integrator == "sppm" {
+                assert_eq!(w, passes * pixels, "{integrator}: passes x pixels");
+            } else {
+                // Mutations: whole MLT passes of about one mutation per pixel each.
+                assert!(
+                    (passes * pixels..passes * pixels + 2 * pixels).contains(&w),
+                    "{integrator}: {w} mutations for {passes} per pixel"
+                );
+            }
+        }
+        for ((pa, pb), pm) in ia.pixels.iter().zip(&ib.pixels).zip(&im.pixels) {
+            let expected =
+                (pa.as_dvec3() * wa as f64 + pb.as_dvec3() * wb as f64) / (wa + wb) as f64;
+            let off = (pm.as_dvec3() - expected).abs().max_element();
+            assert!(
+                off <= 1e-6 * expected.abs().max_element().max(1e-30),
+                "{integrator}: merged {pm} against the weighted average {expected}"
+            );
+        }
+        let (ea, eb, em) = (furnace_error(&ia), furnace_error(&ib), furnace_error(&im));
+        assert!(
+            (em.1 / 2.0 - 1.0).abs() < tolerance,
+            "{integrator}: merged mean {} against 2",
+            em.1
+        );
+        assert!(
+            em.0 < ea.0.max(eb.0),
+            "{integrator}: merged mean |L - 2| {} not below the shards' {} and {}",
+            em.0,
+            ea.0,
+            eb.0
+        );
+    }
+    // Parts of differently set runs are not averaged.
+    let c = dir.join("pssmlt-c.exr");
+    ok(&[
         "render",
         s(&scene),
         "--integrator",
-        "sppm",
+        "pssmlt",
+        "--spp",
+        "256",
+        "--seed",
+        "4",
+        "--sigma",
+        "0.05",
         "--shard",
-        "1/2",
+        "2/2",
         "-o",
-        s(&merged),
+        s(&c),
+        "--quiet",
     ]);
-    assert!(err.contains("sppm"), "{err}");
+    let err = refused(&[
+        "merge",
+        s(&dir.join("pssmlt-a.exr")),
+        s(&c),
+        "-o",
+        s(&dir.join("refused.exr")),
+    ]);
+    assert!(err.contains("settings") && err.contains("0.05"), "{err}");
 }
 
 /// Runs a generated batch script with bash, as a Slurm node would (`SLURM_ARRAY_TASK_ID` set
