@@ -1,4 +1,4 @@
-//! The `stagelight` command line: render, reference, compare, diff and bench.
+//! The `stagelight` command line: render, reference, merge, compare, diff and bench.
 
 use crate::commands::bench::BenchOptions;
 use crate::commands::reference::ReferenceOptions;
@@ -35,6 +35,13 @@ pub enum Command {
     /// Renders each integrator at each budget and writes a report folder of speed against
     /// error: results.csv, error_vs_time.png/.svg, grid.png, summary.md.
     Compare(CompareArgs),
+    /// Adds the partial films of shards (`render` or `reference` with --shard) into the
+    /// image one machine would have made; each PART.exr's film is PART.exr.checkpoint.
+    Merge(MergeArgs),
+    /// Writes Slurm batch scripts that run a render or reference as a job array of shards
+    /// and a merge job after them, e.g. `stagelight slurm --shards 16 -o job -- reference
+    /// scenes/door_ajar.ron --spp 4096 -o ref.exr`, then `sh job/submit.sh`.
+    Slurm(SlurmArgs),
     /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
     Diff { image: PathBuf, reference: PathBuf },
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
@@ -103,6 +110,104 @@ fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
     s.parse::<SamplerKind>().map_err(|e| e.to_string())
 }
 
+/// Which passes of a render this run makes (a shard); see `commands::ShardChoice`.
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct ShardArgs {
+    /// Render shard I of N (1 <= I <= N) of the --spp passes and write its partial film,
+    /// OUT.exr.checkpoint, beside the image, for `stagelight merge`.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard, conflicts_with_all = ["time", "pass_range"])]
+    pub shard: Option<(u64, u64)>,
+    /// Render passes FIRST..END (END excluded) of the --spp passes, as a shard.
+    #[arg(long, value_name = "FIRST..END", value_parser = parse_pass_range, conflicts_with = "time")]
+    pub pass_range: Option<(u64, u64)>,
+}
+
+impl ShardArgs {
+    pub fn choice(&self) -> Option<crate::commands::ShardChoice> {
+        use crate::commands::ShardChoice;
+        match (self.shard, self.pass_range) {
+            (Some((index, count)), _) => Some(ShardChoice::Shard { index, count }),
+            (None, Some((first, end))) => Some(ShardChoice::Range { first, end }),
+            (None, None) => None,
+        }
+    }
+}
+
+fn parse_shard(s: &str) -> std::result::Result<(u64, u64), String> {
+    let bad = || {
+        format!(
+            "expected I/N (shard I of N, 1 <= I <= N), not {}",
+            clip_word(s)
+        )
+    };
+    let (i, n) = s.split_once('/').ok_or_else(bad)?;
+    let (i, n): (u64, u64) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if i == 0 || i > n {
+        return Err(bad());
+    }
+    Ok((i, n))
+}
+
+fn parse_pass_range(s: &str) -> std::result::Result<(u64, u64), String> {
+    let bad = || format!("expected FIRST..END with FIRST < END, not {}", clip_word(s));
+    let (a, b) = s.split_once("..").ok_or_else(bad)?;
+    let (a, b): (u64, u64) = (
+        a.trim().parse().map_err(|_| bad())?,
+        b.trim().parse().map_err(|_| bad())?,
+    );
+    if a >= b {
+        return Err(bad());
+    }
+    Ok((a, b))
+}
+
+/// `stagelight merge`.
+#[derive(clap::Args, Debug)]
+pub struct MergeArgs {
+    /// The shards' images (the paths given to them with -o); each one's film is read from
+    /// PART.exr.checkpoint beside it.
+    #[arg(required = true, value_name = "PART.exr")]
+    pub parts: Vec<PathBuf>,
+    /// The merged EXR; a PNG preview goes beside it (and, for a reference, its checkpoint).
+    #[arg(short, long)]
+    pub output: PathBuf,
+}
+
+/// `stagelight slurm`.
+#[derive(clap::Args, Debug)]
+pub struct SlurmArgs {
+    /// Shards: the tasks of the job array.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub shards: u64,
+    /// Folder of the scripts (shards.sbatch, merge.sbatch, submit.sh), the shards' parts and
+    /// the logs.
+    #[arg(short, long, default_value = "slurm-job")]
+    pub output: PathBuf,
+    /// Slurm partition of the jobs.
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Time limit of each shard, as sbatch --time takes it (MINUTES, HH:MM:SS, D-HH:MM).
+    #[arg(long)]
+    pub time_limit: Option<String>,
+    /// CPUs of each shard (sbatch --cpus-per-task; the render's threads unless --threads).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    pub cpus_per_task: Option<u32>,
+    /// Seconds before a shard's time limit that Slurm stops it (it keeps its finished
+    /// passes; a reference's shard requeues and resumes).
+    #[arg(long, default_value_t = 300)]
+    pub signal_seconds: u32,
+    /// The stagelight binary the jobs run (default: this one).
+    #[arg(long)]
+    pub stagelight: Option<PathBuf>,
+    /// The command to shard, after `--`: `render ...` or `reference ...` with `--spp N` and
+    /// `-o OUT.exr` (where the merge job writes the merged image).
+    #[arg(last = true, required = true, value_name = "COMMAND")]
+    pub command: Vec<String>,
+}
+
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
     /// Scene file (RON).
@@ -141,6 +246,8 @@ pub struct RenderArgs {
     /// Output EXR (default render/SCENE_INTEGRATOR.exr); a PNG preview is written beside it.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub shard: ShardArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -346,6 +453,8 @@ pub struct ReferenceArgs {
     /// Seconds between checkpoints (at most 1e9).
     #[arg(long, default_value = "30", value_parser = parse_checkpoint_seconds)]
     pub checkpoint_every: f64,
+    #[command(flatten)]
+    pub shard: ShardArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -530,6 +639,8 @@ fn run(cli: Cli) -> Result<i32> {
     match cli.command {
         Command::Render(args) => crate::commands::render::render(&args.options()),
         Command::Reference(args) => crate::commands::reference::reference(&args.options()),
+        Command::Merge(args) => crate::commands::merge::merge(&args.parts, &args.output),
+        Command::Slurm(args) => crate::commands::slurm::write(&args.options()?),
         Command::Compare(args) if args.preset == Some(Preset::Thesis) => {
             crate::compare::thesis::run(&args.thesis_options())
         }
@@ -565,6 +676,61 @@ fn run(cli: Cli) -> Result<i32> {
     }
 }
 
+impl SlurmArgs {
+    /// The options, after checking the command to shard as `stagelight` would parse it.
+    fn options(&self) -> Result<crate::commands::slurm::SlurmOptions> {
+        crate::commands::slurm::check_command(&self.command)?;
+        let shard = format!("1/{}", self.shards);
+        let line = ["stagelight"]
+            .into_iter()
+            .chain(self.command.iter().map(String::as_str))
+            .chain(["--shard", &shard]);
+        let parsed = Cli::try_parse_from(line).map_err(|e| {
+            let text = e.render().to_string();
+            anyhow::anyhow!(
+                "the command to shard: {}",
+                text.lines()
+                    .next()
+                    .unwrap_or_default()
+                    .trim_start_matches("error: ")
+            )
+        })?;
+        let spp = match parsed.command {
+            Command::Render(a) => a.spp.unwrap_or(64),
+            Command::Reference(a) => a.spp.unwrap_or(DEFAULT_REFERENCE_SPP),
+            _ => unreachable!("check_command lets render and reference through"),
+        };
+        if self.shards > spp {
+            anyhow::bail!(
+                "--shards {}: more shards than the command's {spp} passes",
+                self.shards
+            );
+        }
+        let binary = match &self.stagelight {
+            Some(b) => b.clone(),
+            None => std::env::current_exe().context("cannot find this stagelight binary")?,
+        };
+        let workdir = std::env::current_dir().context("cannot read the current folder")?;
+        let name = self
+            .command
+            .get(1)
+            .map(|scene| scene_stem(std::path::Path::new(scene)))
+            .unwrap_or_else(|| "stagelight".into());
+        Ok(crate::commands::slurm::SlurmOptions {
+            shards: self.shards,
+            dir: self.output.clone(),
+            command: self.command.clone(),
+            binary,
+            workdir,
+            partition: self.partition.clone(),
+            time_limit: self.time_limit.clone(),
+            cpus_per_task: self.cpus_per_task,
+            signal_seconds: self.signal_seconds,
+            name,
+        })
+    }
+}
+
 impl RenderArgs {
     fn options(&self) -> RenderOptions {
         let budget = match (self.spp, self.time) {
@@ -594,6 +760,7 @@ impl RenderArgs {
             },
             strategy_images: self.strategy_images.clone(),
             output,
+            shard: self.shard.choice(),
             threads: self.threads.map(|t| t as usize),
             quiet: self.quiet,
         }
@@ -629,6 +796,7 @@ impl ReferenceArgs {
                 .unwrap_or(std::time::Duration::from_secs(
                     MAX_CHECKPOINT_SECONDS as u64,
                 )),
+            shard: self.shard.choice(),
             threads: self.threads.map(|t| t as usize),
             quiet: self.quiet,
         }

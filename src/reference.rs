@@ -1,28 +1,35 @@
 //! References: long renders that stop and resume without losing or changing a sample.
 //!
 //! A reference `REF.exr` is rendered in chunks of whole passes. After every chunk, the film's
-//! f64 sums and sample counts go to a checkpoint beside it, `REF.exr.checkpoint`, together
+//! fixed-point sums and sample counts go to a checkpoint beside it, `REF.exr.checkpoint`, together
 //! with what produced them (integrator, seed, depth cap, a fingerprint of the prepared scene);
 //! then the EXR (float32, with its sample count and seed as header attributes) and a PNG
 //! preview are written. Both files are written to a temporary name and renamed, so an
 //! interruption at any moment leaves the previous complete pair.
 //!
 //! Running the same reference again continues from the checkpoint's passes. Samples are a pure
-//! function of (seed, pixel, sample index, dimension) and the film adds them in global sample
-//! order, so the result equals an uninterrupted render bit for bit. A checkpoint made with a
+//! function of (seed, pixel, sample index, dimension) and the film's fixed-point sums do not
+//! depend on the order of their samples, so the result equals an uninterrupted render bit for bit. A checkpoint made with a
 //! different integrator, seed, depth cap or scene is refused rather than mixed in.
 //!
-//! The checkpoint file: the line `stagelight checkpoint 3`, one line of RON (the header
+//! The checkpoint file: the line `stagelight checkpoint 4`, one line of RON (the header
 //! below, unknown fields refused, every value checked), then per pixel, row 0 first, the
-//! three f64 sums, the u64 sample count and the three f64 splat sums (light tracing's, zero
-//! for PT) (little-endian), then an FNV-1a 64 checksum of everything before it, the first
-//! line and the header included (u64, little-endian). Version 2 files (whose checksum covered
-//! the pixels only) are still read, their header checked the same way.
+//! film's sums of the three channels (each an i128 in units of 2^-64, `film::fixed`), the u64
+//! sample count and, when the pixel data's length says so, the splat sums (light tracing's;
+//! three more i128), all little-endian, then an FNV-1a 64 checksum of everything before it, the
+//! first line and the header included (u64, little-endian). Version 3 files (f64 sums and
+//! splat sums, 56 bytes a pixel) and version 2 files (whose checksum covered the pixels only)
+//! are still read, their f64 sums rounded to the unit (exact for samples of 2^-41 and more).
+//!
+//! A checkpoint may hold a range of passes, `first_pass..passes`: the partial film of a
+//! shard (`render` or `reference` with `--shard I/N`), which `stagelight merge` adds to the
+//! other shards' films (`commands::merge`).
 //!
 //! While a run makes or continues a reference it holds `REF.exr.lock` (an advisory lock, let
 //! go when the process ends however it ends): a second run on the same output is refused
 //! instead of mixing its passes in.
 
+use crate::film::fixed::{FIXED_RGB_BYTES, FixedRgb};
 use crate::film::{Film, Image};
 use crate::integrators::{
     Budget, Control, IntegratorKind, RenderSettings, Resume, SceneData, resume,
@@ -35,13 +42,15 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-const MAGIC: &str = "stagelight checkpoint 3\n";
-/// The previous format: the checksum covered the pixel data only.
+const MAGIC: &str = "stagelight checkpoint 4\n";
+/// Version 3: f64 sums, the checksum over the whole file.
+const MAGIC_V3: &str = "stagelight checkpoint 3\n";
+/// Version 2: f64 sums, the checksum over the pixel data only.
 const MAGIC_V2: &str = "stagelight checkpoint 2\n";
 
-/// Bytes per pixel in a checkpoint: the sum (3 x f64), the sample count (u64) and the splat
-/// sum (3 x f64, light tracing's contributions), little-endian.
-const PIXEL_BYTES: usize = 56;
+/// Bytes per pixel in a version 2 or 3 checkpoint: the sum (3 x f64), the sample count (u64)
+/// and the splat sum (3 x f64, light tracing's contributions), little-endian.
+const PIXEL_BYTES_V3: usize = 56;
 
 /// The EXR header attribute of a reference: one text attribute holding
 /// `spp=N; seed=S; integrator=NAME; maxDepth=D; scene=PATH` (one attribute, because the EXR
@@ -99,18 +108,101 @@ pub struct CheckpointHeader {
     /// Non-finite splats (light tracing) rejected so far (absent from version 2 files).
     #[serde(default)]
     pub nonfinite_splats: u64,
+    /// Samples and splats rejected as beyond the film's range (`Film::out_of_range`).
+    #[serde(default)]
+    pub out_of_range: u64,
+    /// The first pass in the film: the film holds passes `first_pass..passes` (a shard's
+    /// range; 0 for a whole render).
+    #[serde(default)]
+    pub first_pass: u64,
+    /// For a shard: the pass its range ends at (a shard stopped early has `passes` below
+    /// it) and the passes of the whole render the shards split.
+    #[serde(default)]
+    pub shard: Option<ShardRange>,
+    /// The command that made it: `reference` or `render` (a render's shard).
+    #[serde(default = "reference_command")]
+    pub made_by: String,
+    /// The integrator's settings that change its image, besides seed, sampler and depth cap,
+    /// as text (`integrators::film_settings`; empty when all are defaults).
+    #[serde(default)]
+    pub settings: String,
+}
+
+/// What part of a render a shard makes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShardRange {
+    /// The pass the shard's range ends at (exclusive).
+    pub end_pass: u64,
+    /// Passes of the whole render.
+    pub total_passes: u64,
+}
+
+fn reference_command() -> String {
+    "reference".into()
 }
 
 impl CheckpointHeader {
+    /// The header of a render about to start (no passes yet; a shard's at its first pass),
+    /// as `reference` makes it (`made_by` is "reference").
+    pub fn start(
+        scene_path: &Path,
+        data: &SceneData,
+        integrator: IntegratorKind,
+        settings: &RenderSettings,
+        shard: Option<PassRange>,
+    ) -> CheckpointHeader {
+        let cam = data.scene.camera;
+        let first_pass = shard.map_or(0, |r| r.first);
+        CheckpointHeader {
+            integrator: integrator.as_str().to_string(),
+            seed: settings.seed,
+            sampler: settings.sampler.to_string(),
+            max_depth: settings.max_depth,
+            scene: scene_path.display().to_string(),
+            scene_fingerprint: format!("{:016x}", scene_fingerprint(data)),
+            width: cam.width as usize,
+            height: cam.height as usize,
+            passes: first_pass,
+            seconds: 0.0,
+            nonfinite: 0,
+            nonfinite_splats: 0,
+            out_of_range: 0,
+            first_pass,
+            shard: shard.map(|r| ShardRange {
+                end_pass: r.end,
+                total_passes: r.total,
+            }),
+            made_by: reference_command(),
+            settings: crate::integrators::film_settings(integrator, settings),
+        }
+    }
+
+    /// Whether the film is of an unbiased integrator: sums of its samples, one per pixel and
+    /// pass. A biased integrator's shard (`render --shard`) holds its image times its weight
+    /// (MLT: its mutations; the photon mappers: its passes x pixels) in every pixel, with
+    /// the weight as every pixel's count, so that adding films averages the shards' images
+    /// weighted by it (`commands::merge`).
+    pub fn is_unbiased(&self) -> bool {
+        IntegratorKind::all()
+            .into_iter()
+            .any(|k| k.is_unbiased() && k.as_str() == self.integrator)
+    }
+
     /// Checks every value (the checksum vouches for the bytes, this for their sense).
     fn validate(&self) -> Result<(), String> {
-        let known = IntegratorKind::all()
+        let Some(kind) = IntegratorKind::all()
             .into_iter()
-            .any(|k| k.is_unbiased() && k.as_str() == self.integrator);
-        if !known {
+            .find(|k| k.as_str() == self.integrator)
+        else {
             return Err(format!(
-                "integrator \"{}\" is not one that makes references",
+                "integrator \"{}\" is not one stagelight has",
                 crate::scene::echo(&self.integrator)
+            ));
+        };
+        if !kind.is_unbiased() && (self.shard.is_none() || self.made_by != "render") {
+            return Err(format!(
+                "integrator {kind} is biased: its films are only the shards of a render"
             ));
         }
         let max = crate::scene::format::MAX_IMAGE_SIZE as usize;
@@ -134,8 +226,31 @@ impl CheckpointHeader {
         {
             return Err("the scene fingerprint is not 16 hex digits".into());
         }
-        let samples = self.passes.checked_mul((self.width * self.height) as u64);
-        if samples.is_none_or(|n| self.nonfinite > n) {
+        if self.first_pass > self.passes {
+            return Err(format!(
+                "first pass {} after the last, {}",
+                self.first_pass, self.passes
+            ));
+        }
+        if let Some(shard) = self.shard
+            && !(self.first_pass < shard.end_pass
+                && self.passes <= shard.end_pass
+                && shard.end_pass <= shard.total_passes)
+        {
+            return Err(format!(
+                "shard range {}..{} of {} passes does not hold passes {}..{}",
+                self.first_pass, shard.end_pass, shard.total_passes, self.first_pass, self.passes
+            ));
+        }
+        if !matches!(self.made_by.as_str(), "render" | "reference") {
+            return Err(format!(
+                "made by \"{}\", not render or reference",
+                crate::scene::echo(&self.made_by)
+            ));
+        }
+        let samples =
+            (self.passes - self.first_pass).checked_mul((self.width * self.height) as u64);
+        if self.is_unbiased() && samples.is_none_or(|n| self.nonfinite > n) {
             return Err(format!(
                 "{} rejected samples of {} passes",
                 self.nonfinite, self.passes
@@ -221,27 +336,26 @@ impl Checkpoint {
 
     /// The checkpoint file's bytes.
     pub fn to_bytes(&self) -> Result<Vec<u8>, String> {
+        let splats = self.film.fixed_splats();
         let header = ron::to_string(&self.header).map_err(|e| e.to_string())?;
         let pixels = self.film.width * self.film.height;
-        let mut bytes =
-            Vec::with_capacity(MAGIC.len() + header.len() + 1 + pixels * PIXEL_BYTES + 8);
+        let per_pixel = FIXED_RGB_BYTES * (1 + usize::from(!splats.is_empty())) + 8;
+        let mut bytes = Vec::with_capacity(MAGIC.len() + header.len() + 1 + pixels * per_pixel + 8);
         bytes.extend_from_slice(MAGIC.as_bytes());
         bytes.extend_from_slice(header.as_bytes());
         bytes.push(b'\n');
+        let put = |bytes: &mut Vec<u8>, rgb: &FixedRgb| bytes.extend_from_slice(&rgb.to_le_bytes());
         for (i, (sum, &count)) in self
             .film
-            .sums()
+            .fixed_sums()
             .iter()
             .zip(self.film.sample_counts())
             .enumerate()
         {
-            for v in [sum.x, sum.y, sum.z] {
-                bytes.extend_from_slice(&v.to_le_bytes());
-            }
+            put(&mut bytes, sum);
             bytes.extend_from_slice(&count.to_le_bytes());
-            let splat = self.film.splat_sum(i);
-            for v in [splat.x, splat.y, splat.z] {
-                bytes.extend_from_slice(&v.to_le_bytes());
+            if let Some(splat) = splats.get(i) {
+                put(&mut bytes, splat);
             }
         }
         let mut hash = Fnv1a::new();
@@ -262,6 +376,8 @@ impl Checkpoint {
             format!("damaged checkpoint ({what}); delete it to start the reference over")
         };
         let (version, rest) = if let Some(rest) = bytes.strip_prefix(MAGIC.as_bytes()) {
+            (4, rest)
+        } else if let Some(rest) = bytes.strip_prefix(MAGIC_V3.as_bytes()) {
             (3, rest)
         } else if let Some(rest) = bytes.strip_prefix(MAGIC_V2.as_bytes()) {
             (2, rest)
@@ -280,27 +396,44 @@ impl Checkpoint {
                 crate::scene::clip(&e.to_string(), 200)
             ))
         })?;
+        if version < 4 && (header.first_pass != 0 || header.shard.is_some()) {
+            return Err(damaged("a version 4 header in an older file"));
+        }
         let payload = &rest[newline + 1..];
         let pixels = header
             .width
             .checked_mul(header.height)
             .ok_or_else(|| damaged("image size"))?;
-        let data_len = pixels
-            .checked_mul(PIXEL_BYTES)
-            .ok_or_else(|| damaged("image size"))?;
-        if payload.len() != data_len.saturating_add(8) {
+        // Version 4 pixels hold splat sums or not, which their length says.
+        let sizes: &[usize] = if version == 4 {
+            &[FIXED_RGB_BYTES + 8, 2 * FIXED_RGB_BYTES + 8]
+        } else {
+            &[PIXEL_BYTES_V3]
+        };
+        let data_len_of = |pixel_bytes: usize| {
+            pixels
+                .checked_mul(pixel_bytes)
+                .and_then(|n| n.checked_add(8))
+                .ok_or_else(|| damaged("image size"))
+        };
+        let Some(&pixel_bytes) = sizes
+            .iter()
+            .find(|&&b| data_len_of(b).is_ok_and(|n| n == payload.len()))
+        else {
             return Err(damaged(&format!(
                 "{} bytes of pixel data where {}x{} pixels need {}",
                 payload.len(),
                 header.width,
                 header.height,
-                data_len.saturating_add(8)
+                data_len_of(sizes[0])?
             )));
-        }
+        };
+        let has_splats = pixel_bytes == 2 * FIXED_RGB_BYTES + 8;
+        let data_len = payload.len() - 8;
         let (data, checksum) = payload.split_at(data_len);
         let mut hash = Fnv1a::new();
-        // Version 3 covers the whole file; version 2 covered the pixel data only.
-        hash.update(if version == 3 {
+        // Versions 3 and 4 cover the whole file; version 2 covered the pixel data only.
+        hash.update(if version >= 3 {
             &bytes[..bytes.len() - 8]
         } else {
             data
@@ -318,23 +451,40 @@ impl Checkpoint {
         };
         let mut sum = Vec::with_capacity(pixels);
         let mut samples = Vec::with_capacity(pixels);
-        let mut splat = Vec::with_capacity(pixels);
-        for chunk in data.chunks_exact(PIXEL_BYTES) {
-            let f = |i| f64::from_le_bytes(word(chunk, i));
-            sum.push(DVec3::new(f(0), f(1), f(2)));
-            samples.push(u64::from_le_bytes(word(chunk, 3)));
-            splat.push(DVec3::new(f(4), f(5), f(6)));
+        let mut splat = Vec::new();
+        if version == 4 {
+            const COUNT: usize = FIXED_RGB_BYTES;
+            for chunk in data.chunks_exact(pixel_bytes) {
+                sum.push(FixedRgb::from_le_bytes(&chunk[..COUNT]));
+                samples.push(u64::from_le_bytes(word(&chunk[COUNT..], 0)));
+                if has_splats {
+                    splat.push(FixedRgb::from_le_bytes(&chunk[COUNT + 8..]));
+                }
+            }
+        } else {
+            let fixed = |v: DVec3| {
+                FixedRgb::from_dvec3(v)
+                    .ok_or_else(|| damaged("a pixel sum beyond the film's range (+-2^63)"))
+            };
+            for chunk in data.chunks_exact(PIXEL_BYTES_V3) {
+                let f = |i| f64::from_le_bytes(word(chunk, i));
+                sum.push(fixed(DVec3::new(f(0), f(1), f(2)))?);
+                samples.push(u64::from_le_bytes(word(chunk, 3)));
+                splat.push(fixed(DVec3::new(f(4), f(5), f(6)))?);
+            }
         }
-        if let Some(&n) = samples.iter().find(|&&n| n != header.passes) {
+        let in_film = if header.is_unbiased() {
+            header.passes - header.first_pass
+        } else {
+            // A biased shard's weight, the same in every pixel.
+            samples.first().copied().unwrap_or(0).max(1)
+        };
+        if let Some(&n) = samples.iter().find(|&&n| n != in_film) {
             return Err(damaged(&format!(
-                "a pixel with {n} samples where {} passes were recorded",
-                header.passes
+                "a pixel with {n} samples where {in_film} were recorded",
             )));
         }
-        if sum.iter().chain(&splat).any(|v| !v.is_finite()) {
-            return Err(damaged("a pixel sum is not finite"));
-        }
-        let mut film = Film::from_parts(
+        let mut film = Film::from_fixed_parts(
             header.width,
             header.height,
             sum,
@@ -344,6 +494,7 @@ impl Checkpoint {
         )
         .ok_or_else(|| damaged("image size"))?;
         film.nonfinite_splats = header.nonfinite_splats;
+        film.out_of_range = header.out_of_range;
         Ok(Checkpoint { header, film })
     }
 }
@@ -439,6 +590,61 @@ pub struct ReferenceJob<'a> {
     pub output: &'a Path,
     /// Wall time between checkpoints (whole passes; at least one pass per checkpoint).
     pub checkpoint_every: Duration,
+    /// Only these passes of the budget's (a shard; the budget is then samples per pixel, the
+    /// whole render's passes).
+    pub shard: Option<PassRange>,
+}
+
+/// The passes a shard renders, `first..end`, of a render of `total` passes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PassRange {
+    pub first: u64,
+    pub end: u64,
+    pub total: u64,
+}
+
+impl PassRange {
+    /// The seed of a shard of a biased integrator (MLT, the photon mappers), which is an
+    /// independent run: the render's own seed for the shard that starts at pass 0 (so it is
+    /// the plain render of its passes), a hash of the seed and the first pass for the others.
+    pub fn independent_seed(&self, seed: u64) -> u64 {
+        if self.first == 0 {
+            seed
+        } else {
+            crate::sampling::mix64(seed ^ crate::sampling::mix64(self.first))
+        }
+    }
+
+    /// Shard `index` of `count` (1-based) of `total` passes: the passes split as evenly as
+    /// whole passes allow, earlier shards never larger than later ones.
+    pub fn shard(index: u64, count: u64, total: u64) -> Result<PassRange, String> {
+        if count == 0 || index == 0 || index > count {
+            return Err(format!(
+                "--shard {index}/{count}: I/N needs 1 <= I <= N (shard I of N)"
+            ));
+        }
+        if count > total {
+            return Err(format!(
+                "--shard {index}/{count}: {count} shards of {total} passes would leave some                  empty (at most one shard per pass)"
+            ));
+        }
+        let at = |i: u64| (total as u128 * i as u128 / count as u128) as u64;
+        Ok(PassRange {
+            first: at(index - 1),
+            end: at(index),
+            total,
+        })
+    }
+
+    /// An explicit range `first..end` of `total` passes.
+    pub fn explicit(first: u64, end: u64, total: u64) -> Result<PassRange, String> {
+        if first >= end || end > total {
+            return Err(format!(
+                "--pass-range {first}..{end}: needs FIRST < END <= the render's passes ({total})"
+            ));
+        }
+        Ok(PassRange { first, end, total })
+    }
 }
 
 /// What a reference run did.
@@ -472,21 +678,13 @@ pub fn render_reference(
     let checkpoint_file = checkpoint_path(job.output);
     let cam = job.data.scene.camera;
     let (width, height) = (cam.width as usize, cam.height as usize);
-    let fingerprint = format!("{:016x}", scene_fingerprint(&job.data));
-    let mut header = CheckpointHeader {
-        integrator: job.integrator.as_str().to_string(),
-        seed: job.settings.seed,
-        sampler: job.settings.sampler.to_string(),
-        max_depth: job.settings.max_depth,
-        scene: job.scene_path.display().to_string(),
-        scene_fingerprint: fingerprint,
-        width,
-        height,
-        passes: 0,
-        seconds: 0.0,
-        nonfinite: 0,
-        nonfinite_splats: 0,
-    };
+    let mut header = CheckpointHeader::start(
+        job.scene_path,
+        &job.data,
+        job.integrator,
+        &job.settings,
+        job.shard,
+    );
     let mut film = if checkpoint_file.exists() {
         let checkpoint = Checkpoint::read(&checkpoint_file)?;
         check_compatible(&checkpoint.header, &header, &checkpoint_file)?;
@@ -506,8 +704,10 @@ pub fn render_reference(
         Film::new(width, height)
     };
     let passes_before = header.passes;
+    // A shard's budget is its range's end.
+    let end_pass = |spp: u64| job.shard.map_or(spp, |r| r.end);
     let done = |h: &CheckpointHeader| match job.budget {
-        ReferenceBudget::SamplesPerPixel(spp) => h.passes >= spp,
+        ReferenceBudget::SamplesPerPixel(spp) => h.passes >= end_pass(spp),
         ReferenceBudget::Seconds(s) => h.seconds >= s,
     };
     let already_complete = done(&header);
@@ -530,11 +730,14 @@ pub fn render_reference(
         let passes_in =
             |seconds: f64| seconds_per_pass.map_or(1, |t| (seconds / t.max(1e-9)).round() as u64);
         let chunk = match job.budget {
-            ReferenceBudget::SamplesPerPixel(spp) => passes_in(every).clamp(1, spp - header.passes),
+            ReferenceBudget::SamplesPerPixel(spp) => {
+                passes_in(every).clamp(1, end_pass(spp) - header.passes)
+            }
             ReferenceBudget::Seconds(s) => passes_in((s - header.seconds).min(every)).max(1),
         };
         let from = Resume {
             film,
+            first_pass: header.first_pass,
             passes: header.passes,
         };
         let (chunk_start, seconds_before) = (Instant::now(), header.seconds);
@@ -566,6 +769,7 @@ pub fn render_reference(
         header.seconds += wall;
         header.nonfinite = film.nonfinite;
         header.nonfinite_splats = film.nonfinite_splats;
+        header.out_of_range = film.out_of_range;
         seconds_this_run += wall;
         if new_passes > 0 {
             Checkpoint {
@@ -632,6 +836,20 @@ fn check_compatible(
             "an image of {}x{}, not {}x{}",
             found.width, found.height, wanted.width, wanted.height
         ))
+    } else if found.settings != wanted.settings {
+        Some(format!(
+            "settings \"{}\", not \"{}\"",
+            found.settings, wanted.settings
+        ))
+    } else if (found.first_pass, found.shard) != (wanted.first_pass, wanted.shard) {
+        let range = |h: &CheckpointHeader| match h.shard {
+            Some(r) => format!(
+                "the shard of passes {}..{} of {}",
+                h.first_pass, r.end_pass, r.total_passes
+            ),
+            None => "a whole render".to_string(),
+        };
+        Some(format!("{}, not {}", range(found), range(wanted)))
     } else if found.scene_fingerprint != wanted.scene_fingerprint {
         Some(format!(
             "a different scene ({} as it was then; now {})",
@@ -658,6 +876,16 @@ fn write_images(
     header: &CheckpointHeader,
     film: &Film,
 ) -> Result<(), ReferenceError> {
+    write_reference_images(job.output, header, film)
+}
+
+/// A reference's EXR, with its `stagelight` attribute (the samples per pixel in the film),
+/// and its PNG preview (`output` with the extension png).
+pub fn write_reference_images(
+    output: &Path,
+    header: &CheckpointHeader,
+    film: &Film,
+) -> Result<(), ReferenceError> {
     let image = film.image();
     let depth = if header.max_depth == u32::MAX {
         "unlimited".to_string()
@@ -675,16 +903,16 @@ fn write_images(
         ATTRIBUTE,
         format!(
             "spp={}; seed={}; {sampler}integrator={}; maxDepth={depth}; scene={}",
-            header.passes,
+            header.passes - header.first_pass,
             header.seed,
             header.integrator,
             header.scene.replace('\n', " ")
         ),
     )];
     image
-        .write_exr_with_attributes(job.output, &attributes)
-        .map_err(|e| error(job.output, e.message))?;
-    let png = job.output.with_extension("png");
+        .write_exr_with_attributes(output, &attributes)
+        .map_err(|e| error(output, e.message))?;
+    let png = output.with_extension("png");
     image.write_png(&png).map_err(|e| error(&png, e.message))
 }
 

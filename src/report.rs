@@ -72,10 +72,18 @@ pub fn render_report(
     }
     let _ = writeln!(
         r,
-        "  NaN/Inf samples   {} (counted as black, never added){}",
+        "  NaN/Inf samples   {} (counted as black, never added){}{}",
         o.film.nonfinite,
         if o.film.nonfinite_splats > 0 {
             format!("; {} NaN/Inf splats dropped", o.film.nonfinite_splats)
+        } else {
+            String::new()
+        },
+        if o.film.out_of_range > 0 {
+            format!(
+                "; {} samples or splats beyond the film's range (+-2^63) rejected",
+                o.film.out_of_range
+            )
         } else {
             String::new()
         }
@@ -120,6 +128,13 @@ pub fn nonfinite_warning(film: &crate::film::Film) -> Option<String> {
              the image is too dark (very bright lights or extreme geometry overflow f32)",
             100.0 * share,
             film.nonfinite
+        ));
+    }
+    if film.out_of_range > 0 {
+        return Some(format!(
+            "{} samples or splats were beyond the film's range (a pixel sum beyond 2^63 = \
+             9.2e18) and were rejected: the image is too dark where they fell",
+            film.out_of_range
         ));
     }
     if film.nonfinite_splats as f64 > NONFINITE_WARNING_SHARE * samples as f64 {

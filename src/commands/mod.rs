@@ -4,8 +4,10 @@
 //! `compare::run` and `compare::thesis`.
 
 pub mod bench;
+pub mod merge;
 pub mod reference;
 pub mod render;
+pub mod slurm;
 
 use crate::film::Image;
 use crate::integrators::{Budget, IntegratorKind, RenderSettings, SceneData};
@@ -63,6 +65,26 @@ pub fn load_scene(path: &Path) -> Result<Arc<SceneData>> {
     Ok(Arc::new(SceneData::new(scene)))
 }
 
+/// Which passes a shard renders, as the command line said it (`--shard I/N` or
+/// `--pass-range FIRST..END`), before the render's pass count is known.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ShardChoice {
+    Shard { index: u64, count: u64 },
+    Range { first: u64, end: u64 },
+}
+
+impl ShardChoice {
+    /// The passes of a render of `total` passes this shard makes.
+    pub fn range(self, total: u64) -> Result<crate::reference::PassRange> {
+        use crate::reference::PassRange;
+        match self {
+            ShardChoice::Shard { index, count } => PassRange::shard(index, count, total),
+            ShardChoice::Range { first, end } => PassRange::explicit(first, end, total),
+        }
+        .map_err(anyhow::Error::msg)
+    }
+}
+
 /// Checks, before any rendering, that every output can be written (`film::output::
 /// check_writable`: its folder is created) and that none is an input file (the scene, a
 /// reference).
@@ -101,9 +123,9 @@ pub fn check_samples(option: &str, spp: u64, data: &SceneData) -> Result<()> {
     Ok(())
 }
 
-/// Bytes per pixel of the film and the images written from it (sums, counts, the image and
-/// its encoding).
-const FILM_BYTES_PER_PIXEL: u64 = 64;
+/// Bytes per pixel of the film and the images written from it (the fixed-point sums, 3 x 16
+/// bytes, the count, the image and its encoding).
+const FILM_BYTES_PER_PIXEL: u64 = 88;
 /// Bytes per emitted photon of the photon mappers (the photons stored at each bounce and
 /// their index).
 const PHOTON_BYTES: u64 = 200;
@@ -123,7 +145,7 @@ pub fn render_memory(
     let state = match kind.as_str() {
         // Wavefronts of at most 2^18 (pt) and 2^15 (bdpt) paths; bdpt's film has splats.
         "pt" => (1u64 << 18) * 300,
-        "bdpt" => (1u64 << 15) * 4200 + pixels.saturating_mul(24),
+        "bdpt" => (1u64 << 15) * 4200 + pixels.saturating_mul(48),
         // The photon mappers keep state per pixel, and photons.
         "pm" => pixels
             .saturating_mul(800)

@@ -26,6 +26,8 @@ pub struct ReferenceOptions {
     /// Output EXR; its checkpoint and PNG preview go beside it.
     pub output: PathBuf,
     pub checkpoint_every: Duration,
+    /// Only a shard of the passes (`--shard I/N` or `--pass-range`), for `stagelight merge`.
+    pub shard: Option<super::ShardChoice>,
     /// Worker threads (None: all cores).
     pub threads: Option<usize>,
     /// No progress bar.
@@ -53,6 +55,13 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
     if let ReferenceBudget::SamplesPerPixel(spp) = o.budget {
         check_samples("--spp", spp, &data)?;
     }
+    let shard = match (o.shard, o.budget) {
+        (None, _) => None,
+        (Some(choice), ReferenceBudget::SamplesPerPixel(spp)) => Some(choice.range(spp)?),
+        (Some(_), ReferenceBudget::Seconds(_)) => {
+            bail!("--shard and --pass-range split --spp passes, not a --time budget")
+        }
+    };
     check_reference_outputs(output, &[&o.scene])?;
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
@@ -64,6 +73,7 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
         budget: o.budget,
         output,
         checkpoint_every: o.checkpoint_every,
+        shard,
     };
     let outcome = make_reference(&job, &stop, &pool, o.quiet)?;
     let mut report = describe_reference(&job, &outcome) + "\n";
@@ -123,18 +133,28 @@ pub fn make_reference(
 /// One line on what a reference run did: made, resumed or already complete, and with what.
 pub fn describe_reference(job: &ReferenceJob, o: &ReferenceOutcome) -> String {
     let file = job.output.display();
+    let passes = match job.shard {
+        Some(r) => format!(
+            "passes {}..{} of {} (shard {}..{})",
+            r.first, o.passes, r.total, r.first, r.end
+        ),
+        None => format!("{} spp", o.passes),
+    };
     let what = format!(
-        "{} at {} spp ({:.1} s of rendering), seed {}, {}",
+        "{} at {passes} ({:.1} s of rendering), seed {}, {}",
         job.integrator,
-        o.passes,
         o.seconds,
         job.settings.seed,
         job.scene_path.display()
     );
     if o.already_complete {
         format!("{file}: already complete with {what}; nothing rendered")
-    } else if o.passes_before > 0 {
-        format!("{file}: resumed from {} spp to {what}", o.passes_before)
+    } else if o.passes_before > job.shard.map_or(0, |r| r.first) {
+        let from = match job.shard {
+            Some(_) => format!("pass {}", o.passes_before),
+            None => format!("{} spp", o.passes_before),
+        };
+        format!("{file}: resumed from {from} to {what}")
     } else {
         format!("{file}: made with {what}")
     }

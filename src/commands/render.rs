@@ -4,7 +4,9 @@ use super::{
     EXIT_INTERRUPTED, budget_bar, check_outputs, check_render_memory, check_samples, check_threads,
     exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool,
 };
-use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings};
+use crate::film::Film;
+use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, Resume};
+use crate::reference::{Checkpoint, CheckpointHeader, checkpoint_path};
 use crate::sysinfo::cpu_seconds;
 use anyhow::{Result, bail};
 use std::path::PathBuf;
@@ -21,6 +23,9 @@ pub struct RenderOptions {
     pub strategy_images: Option<PathBuf>,
     /// Output EXR; the PNG preview goes beside it.
     pub output: PathBuf,
+    /// Only a shard of the passes (`--shard I/N` or `--pass-range`): its image and its
+    /// partial film (`OUT.exr.checkpoint`) for `stagelight merge`.
+    pub shard: Option<super::ShardChoice>,
     /// Worker threads (None: all cores).
     pub threads: Option<usize>,
     /// No progress bar.
@@ -46,9 +51,23 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     if let Budget::SamplesPerPixel(spp) = o.budget {
         check_samples("--spp", spp, &data)?;
     }
+    let shard = match (o.shard, o.budget) {
+        (None, _) => None,
+        (Some(_), _) if o.strategy_images.is_some() => {
+            bail!("--strategy-images are not made by shards: render them without --shard")
+        }
+        (Some(choice), Budget::SamplesPerPixel(spp)) => Some(choice.range(spp)?),
+        (Some(_), Budget::Seconds(_)) => {
+            bail!("--shard and --pass-range split --spp passes, not a --time budget")
+        }
+    };
     let png = output.with_extension("png");
+    let film_file = checkpoint_path(output);
     // Every output is checked before the render, not found unwritable after it.
     let mut outputs = vec![output.as_path(), png.as_path()];
+    if shard.is_some() {
+        outputs.push(&film_file);
+    }
     let strategy_probe = o.strategy_images.as_ref().map(|dir| dir.join("s1_t1.exr"));
     outputs.extend(strategy_probe.as_deref());
     check_outputs(&outputs, &[&o.scene])?;
@@ -69,11 +88,72 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         progress: &progress,
     };
     let cpu_start = cpu_seconds();
-    let outcome = pool.install(|| {
-        crate::integrators::render(o.integrator, data.clone(), &o.settings, budget, &control)
+    let unbiased = o.integrator.is_unbiased();
+    let mut outcome = pool.install(|| match shard {
+        None => {
+            crate::integrators::render(o.integrator, data.clone(), &o.settings, budget, &control)
+        }
+        Some(range) if !unbiased => {
+            // An independent run of the shard's share, with its own seed.
+            let settings = RenderSettings {
+                seed: range.independent_seed(o.settings.seed),
+                ..o.settings
+            };
+            let budget = Budget::SamplesPerPixel(range.end - range.first);
+            crate::integrators::render(o.integrator, data.clone(), &settings, budget, &control)
+        }
+        Some(range) => {
+            let cam = data.scene.camera;
+            let start = Resume::shard_start(cam.width as usize, cam.height as usize, range.first);
+            let budget = Budget::SamplesPerPixel(range.end);
+            let settings = &o.settings;
+            crate::integrators::resume(
+                o.integrator,
+                data.clone(),
+                settings,
+                budget,
+                &control,
+                start,
+            )
+        }
     });
     let cpu = cpu_seconds() - cpu_start;
     bar.finish_and_clear();
+    let mut shard_end = 0;
+    if let Some(range) = shard {
+        // The report counts this shard's passes; its film lies beside the image.
+        let pixels = data.scene.camera.width as u64 * data.scene.camera.height as u64;
+        let (film, passes) = if unbiased {
+            outcome.passes -= range.first;
+            outcome.samples -= range.first * pixels;
+            (outcome.film.clone(), range.first + outcome.passes)
+        } else {
+            // Its image weighted by its mutations (MLT) or passes x pixels (the photon
+            // mappers), the weight as each pixel's count: adding such films averages
+            // the images by weight. Passes here are the --spp unit (mutations per pixel
+            // for MLT), of which an interrupted run has done fewer.
+            let done = if outcome.interrupted {
+                (outcome.samples / pixels).min(range.end - range.first)
+            } else {
+                range.end - range.first
+            };
+            let film = weighted_film(&outcome.film.image(), outcome.samples, &outcome.film);
+            (film, range.first + done)
+        };
+        shard_end = passes;
+        let header = CheckpointHeader {
+            passes,
+            seconds: outcome.wall.as_secs_f64(),
+            nonfinite: film.nonfinite,
+            nonfinite_splats: film.nonfinite_splats,
+            out_of_range: film.out_of_range,
+            made_by: "render".into(),
+            ..CheckpointHeader::start(&o.scene, &data, o.integrator, &o.settings, Some(range))
+        };
+        if outcome.passes > 0 {
+            Checkpoint { header, film }.write(&film_file)?;
+        }
+    }
 
     if outcome.passes == 0 {
         // Nothing finished: an existing output is better than a black image.
@@ -94,6 +174,21 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     let mut report =
         crate::report::render_report(&o.scene, o.integrator, threads, &outcome, cpu, &data);
     report += &format!("wrote {} and {}\n", output.display(), png.display());
+    if let Some(range) = shard {
+        report += &format!(
+            "shard: passes {}..{shard_end} of {}; its film is {} (stagelight merge adds the \
+             shards)\n",
+            range.first,
+            range.total,
+            film_file.display()
+        );
+        if !unbiased {
+            report += &format!(
+                "shard: an independent run with seed {} (merge averages the shards' images)\n",
+                range.independent_seed(o.settings.seed)
+            );
+        }
+    }
     if outcome.interrupted {
         report += &format!(
             "interrupted: saved the {} finished passes ({} samples)\n",
@@ -105,4 +200,27 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         eprintln!("warning: {warning}");
     }
     Ok(exit_code(outcome.interrupted))
+}
+
+/// A biased integrator's shard film: `image` times `weight` in every pixel, with `weight` as
+/// every pixel's count (see `CheckpointHeader::is_unbiased`), and `film`'s rejected counts.
+fn weighted_film(image: &crate::film::Image, weight: u64, film: &Film) -> Film {
+    let n = image.pixels.len();
+    let sums = image
+        .pixels
+        .iter()
+        .map(|p| p.as_dvec3() * weight as f64)
+        .collect();
+    let mut weighted = Film::from_parts(
+        image.width,
+        image.height,
+        sums,
+        vec![weight; n],
+        Vec::new(),
+        film.nonfinite,
+    )
+    .expect("one sum and count per pixel");
+    weighted.nonfinite_splats = film.nonfinite_splats;
+    weighted.out_of_range += film.out_of_range;
+    weighted
 }

@@ -184,6 +184,7 @@ pub(crate) fn compare_scene(
                 budget: ReferenceBudget::SamplesPerPixel(reference_spp),
                 output: &path,
                 checkpoint_every: std::time::Duration::from_secs(30),
+                shard: None,
             };
             if !quiet {
                 eprintln!(

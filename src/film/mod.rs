@@ -1,14 +1,20 @@
-//! The film: per-pixel sums in f64 (so a million samples of a constant give that constant
-//! exactly), non-finite samples counted and never added, and images written as EXR (float32
-//! linear RGB, unscaled) and PNG (sRGB preview), each under a temporary name and renamed
-//! (`output`).
+//! The film: per-pixel sums in fixed point (`fixed`: each sample rounded once to units of
+//! 2^-64 and summed as an integer, so the sum does not depend on the order of its samples and
+//! two films of disjoint samples add up to the film of all of them, bit for bit), non-finite
+//! samples counted and never added, and images written as EXR (float32 linear RGB, unscaled)
+//! and PNG (sRGB preview), each under a temporary name and renamed (`output`).
 //!
 //! A rejected (NaN or infinite) sample still counts in its pixel's sample count: it weighs as
 //! black in the pixel's mean, so a pixel with rejected samples is darkened by their share.
 //! Every integrator does the same (the photon mappers drop a non-finite estimate as zero),
-//! and the reports count them; `stagelight render` warns when their share is large.
+//! and the reports count them; `stagelight render` warns when their share is large. A sample
+//! beyond the film's range (a pixel sum beyond +-2^63) is rejected the same way and counted
+//! apart (`out_of_range`).
 
+pub mod fixed;
 pub mod output;
+
+use fixed::{FixedRgb, Rejected};
 
 use glam::{DVec3, Vec3};
 use std::io::{Read, Seek};
@@ -19,16 +25,19 @@ use std::path::Path;
 pub struct Film {
     pub width: usize,
     pub height: usize,
-    sum: Vec<DVec3>,
+    sum: Vec<FixedRgb>,
     samples: Vec<u64>,
     /// Splatted contributions (light tracing): they land in any pixel, not the one sampled,
     /// and are divided by the number of passes (light paths per pixel), not by the pixel's
     /// own sample count. Empty until the first splat.
-    splat: Vec<DVec3>,
+    splat: Vec<FixedRgb>,
     /// Samples rejected because a channel was NaN or infinite (they count as black).
     pub nonfinite: u64,
     /// Splats rejected because a channel was NaN or infinite (counted apart from samples).
     pub nonfinite_splats: u64,
+    /// Samples and splats rejected because they would take their pixel's sum beyond the
+    /// film's range, +-2^63 (samples count as black, splats are dropped).
+    pub out_of_range: u64,
 }
 
 impl Film {
@@ -36,26 +45,70 @@ impl Film {
         Film {
             width,
             height,
-            sum: vec![DVec3::ZERO; width * height],
+            sum: vec![FixedRgb::ZERO; width * height],
             samples: vec![0; width * height],
             splat: Vec::new(),
             nonfinite: 0,
             nonfinite_splats: 0,
+            out_of_range: 0,
         }
     }
 
-    /// Adds one sample to a pixel; a sample with a NaN or infinite channel is counted instead.
+    /// Adds one sample to a pixel; a rejected one (NaN, infinite, out of range) is counted
+    /// instead.
     #[inline]
     pub fn add_sample(&mut self, pixel: usize, value: Vec3) {
         self.samples[pixel] += 1;
-        if value.is_finite() {
-            self.sum[pixel] += value.as_dvec3();
-        } else {
-            self.nonfinite += 1;
+        match self.sum[pixel].add_sample(value) {
+            Ok(()) => {}
+            Err(Rejected::NonFinite) => self.nonfinite += 1,
+            Err(Rejected::OutOfRange) => self.out_of_range += 1,
         }
     }
 
-    /// Adds a splat to a pixel; a non-finite one is counted (in `nonfinite_splats`) instead.
+    /// Adds a wave of samples: `values[i]` is global sample `first_sample + i`, which lands in
+    /// pixel `(first_sample + i) % pixels` (as `add_sample` one by one would add them). Each
+    /// pixel's samples are added in sample order, so the pixels are shared out between threads
+    /// in fixed blocks and the film is the same for any thread count.
+    pub fn add_wave(&mut self, first_sample: u64, values: &[Vec3]) {
+        use rayon::prelude::*;
+        const BLOCK: usize = 1024;
+        let pixels = self.sum.len();
+        if pixels == 0 {
+            return;
+        }
+        // Sample i lands in pixel (offset + i) % pixels: pixel p's first sample is
+        // (p + pixels - offset) % pixels, then every `pixels` further.
+        let offset = (first_sample % pixels as u64) as usize;
+        let (nonfinite, out_of_range) = self
+            .sum
+            .par_chunks_mut(BLOCK)
+            .zip(self.samples.par_chunks_mut(BLOCK))
+            .enumerate()
+            .map(|(block, (sums, counts))| {
+                let (mut nonfinite, mut out_of_range) = (0, 0);
+                for (j, (sum, count)) in sums.iter_mut().zip(counts).enumerate() {
+                    let pixel = block * BLOCK + j;
+                    let mut i = (pixel + pixels - offset) % pixels;
+                    while i < values.len() {
+                        *count += 1;
+                        match sum.add_sample(values[i]) {
+                            Ok(()) => {}
+                            Err(Rejected::NonFinite) => nonfinite += 1,
+                            Err(Rejected::OutOfRange) => out_of_range += 1,
+                        }
+                        i += pixels;
+                    }
+                }
+                (nonfinite, out_of_range)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        self.nonfinite += nonfinite;
+        self.out_of_range += out_of_range;
+    }
+
+    /// Adds a splat to a pixel; a non-finite one is counted (in `nonfinite_splats`), one out
+    /// of range in `out_of_range`, instead.
     #[inline]
     pub fn add_splat(&mut self, pixel: usize, value: Vec3) {
         if !value.is_finite() {
@@ -63,24 +116,71 @@ impl Film {
             return;
         }
         if self.splat.is_empty() {
-            self.splat = vec![DVec3::ZERO; self.width * self.height];
+            self.splat = vec![FixedRgb::ZERO; self.width * self.height];
         }
-        self.splat[pixel] += value.as_dvec3();
+        match self.splat[pixel].add_sample(value) {
+            Ok(()) => {}
+            Err(Rejected::NonFinite) => self.nonfinite_splats += 1,
+            Err(Rejected::OutOfRange) => self.out_of_range += 1,
+        }
     }
 
-    /// Rebuilds a film from its per-pixel sums, sample counts and splat sums (e.g. a
-    /// checkpoint; `splat` may be empty for a film without splats); None when their lengths
-    /// do not match the size.
-    pub fn from_parts(
+    /// Adds another film of the same size (samples, splats and rejected counts): the film of
+    /// both sets of samples, exactly as if they had been added one by one. An error when the
+    /// sizes differ or a sum would leave the film's range (this film is then unchanged).
+    pub fn add_film(&mut self, other: &Film) -> Result<(), String> {
+        if (self.width, self.height) != (other.width, other.height) {
+            return Err(format!(
+                "a {}x{} film cannot be added to a {}x{} one",
+                other.width, other.height, self.width, self.height
+            ));
+        }
+        let add = |a: &[FixedRgb], b: &[FixedRgb], what: &str| -> Result<Vec<FixedRgb>, String> {
+            a.iter()
+                .zip(b)
+                .enumerate()
+                .map(|(i, (x, y))| {
+                    x.checked_add(y).ok_or_else(|| {
+                        format!(
+                            "the {what} of pixel ({}, {}) would leave the film's range (+-2^63)",
+                            i % self.width,
+                            i / self.width
+                        )
+                    })
+                })
+                .collect()
+        };
+        let sum = add(&self.sum, &other.sum, "sum")?;
+        let splat = match (self.splat.is_empty(), other.splat.is_empty()) {
+            (_, true) => None,
+            (true, false) => Some(other.splat.clone()),
+            (false, false) => Some(add(&self.splat, &other.splat, "splat sum")?),
+        };
+        self.sum = sum;
+        if let Some(splat) = splat {
+            self.splat = splat;
+        }
+        for (a, &b) in self.samples.iter_mut().zip(&other.samples) {
+            *a += b;
+        }
+        self.nonfinite += other.nonfinite;
+        self.nonfinite_splats += other.nonfinite_splats;
+        self.out_of_range += other.out_of_range;
+        Ok(())
+    }
+
+    /// Rebuilds a film from its fixed-point per-pixel sums, sample counts and splat sums (a
+    /// checkpoint; `splat` may be empty); None when their lengths do not match the size.
+    pub fn from_fixed_parts(
         width: usize,
         height: usize,
-        sum: Vec<DVec3>,
+        sum: Vec<FixedRgb>,
         samples: Vec<u64>,
-        splat: Vec<DVec3>,
+        splat: Vec<FixedRgb>,
         nonfinite: u64,
     ) -> Option<Film> {
         let pixels = width.checked_mul(height)?;
-        let splat = if splat.iter().all(|v| *v == DVec3::ZERO) {
+        let splat = if splat.iter().all(FixedRgb::is_zero) {
             Vec::new()
         } else {
             splat
@@ -96,17 +196,71 @@ impl Film {
                 splat,
                 nonfinite,
                 nonfinite_splats: 0,
+                out_of_range: 0,
             })
     }
 
-    /// Per-pixel splat sums (zero for every pixel of a film without splats).
-    pub fn splat_sum(&self, pixel: usize) -> DVec3 {
-        self.splat.get(pixel).copied().unwrap_or(DVec3::ZERO)
+    /// The fixed-point per-pixel sums, row 0 first.
+    pub fn fixed_sums(&self) -> &[FixedRgb] {
+        &self.sum
     }
 
-    /// Per-pixel sums of the finite samples, row 0 first.
-    pub fn sums(&self) -> &[DVec3] {
-        &self.sum
+    /// The fixed-point per-pixel splat sums; empty for a film without splats.
+    pub fn fixed_splats(&self) -> &[FixedRgb] {
+        &self.splat
+    }
+
+    /// Builds a film from f64 per-pixel sums, sample counts and splat sums (`splat` may be
+    /// empty for a film without splats), each sum rounded to the film's unit (2^-64); a sum
+    /// beyond the film's range (+-2^63) or not finite is taken as 0 and counted in
+    /// `out_of_range` or `nonfinite`. None when their lengths do not match the size. For films
+    /// made from f64 images (the photon mappers, MLT).
+    pub fn from_parts(
+        width: usize,
+        height: usize,
+        sum: Vec<DVec3>,
+        samples: Vec<u64>,
+        splat: Vec<DVec3>,
+        nonfinite: u64,
+    ) -> Option<Film> {
+        let (mut rejected_nonfinite, mut out_of_range) = (0, 0);
+        let mut fixed = |v: Vec<DVec3>| -> Vec<FixedRgb> {
+            v.into_iter()
+                .map(|s| {
+                    FixedRgb::from_dvec3(s).unwrap_or_else(|| {
+                        if s.is_finite() {
+                            out_of_range += 1;
+                        } else {
+                            rejected_nonfinite += 1;
+                        }
+                        FixedRgb::ZERO
+                    })
+                })
+                .collect()
+        };
+        let (sum, splat) = (fixed(sum), fixed(splat));
+        let mut film = Film::from_fixed_parts(
+            width,
+            height,
+            sum,
+            samples,
+            splat,
+            nonfinite + rejected_nonfinite,
+        )?;
+        film.out_of_range = out_of_range;
+        Some(film)
+    }
+
+    /// A pixel's splat sum, rounded to f64 (zero for a film without splats).
+    pub fn splat_sum(&self, pixel: usize) -> DVec3 {
+        self.splat
+            .get(pixel)
+            .map_or(DVec3::ZERO, FixedRgb::to_dvec3)
+    }
+
+    /// Per-pixel sums of the finite samples, rounded to f64, row 0 first.
+    pub fn sums(&self) -> Vec<DVec3> {
+        self.sum.iter().map(FixedRgb::to_dvec3).collect()
     }
 
     /// Per-pixel sample counts (rejected non-finite samples included).
@@ -128,11 +282,15 @@ impl Film {
             .zip(&self.samples)
             .enumerate()
             .map(|(i, (s, &n))| {
-                let mut v = if n == 0 { DVec3::ZERO } else { *s / n as f64 };
-                if let Some(&splat) = self.splat.get(i)
+                let mut v = if n == 0 {
+                    DVec3::ZERO
+                } else {
+                    s.to_dvec3() / n as f64
+                };
+                if let Some(splat) = self.splat.get(i)
                     && passes > 0.0
                 {
-                    v += splat / passes;
+                    v += splat.to_dvec3() / passes;
                 }
                 v.as_vec3()
             })
@@ -410,6 +568,26 @@ mod tests {
         let img = film.image();
         assert_eq!(img.pixels[0], Vec3::splat(0.5));
         assert_eq!(img.pixels[1], Vec3::ZERO);
+    }
+
+    #[test]
+    fn a_wave_adds_as_its_samples_one_by_one() {
+        let values: Vec<Vec3> = (0..5000)
+            .map(|i| match i % 97 {
+                0 => Vec3::NAN,
+                k => Vec3::new(k as f32 * 0.37, 1.0 / k as f32, -(k as f32)),
+            })
+            .collect();
+        for (first, len) in [(0u64, 5000usize), (1234, 700), (2999, 4001), (7, 1)] {
+            let (mut one_by_one, mut wave) = (Film::new(37, 41), Film::new(37, 41));
+            for (i, &v) in values[..len].iter().enumerate() {
+                one_by_one.add_sample(((first + i as u64) % (37 * 41)) as usize, v);
+            }
+            wave.add_wave(first, &values[..len]);
+            assert_eq!(wave.fixed_sums(), one_by_one.fixed_sums());
+            assert_eq!(wave.sample_counts(), one_by_one.sample_counts());
+            assert_eq!(wave.nonfinite, one_by_one.nonfinite);
+        }
     }
 
     #[test]

@@ -3,8 +3,9 @@
 //!
 //! - `render_waves` drives sample-based integrators (PT, BDPT): global sample ids in waves of
 //!   up to the state's wavefront, whole passes per wave where they fit. Samples are a pure
-//!   function of (seed, pixel, sample index, dimension) and the film adds them in sample
-//!   order, so a render can resume from the film of its finished passes, bit for bit.
+//!   function of (seed, pixel, sample index, dimension) and the film sums them exactly, so
+//!   a render can resume from the film of its finished passes, and shards of disjoint pass
+//!   ranges add up to one render's film, bit for bit.
 //! - `render_passes` drives pass-based integrators (the photon mappers, MLT): one graph run
 //!   per pass, the image made from the state at the end.
 
@@ -81,7 +82,8 @@ pub fn render_waves<S: WaveState>(
         assert!(
             from.film.width == cam.width as usize
                 && from.film.height == cam.height as usize
-                && from.film.total_samples() == from.passes * pixels,
+                && from.first_pass <= from.passes
+                && from.film.total_samples() == (from.passes - from.first_pass) * pixels,
             "a resumed film must hold whole passes of this camera's image"
         );
         *state.film_mut() = from.film;

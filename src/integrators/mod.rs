@@ -376,12 +376,43 @@ impl Default for RenderSettings {
     }
 }
 
-/// A render to continue: the film of the passes already done (0..passes). Samples are a
-/// pure function of (seed, pixel, sample index, dimension) and the film adds them in global
-/// sample order, so continuing gives, bit for bit, the film of one uninterrupted render.
+/// A render to continue: the film of the passes already done (`first_pass..passes`; a shard
+/// starts at its first pass with an empty film). Samples are a pure function of (seed, pixel,
+/// sample index, dimension) and the film sums them exactly, so continuing gives, bit for bit,
+/// the film of one uninterrupted render of those passes.
 pub struct Resume {
     pub film: Film,
+    /// The first pass in `film` (0 unless the render is a shard).
+    pub first_pass: u64,
     pub passes: u64,
+}
+
+impl Resume {
+    /// A shard's start: an empty film, the render beginning at pass `first_pass`.
+    pub fn shard_start(width: usize, height: usize, first_pass: u64) -> Resume {
+        Resume {
+            film: Film::new(width, height),
+            first_pass,
+            passes: first_pass,
+        }
+    }
+}
+
+/// The settings of an integrator that change its image besides the seed, sampler and depth
+/// cap, as text; shards must agree on it to be merged. For the unbiased ones: empty when they
+/// are the defaults (so checkpoints made before this was recorded still match), else e.g.
+/// `mis=balance`; for the others, all their options (`--photons`, `--alpha`, `--sigma`, ...).
+pub fn film_settings(kind: IntegratorKind, settings: &RenderSettings) -> String {
+    let options = kind.info().options;
+    if options.contains(&"--large-step") {
+        format!("{:?}", settings.mlt)
+    } else if options.contains(&"--photons") || options.contains(&"--photons-per-pass") {
+        format!("{:?}", settings.photons)
+    } else if options.contains(&"--mis") && settings.mis != crate::path::MisHeuristic::Power {
+        format!("mis={:?}", settings.mis).to_ascii_lowercase()
+    } else {
+        String::new()
+    }
 }
 
 /// Renders a scene with an integrator from nothing.

@@ -1,7 +1,6 @@
 //! Adds the wave's connections to the film: each sample's strategies with t >= 2 to its own
-//! pixel, in sample order; light-tracing splats (t = 1) to the pixels they project to, in
-//! connection order. Both orders are fixed by the wave, so the image never depends on how
-//! work was split between threads. With strategy images on, each strategy's share is also
+//! pixel; light-tracing splats (t = 1) to the pixels they project to. The film's sums are
+//! exact, so the image never depends on how work was split between threads. With strategy images on, each strategy's share is also
 //! summed on its own.
 
 use crate::components::CHUNK;
@@ -34,11 +33,8 @@ crate::system! {
                     }
                 }
             });
-        let (first, pixels) = (wave.first, *pixels);
-        for (k, &value) in sample_radiance[..n].iter().enumerate() {
-            film
-                .add_sample(((first + k as u64) % pixels) as usize, value);
-        }
+        debug_assert_eq!(*pixels as usize, film.width * film.height);
+        film.add_wave(wave.first, &sample_radiance[..n]);
         let total = *connections_len;
         let mut splats = 0;
         for slot in 0..total {

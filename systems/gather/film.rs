@@ -1,5 +1,5 @@
-//! Adds the wave's finished samples to the film, in global sample order, so the image never
-//! depends on how work was split between threads.
+//! Adds the wave's finished samples to the film. The film's sums are exact, so the image never
+//! depends on how the work was split between threads.
 
 use crate::integrators::pt::PtState;
 use crate::pipeline::Flow;
@@ -13,10 +13,9 @@ crate::system! {
         write film;
     }
     run {
-        let (first, len) = (wave.first, wave.len);
-        for (i, &value) in sample_radiance[..len].iter().enumerate() {
-            film.add_sample(((first + i as u64) % pixels) as usize, value);
-        }
+        let len = wave.len;
+        debug_assert_eq!(*pixels as usize, film.width * film.height);
+        film.add_wave(wave.first, &sample_radiance[..len]);
         Flow::new(len, len)
     }
 }

@@ -583,6 +583,13 @@ const CHECKPOINT_WORDS: &[&str] = &[
     "seconds",
     "nonfinite",
     "nonfinite_splats",
+    "first_pass",
+    "shard",
+    "end_pass",
+    "total_passes",
+    "made_by",
+    "render",
+    "settings",
     "pt",
     "bdpt",
     "sppm",
@@ -604,10 +611,16 @@ fn fnv1a(bytes: &[u8]) -> u64 {
 /// f64 or count set to an edge value, the version switched; then the checksum recomputed
 /// for the file's version (four times in five).
 fn mutate_checkpoint(rng: &mut Rng, input: &[u8], corpus: &[Vec<u8>]) -> Vec<u8> {
+    const MAGIC4: &[u8] = b"stagelight checkpoint 4\n";
     const MAGIC3: &[u8] = b"stagelight checkpoint 3\n";
     const MAGIC2: &[u8] = b"stagelight checkpoint 2\n";
-    let version3 = input.starts_with(MAGIC3);
-    if !(version3 || input.starts_with(MAGIC2)) || input.len() < MAGIC3.len() + 8 {
+    let Some(&original) = [MAGIC4, MAGIC3, MAGIC2]
+        .iter()
+        .find(|m| input.starts_with(m))
+    else {
+        return mutate_bytes(rng, input, corpus);
+    };
+    if input.len() < MAGIC3.len() + 8 {
         return mutate_bytes(rng, input, corpus);
     }
     let body = &input[MAGIC3.len()..input.len() - 8];
@@ -616,7 +629,7 @@ fn mutate_checkpoint(rng: &mut Rng, input: &[u8], corpus: &[Vec<u8>]) -> Vec<u8>
     };
     let mut header = body[..newline].to_vec();
     let mut payload = body[newline + 1..].to_vec();
-    let mut magic = if version3 { MAGIC3 } else { MAGIC2 };
+    let mut magic = original;
     match rng.below(6) {
         0 | 1 => header = mutate_ron(rng, &header, corpus),
         2 => {
@@ -641,7 +654,7 @@ fn mutate_checkpoint(rng: &mut Rng, input: &[u8], corpus: &[Vec<u8>]) -> Vec<u8>
             };
             payload[k..k + 8].copy_from_slice(&value);
         }
-        4 => magic = if version3 { MAGIC2 } else { MAGIC3 },
+        4 => magic = [MAGIC4, MAGIC3, MAGIC2][rng.below(3)],
         _ => payload = mutate_bytes(rng, &payload, corpus),
     }
     let mut out = magic.to_vec();
@@ -651,7 +664,7 @@ fn mutate_checkpoint(rng: &mut Rng, input: &[u8], corpus: &[Vec<u8>]) -> Vec<u8>
     out.extend_from_slice(&payload);
     let checksum = if rng.chance(5) {
         rng.next()
-    } else if magic == MAGIC3 {
+    } else if magic != MAGIC2 {
         fnv1a(&out)
     } else {
         fnv1a(&out[payload_start..])
@@ -737,6 +750,11 @@ fn write_binary_fuzz_seeds() {
         seconds: 1.5,
         nonfinite: 1,
         nonfinite_splats: 0,
+        out_of_range: 0,
+        first_pass: 0,
+        shard: None,
+        made_by: "reference".into(),
+        settings: String::new(),
     };
     let film = |width: usize, height: usize, passes: u64, splat: bool| {
         let n = width * height;
@@ -764,4 +782,20 @@ fn write_binary_fuzz_seeds() {
         }
         std::fs::write(cp.join(format!("{name}.checkpoint")), c.to_bytes().unwrap()).unwrap();
     }
+    // A shard's partial film: passes 2..5 of 8.
+    let mut shard = Checkpoint {
+        header: header(2, 2, 5),
+        film: film(2, 2, 3, false),
+    };
+    shard.header.first_pass = 2;
+    shard.header.made_by = "render".into();
+    shard.header.shard = Some(stagelight::reference::ShardRange {
+        end_pass: 5,
+        total_passes: 8,
+    });
+    std::fs::write(
+        cp.join("pt_shard_2x2.checkpoint"),
+        shard.to_bytes().unwrap(),
+    )
+    .unwrap();
 }

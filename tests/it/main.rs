@@ -26,4 +26,5 @@ mod reference;
 mod scene_crosscheck;
 mod scene_errors;
 mod scene_loading;
+mod shards;
 mod stability;

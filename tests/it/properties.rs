@@ -55,6 +55,11 @@ fn header(width: usize, height: usize, passes: u64) -> impl Strategy<Value = Che
                     seconds,
                     nonfinite: 0,
                     nonfinite_splats: splats,
+                    out_of_range: 0,
+                    first_pass: 0,
+                    shard: None,
+                    made_by: "reference".into(),
+                    settings: String::new(),
                 }
             },
         )
@@ -82,6 +87,7 @@ fn checkpoint() -> impl Strategy<Value = Checkpoint> {
             }
             header.nonfinite = film.nonfinite;
             header.nonfinite_splats = film.nonfinite_splats;
+            header.out_of_range = film.out_of_range;
             Checkpoint { header, film }
         })
 }
@@ -97,6 +103,7 @@ proptest! {
         prop_assert_eq!(back.film.sums(), c.film.sums());
         prop_assert_eq!(back.film.sample_counts(), c.film.sample_counts());
         prop_assert_eq!(back.film.nonfinite_splats, c.film.nonfinite_splats);
+        prop_assert_eq!(back.film.out_of_range, c.film.out_of_range);
         prop_assert_eq!(back.film.image(), c.film.image());
     }
 
@@ -129,13 +136,12 @@ proptest! {
         for (i, s) in samples[..cut].iter().enumerate() {
             first.add_sample(i % n, *s);
         }
-        let splat: Vec<DVec3> = (0..n).map(|p| first.splat_sum(p)).collect();
-        let mut resumed = Film::from_parts(
+        let mut resumed = Film::from_fixed_parts(
             w,
             h,
-            first.sums().to_vec(),
+            first.fixed_sums().to_vec(),
             first.sample_counts().to_vec(),
-            splat,
+            first.fixed_splats().to_vec(),
             first.nonfinite,
         )
         .unwrap();
@@ -145,9 +151,15 @@ proptest! {
         prop_assert_eq!(resumed.sums(), whole.sums());
         prop_assert_eq!(resumed.nonfinite, whole.nonfinite);
         prop_assert_eq!(resumed.image(), whole.image());
-        // A rejected sample counts as black: the mean is over every sample.
+        // A rejected sample (NaN, infinite, or 3e38: beyond the film's range) counts as
+        // black: the mean is over every sample.
+        let in_range = |s: &Vec3| s.is_finite() && s.abs().max_element() < 2f32.powi(63);
+        prop_assert_eq!(
+            whole.nonfinite + whole.out_of_range,
+            samples.iter().filter(|s| !in_range(s)).count() as u64
+        );
         for p in 0..n {
-            let finite: Vec<Vec3> = samples.iter().skip(p).step_by(n).copied().filter(|s| s.is_finite()).collect();
+            let finite: Vec<Vec3> = samples.iter().skip(p).step_by(n).copied().filter(in_range).collect();
             let count = samples.iter().skip(p).step_by(n).count();
             if count > 0 {
                 let mean = finite.iter().map(|s| s.as_dvec3()).sum::<DVec3>() / count as f64;
@@ -203,6 +215,11 @@ proptest! {
                 seconds: 0.0,
                 nonfinite: part.film.nonfinite,
                 nonfinite_splats: part.film.nonfinite_splats,
+                out_of_range: part.film.out_of_range,
+                first_pass: 0,
+                shard: None,
+                made_by: "reference".into(),
+                settings: String::new(),
             },
             film: part.film,
         };
@@ -213,7 +230,7 @@ proptest! {
             &settings,
             Budget::SamplesPerPixel(first + more),
             &control,
-            Resume { film, passes: first },
+            Resume { film, first_pass: 0, passes: first },
         );
         prop_assert_eq!(resumed.film.sums(), whole.film.sums());
         prop_assert_eq!(resumed.film.image(), whole.film.image());

@@ -56,6 +56,7 @@ fn reference_with(
         budget: ReferenceBudget::SamplesPerPixel(spp),
         output,
         checkpoint_every,
+        shard: None,
     };
     render_reference(&job, &AtomicBool::new(false), &|_, _| {})
 }
