@@ -36,7 +36,7 @@ class Capture(mi.Appender):
 
 
 log = Capture()
-logger = mi.Thread.thread().logger()
+logger = mi.logger()
 logger.clear_appenders()
 logger.add_appender(log)
 logger.set_log_level(mi.LogLevel.Info)
@@ -44,7 +44,7 @@ logger.set_log_level(mi.LogLevel.Info)
 t = time.perf_counter()
 scene = mi.load_file(scene_file, spp=spp)
 load_s = time.perf_counter() - t
-built = [l.strip() for l in log.lines if 'ready' in l]
+built = [l.strip().split("(")[-1].rstrip(")") for l in log.lines if "ready" in l]
 film = scene.sensors()[0].film().crop_size()
 pixels = int(film[0]) * int(film[1])
 t = time.perf_counter()
