@@ -46,7 +46,18 @@ pub enum Command {
     Diff { image: PathBuf, reference: PathBuf },
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
     Bench {
-        scene: PathBuf,
+        #[arg(required_unless_present = "big", conflicts_with = "big")]
+        scene: Option<PathBuf>,
+        /// Bench the big scenes (the Cornell box with 32 to 5 million triangles), written as
+        /// PLY files, stagelight and Mitsuba 3 scenes into DIR where missing.
+        #[arg(long, value_name = "DIR")]
+        big: Option<PathBuf>,
+        /// Write the results as JSON.
+        #[arg(long, value_name = "FILE.json")]
+        save: Option<PathBuf>,
+        /// Compare with results saved by --save: ratios, and which measures got worse.
+        #[arg(long, value_name = "FILE.json")]
+        baseline: Option<PathBuf>,
         #[arg(long, default_value = "pt", value_parser = IntegratorParser)]
         integrator: IntegratorKind,
         /// Samples per pixel of each timed run.
@@ -659,6 +670,9 @@ fn run(cli: Cli) -> Result<i32> {
         }
         Command::Bench {
             scene,
+            big,
+            save,
+            baseline,
             integrator,
             spp,
             runs,
@@ -666,6 +680,9 @@ fn run(cli: Cli) -> Result<i32> {
         } => {
             crate::commands::bench::bench(&BenchOptions {
                 scene,
+                big,
+                save,
+                baseline,
                 integrator,
                 spp,
                 runs,

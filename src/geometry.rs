@@ -35,6 +35,21 @@ impl TriangleColumns {
     pub fn is_empty(&self) -> bool {
         self.p0.is_empty()
     }
+
+    /// Bytes the columns hold.
+    pub fn memory_bytes(&self) -> usize {
+        fn bytes<T>(v: &Vec<T>) -> usize {
+            v.capacity() * std::mem::size_of::<T>()
+        }
+        bytes(&self.p0)
+            + bytes(&self.p1)
+            + bytes(&self.p2)
+            + bytes(&self.normal)
+            + bytes(&self.material)
+            + bytes(&self.emitter)
+            + bytes(&self.smooth)
+            + bytes(&self.vertex_normals)
+    }
 }
 
 /// A point on a surface with a conservative bound on its floating-point error.

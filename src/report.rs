@@ -172,6 +172,22 @@ impl BenchRuns {
         }
         self.last = Some((o, cpu));
     }
+
+    /// Each rate's name and its value in every run (photons/s and passes/s only for the
+    /// photon mappers).
+    pub fn rates(&self) -> Vec<(&'static str, &[f64])> {
+        [
+            ("samples/s", &self.samples_per_s),
+            ("closest-hit rays/s", &self.closest_per_s),
+            ("shadow rays/s", &self.shadow_per_s),
+            ("photons/s", &self.photons_per_s),
+            ("passes/s", &self.passes_per_s),
+        ]
+        .into_iter()
+        .filter(|(_, v)| !v.is_empty())
+        .map(|(name, v)| (name, v.as_slice()))
+        .collect()
+    }
 }
 
 /// The bench table (Markdown): median, min and max of each rate over the runs, then the

@@ -38,6 +38,11 @@ pub(crate) struct CwBvhAccel {
 }
 
 impl CwBvhAccel {
+    /// Bytes of the tree's nodes.
+    pub(crate) fn memory_bytes(&self) -> usize {
+        self.nodes.capacity() * std::mem::size_of::<Node>()
+    }
+
     /// Converts the built tree over `verts` (indexed like the boxes it was built from).
     /// Returns it with the input indices of the leaf slots (four per packet, `u32::MAX` for an
     /// unused lane) and the packets.

@@ -169,6 +169,16 @@ impl Accel {
         }
     }
 
+    /// Bytes the tree holds: (its nodes, its triangles in leaf order).
+    pub fn memory_bytes(&self) -> (usize, usize) {
+        let nodes = self.tree.as_ref().map_or(0, |t| t.memory_bytes());
+        let t = &self.tris;
+        let triangles = t.verts.capacity() * std::mem::size_of::<triangle::TriangleColumns>()
+            + t.packets.capacity() * std::mem::size_of::<triangle::TrianglePacket>()
+            + t.ids.capacity() * std::mem::size_of::<u32>();
+        (nodes, triangles)
+    }
+
     /// The number of triangles in the tree (those with a non-zero area).
     pub fn len(&self) -> usize {
         self.tris.len

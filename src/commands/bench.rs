@@ -1,36 +1,400 @@
-//! `stagelight bench`: a scene rendered several times at a fixed budget, its throughput as a
-//! table (`report::bench_table`).
+//! `stagelight bench`: a scene (or the big scenes of `--big`) rendered several times at a
+//! fixed budget, its throughput as a table (`report::bench_table`), with the scene's load and
+//! tree-build times and memory; the machine it ran on; the results saved as JSON (`--save`)
+//! and compared with a saved baseline (`--baseline`), as ratios.
 
-use super::{
-    check_render_memory, check_samples, check_threads, load_scene, print_out, thread_pool,
-};
-use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings};
+use super::big_scenes::{BIG_SCENES, scene_path, write_big_scene};
+use super::{check_outputs, check_render_memory, check_samples, check_threads, print_out};
+use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, SceneData};
 use crate::report::{BenchRuns, bench_table};
 use crate::sysinfo::cpu_seconds;
-use anyhow::Result;
-use std::path::PathBuf;
+use anyhow::{Context, Result, bail};
+use serde::{Deserialize, Serialize};
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 
 /// What a bench was asked for.
 pub struct BenchOptions {
-    /// Scene file (RON).
-    pub scene: PathBuf,
+    /// Scene file (RON); None with `big`.
+    pub scene: Option<PathBuf>,
+    /// Write the big scenes into this folder (those missing) and bench each.
+    pub big: Option<PathBuf>,
     pub integrator: IntegratorKind,
     /// Samples per pixel of each timed run.
     pub spp: u64,
-    /// Timed runs, after one warm-up run.
+    /// Timed runs, after one warm-up run; also the number of tree builds timed.
     pub runs: u32,
     /// Worker threads (None: all cores).
     pub threads: Option<usize>,
+    /// Write the results here as JSON.
+    pub save: Option<PathBuf>,
+    /// Compare with the results saved here.
+    pub baseline: Option<PathBuf>,
 }
 
-/// Renders one warm-up run and `runs` timed ones, and prints the table.
+/// A saved bench: the machine and each scene's measures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BenchFile {
+    pub machine: Machine,
+    pub results: Vec<BenchResult>,
+}
+
+/// What the figures depend on besides the code.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Machine {
+    pub stagelight: String,
+    pub cpu: String,
+    /// Worker threads of the bench.
+    pub threads: usize,
+    /// Target features the build was compiled for (`-C target-cpu`, `-C target-feature`).
+    pub target_features: Vec<String>,
+    /// Whether the traversal's AVX2 copy ran (chosen at run time).
+    pub avx2_fma_at_run_time: bool,
+}
+
+impl Machine {
+    pub fn this(threads: usize) -> Machine {
+        Machine {
+            stagelight: env!("CARGO_PKG_VERSION").to_string(),
+            cpu: cpu_model(),
+            threads,
+            target_features: target_features(),
+            avx2_fma_at_run_time: crate::cpu::has_avx2_fma(),
+        }
+    }
+
+    /// One line for the report.
+    pub fn describe(&self) -> String {
+        format!(
+            "machine: {}, {} threads; build target features: {}; AVX2+FMA code at run time: {}",
+            self.cpu,
+            self.threads,
+            self.target_features.join(","),
+            if self.avx2_fma_at_run_time {
+                "yes"
+            } else {
+                "no"
+            }
+        )
+    }
+}
+
+/// The CPU's model name (Linux: /proc/cpuinfo), or "unknown CPU".
+fn cpu_model() -> String {
+    std::fs::read_to_string("/proc/cpuinfo")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("model name"))
+                .and_then(|l| l.split_once(':'))
+                .map(|(_, v)| v.trim().to_string())
+        })
+        .unwrap_or_else(|| "unknown CPU".to_string())
+}
+
+/// The x86 features this build may use everywhere (a build for `-C target-cpu=native` lists
+/// more than the default SSE2).
+fn target_features() -> Vec<String> {
+    let mut features = Vec::new();
+    macro_rules! check {
+        ($($f:tt),*) => {$(
+            if cfg!(target_feature = $f) {
+                features.push($f.to_string());
+            }
+        )*};
+    }
+    check!(
+        "sse2", "sse3", "ssse3", "sse4.1", "sse4.2", "popcnt", "avx", "avx2", "fma", "bmi2",
+        "avx512f", "neon"
+    );
+    if features.is_empty() {
+        features.push(std::env::consts::ARCH.to_string());
+    }
+    features
+}
+
+/// One scene's figures.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BenchResult {
+    /// The scene's file name (without its folder: results from another checkout compare).
+    pub scene: String,
+    pub integrator: String,
+    pub spp: u64,
+    pub triangles: u64,
+    pub measures: Vec<Measure>,
+}
+
+/// A measure over the runs.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Measure {
+    pub name: String,
+    /// Whether more is better (rates) or less (seconds, bytes).
+    pub higher_is_better: bool,
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+}
+
+impl Measure {
+    fn of(name: &str, higher_is_better: bool, values: &[f64]) -> Measure {
+        let mut v = values.to_vec();
+        v.sort_by(f64::total_cmp);
+        Measure {
+            name: name.to_string(),
+            higher_is_better,
+            median: v[v.len() / 2],
+            min: v[0],
+            max: v[v.len() - 1],
+        }
+    }
+}
+
+/// A measure against its baseline.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Comparison {
+    pub scene: String,
+    pub measure: String,
+    pub baseline: f64,
+    pub current: f64,
+    /// current / baseline (of the medians).
+    pub ratio: f64,
+    pub verdict: Verdict,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Verdict {
+    Better,
+    Worse,
+    /// Within the runs' spread: the ranges of the two overlap, or the medians differ by less
+    /// than `NOISE`.
+    Same,
+}
+
+/// Medians closer than this share are the same whatever the ranges say.
+pub const NOISE: f64 = 0.03;
+
+/// Each measure of `current` against the same measure of the same scene, integrator and spp
+/// in `baseline`; measures or scenes the baseline lacks are left out. Worse (or better) only
+/// when the two runs' ranges do not overlap and the medians differ by more than `NOISE`.
+pub fn compare_with_baseline(current: &BenchFile, baseline: &BenchFile) -> Vec<Comparison> {
+    let mut out = Vec::new();
+    for r in &current.results {
+        let Some(b) = baseline
+            .results
+            .iter()
+            .find(|b| b.scene == r.scene && b.integrator == r.integrator && b.spp == r.spp)
+        else {
+            continue;
+        };
+        for m in &r.measures {
+            let Some(bm) = b.measures.iter().find(|bm| bm.name == m.name) else {
+                continue;
+            };
+            let ratio = m.median / bm.median;
+            let apart = m.min > bm.max || m.max < bm.min;
+            let verdict = if !ratio.is_finite() || !apart || (ratio - 1.0).abs() <= NOISE {
+                Verdict::Same
+            } else if (ratio > 1.0) == m.higher_is_better {
+                Verdict::Better
+            } else {
+                Verdict::Worse
+            };
+            out.push(Comparison {
+                scene: r.scene.clone(),
+                measure: m.name.clone(),
+                baseline: bm.median,
+                current: m.median,
+                ratio,
+                verdict,
+            });
+        }
+    }
+    out
+}
+
+/// The comparison as a Markdown table, with a line when the machines differ.
+pub fn comparison_table(current: &BenchFile, baseline: &BenchFile, baseline_file: &Path) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "against the baseline {}", baseline_file.display());
+    if baseline.machine != current.machine {
+        let _ = writeln!(
+            t,
+            "note: the baseline ran on another machine or build ({})",
+            baseline.machine.describe()
+        );
+    }
+    let rows = compare_with_baseline(current, baseline);
+    if rows.is_empty() {
+        let _ = writeln!(
+            t,
+            "no measure to compare: the baseline has no result for these scenes, integrator and spp"
+        );
+        return t;
+    }
+    let _ = writeln!(t, "| scene | measure | baseline | now | now / baseline | |");
+    let _ = writeln!(t, "|---|---|---|---|---|---|");
+    for c in rows {
+        let flag = match c.verdict {
+            Verdict::Better => "better",
+            Verdict::Worse => "WORSE",
+            Verdict::Same => "",
+        };
+        let _ = writeln!(
+            t,
+            "| {} | {} | {} | {} | {:.3}x | {flag} |",
+            c.scene,
+            c.measure,
+            short(c.baseline),
+            short(c.current),
+            c.ratio
+        );
+    }
+    t
+}
+
+/// A figure in 4 significant digits (k, M and G for large ones).
+fn short(v: f64) -> String {
+    let (v, unit) = match v.abs() {
+        a if a >= 1e9 => (v / 1e9, " G"),
+        a if a >= 1e6 => (v / 1e6, " M"),
+        a if a >= 1e4 => (v / 1e3, " k"),
+        _ => (v, ""),
+    };
+    let digits = if v == 0.0 || !v.is_finite() {
+        0
+    } else {
+        (3 - v.abs().log10().floor() as i32).max(0) as usize
+    };
+    format!("{v:.digits$}{unit}")
+}
+
+/// Reads a saved bench (`--baseline`); errors name the file.
+pub fn read_bench_file(path: &Path) -> Result<BenchFile> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read the baseline", path.display()))?;
+    serde_json::from_str(&text).map_err(|e| {
+        anyhow::anyhow!(
+            "{}:{}:{}: not a saved bench: {}",
+            path.display(),
+            e.line(),
+            e.column(),
+            crate::scene::echo(&e.to_string())
+        )
+    })
+}
+
+/// The file as `--save` writes it.
+pub fn bench_file_json(file: &BenchFile) -> String {
+    serde_json::to_string_pretty(file).unwrap_or_default() + "\n"
+}
+
+/// Benches the scene or the big scenes, prints the tables, saves and compares.
 pub fn bench(o: &BenchOptions) -> Result<()> {
     check_threads(o.threads)?;
-    let data = load_scene(&o.scene)?;
+    let pool = super::thread_pool(o.threads)?;
+    let baseline = o.baseline.as_deref().map(read_bench_file).transpose()?;
+    if let Some(save) = &o.save {
+        let inputs: Vec<&Path> = o.baseline.iter().map(|p| p.as_path()).collect();
+        check_outputs(&[save], &inputs)?;
+    }
+    let scenes: Vec<PathBuf> = match (&o.scene, &o.big) {
+        (Some(scene), None) => vec![scene.clone()],
+        (None, Some(dir)) => BIG_SCENES
+            .iter()
+            .map(|size| {
+                let path = scene_path(dir, size);
+                if path.is_file() {
+                    return Ok(path);
+                }
+                eprintln!(
+                    "writing {} ({} triangles)",
+                    path.display(),
+                    size.triangles()
+                );
+                write_big_scene(dir, size)
+            })
+            .collect::<Result<_>>()?,
+        _ => bail!("bench takes a scene file or --big DIR"),
+    };
+    let machine = Machine::this(pool.current_num_threads());
+    print_out(&format!("{}\n\n", machine.describe()));
+    let mut file = BenchFile {
+        machine,
+        results: Vec::new(),
+    };
+    for scene in &scenes {
+        let result = bench_scene(o, &pool, scene)?;
+        file.results.push(result);
+    }
+    if o.big.is_some() {
+        print_out(&big_table(&file));
+    }
+    if let (Some(baseline), Some(path)) = (&baseline, &o.baseline) {
+        print_out(&comparison_table(&file, baseline, path));
+    }
+    if let Some(save) = &o.save {
+        crate::film::output::write_bytes(save, bench_file_json(&file).as_bytes())?;
+        eprintln!("saved {}", save.display());
+    }
+    Ok(())
+}
+
+/// The big scenes' figures side by side.
+fn big_table(file: &BenchFile) -> String {
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "| scene | triangles | load s | tree build s | tree + triangles MB | samples/s | closest-hit rays/s |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|---|---|");
+    for r in &file.results {
+        let get = |name: &str| {
+            r.measures
+                .iter()
+                .find(|m| m.name == name)
+                .map_or(f64::NAN, |m| m.median)
+        };
+        let _ = writeln!(
+            t,
+            "| {} | {} | {:.2} | {:.2} | {:.0} | {} | {} |",
+            r.scene,
+            r.triangles,
+            get("scene load s"),
+            get("tree build s"),
+            get("tree + triangles bytes") / 1e6,
+            short(get("samples/s")),
+            short(get("closest-hit rays/s")),
+        );
+    }
+    t
+}
+
+/// Loads, builds and renders one scene: its tables printed, its figures returned.
+fn bench_scene(o: &BenchOptions, pool: &rayon::ThreadPool, path: &Path) -> Result<BenchResult> {
+    let t = Instant::now();
+    let scene = crate::scene::load(path)?;
+    let load_s = t.elapsed().as_secs_f64();
+    for w in &scene.warnings {
+        eprintln!("warning: {w}");
+    }
+    // The tree is built `runs` times: the first is kept for the renders.
+    let mut build_s = Vec::new();
+    let mut accel = None;
+    for _ in 0..o.runs {
+        let t = Instant::now();
+        let built = pool.install(|| crate::accel::Accel::build(&scene.triangles));
+        build_s.push(t.elapsed().as_secs_f64());
+        accel.get_or_insert(built);
+    }
+    let accel = accel.context("at least one run")?;
+    let (nodes, leaf_triangles) = accel.memory_bytes();
+    let columns = scene.triangles.memory_bytes();
+    let triangles = scene.triangles.len() as u64;
+    let data = Arc::new(SceneData { scene, accel });
     check_samples("--spp", o.spp, &data)?;
-    let pool = thread_pool(o.threads)?;
     check_render_memory(
         o.integrator,
         &RenderSettings::default(),
@@ -67,12 +431,142 @@ pub fn bench(o: &BenchOptions) -> Result<()> {
         let (outcome, wall, cpu) = run_once(r as u64);
         runs.add(outcome, wall, cpu);
     }
-    print_out(&bench_table(
-        &o.scene,
-        o.integrator,
-        o.spp,
-        pool.current_num_threads(),
-        runs,
-    ));
-    Ok(())
+    let mut measures: Vec<Measure> = runs
+        .rates()
+        .into_iter()
+        .map(|(name, values)| Measure::of(name, true, values))
+        .collect();
+    measures.push(Measure::of("scene load s", false, &[load_s]));
+    measures.push(Measure::of("tree build s", false, &build_s));
+    let bytes = (nodes + leaf_triangles + columns) as f64;
+    measures.push(Measure::of("tree + triangles bytes", false, &[bytes]));
+    let mut table = bench_table(path, o.integrator, o.spp, pool.current_num_threads(), runs);
+    let _ = writeln!(
+        table,
+        "| scene | {triangles} triangles, loaded in {load_s:.2} s (file read and prepared) |\n\
+         | tree build | {} s median of {} (min {:.3}, max {:.3}) |\n\
+         | memory | tree nodes {:.1} MB, triangles in leaf order {:.1} MB, scene's triangle \
+         columns {:.1} MB: {:.1} MB, {:.0} bytes a triangle |\n",
+        short(Measure::of("", false, &build_s).median),
+        build_s.len(),
+        build_s.iter().copied().fold(f64::INFINITY, f64::min),
+        build_s.iter().copied().fold(0.0, f64::max),
+        nodes as f64 / 1e6,
+        leaf_triangles as f64 / 1e6,
+        columns as f64 / 1e6,
+        bytes / 1e6,
+        bytes / triangles.max(1) as f64,
+    );
+    print_out(&table);
+    Ok(BenchResult {
+        scene: path.file_name().map_or_else(
+            || path.display().to_string(),
+            |n| n.to_string_lossy().into(),
+        ),
+        integrator: o.integrator.as_str().to_string(),
+        spp: o.spp,
+        triangles,
+        measures,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn file(samples: [f64; 3], build: [f64; 3]) -> BenchFile {
+        let m = |name: &str, higher: bool, [min, median, max]: [f64; 3]| Measure {
+            name: name.into(),
+            higher_is_better: higher,
+            median,
+            min,
+            max,
+        };
+        BenchFile {
+            machine: Machine::this(2),
+            results: vec![BenchResult {
+                scene: "cornell_box.ron".into(),
+                integrator: "pt".into(),
+                spp: 32,
+                triangles: 32,
+                measures: vec![
+                    m("samples/s", true, samples),
+                    m("tree build s", false, build),
+                ],
+            }],
+        }
+    }
+
+    #[test]
+    fn baseline_ratios_and_verdicts() {
+        let base = file([0.9e6, 1.0e6, 1.1e6], [0.10, 0.11, 0.12]);
+        // Slower rate, apart from the baseline's range: worse; faster build: better.
+        let now = file([0.6e6, 0.7e6, 0.8e6], [0.05, 0.055, 0.06]);
+        let c = compare_with_baseline(&now, &base);
+        assert_eq!(c.len(), 2);
+        assert_eq!(c[0].measure, "samples/s");
+        assert!((c[0].ratio - 0.7).abs() < 1e-12);
+        assert_eq!(c[0].verdict, Verdict::Worse);
+        assert!((c[1].ratio - 0.5).abs() < 1e-12);
+        assert_eq!(c[1].verdict, Verdict::Better);
+        // Overlapping ranges are the same, however far the medians.
+        let now = file([1.05e6, 1.3e6, 1.4e6], [0.115, 0.2, 0.3]);
+        let c = compare_with_baseline(&now, &base);
+        assert!(c.iter().all(|c| c.verdict == Verdict::Same), "{c:?}");
+        // Apart, but within NOISE: the same.
+        let now = file([1.11e6, 1.12e6, 1.13e6], [0.10, 0.11, 0.12]);
+        assert_eq!(
+            compare_with_baseline(&now, &base)[0].verdict,
+            Verdict::Better
+        );
+        let now = file([0.975e6, 0.98e6, 0.985e6], [0.10, 0.11, 0.12]);
+        let base_tight = file([0.999e6, 1.0e6, 1.001e6], [0.10, 0.11, 0.12]);
+        assert_eq!(
+            compare_with_baseline(&now, &base_tight)[0].verdict,
+            Verdict::Same
+        );
+        // Another spp or scene is not compared.
+        let mut other = now.clone();
+        other.results[0].spp = 64;
+        assert!(compare_with_baseline(&other, &base).is_empty());
+        other.results[0].spp = 32;
+        other.results[0].scene = "door_ajar.ron".into();
+        assert!(compare_with_baseline(&other, &base).is_empty());
+    }
+
+    #[test]
+    fn the_table_flags_a_regression_and_another_machine() {
+        let base = file([0.9e6, 1.0e6, 1.1e6], [0.10, 0.11, 0.12]);
+        let now = file([0.6e6, 0.7e6, 0.8e6], [0.10, 0.11, 0.12]);
+        let t = comparison_table(&now, &base, Path::new("b.json"));
+        assert!(
+            t.contains("| samples/s | 1.000 M | 700.0 k | 0.700x | WORSE |"),
+            "{t}"
+        );
+        assert!(!t.contains("another machine"), "{t}");
+        let mut elsewhere = base.clone();
+        elsewhere.machine.cpu = "a slower CPU".into();
+        let t = comparison_table(&now, &elsewhere, Path::new("b.json"));
+        assert!(
+            t.contains("another machine") && t.contains("a slower CPU"),
+            "{t}"
+        );
+    }
+
+    #[test]
+    fn saved_files_read_back() {
+        let f = file([0.9e6, 1.0e6, 1.1e6], [0.10, 0.11, 0.12]);
+        let dir =
+            std::env::temp_dir().join(format!("stagelight_bench_json_{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("bench.json");
+        std::fs::write(&path, bench_file_json(&f)).unwrap();
+        assert_eq!(read_bench_file(&path).unwrap(), f);
+        std::fs::write(&path, "{\"machine\": 3}").unwrap();
+        let e = read_bench_file(&path).unwrap_err().to_string();
+        assert!(
+            e.contains("bench.json:1:") && e.contains("not a saved bench"),
+            "{e}"
+        );
+    }
 }

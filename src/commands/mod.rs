@@ -4,6 +4,7 @@
 //! `compare::run` and `compare::thesis`.
 
 pub mod bench;
+pub mod big_scenes;
 pub mod merge;
 pub mod reference;
 pub mod render;

@@ -96,6 +96,8 @@ pub enum ShapeDesc {
     },
     /// A Wavefront OBJ file, relative to the scene file.
     Obj(String),
+    /// A Stanford PLY file (ASCII or binary), relative to the scene file.
+    Ply(String),
 }
 
 #[derive(Clone, Copy, Debug, Deserialize)]

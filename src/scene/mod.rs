@@ -1,4 +1,4 @@
-//! Scenes: the RON description, OBJ loading, procedural shapes, the hecs world of scene
+//! Scenes: the RON description, OBJ and PLY loading, procedural shapes, the hecs world of scene
 //! entities, and "prepare", which flattens that world once into render data.
 
 mod camera;
@@ -6,6 +6,7 @@ pub use camera::Frustum;
 pub mod format;
 pub mod obj;
 pub mod parse;
+pub mod ply;
 pub mod prepare;
 pub mod shapes;
 pub mod world;

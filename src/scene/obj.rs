@@ -10,7 +10,7 @@
 //! BVH build quadratic, while halving gives small triangles along the rim and a few large
 //! ones inside.
 
-use super::shapes::Mesh;
+use super::shapes::{Mesh, MeshFile};
 use glam::DVec3;
 use std::collections::HashMap;
 use std::path::Path;
@@ -18,30 +18,22 @@ use std::path::Path;
 /// Polygons with more vertices than this are triangulated by halving instead of as a fan.
 pub const FAN_LIMIT: usize = 32;
 
-/// A mesh read from an OBJ file, with warnings for the user.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ObjMesh {
-    pub mesh: Mesh,
-    pub warnings: Vec<String>,
-}
-
 /// A face's corner: its position index and normal index (0-based).
 type Corner = (usize, Option<usize>);
 
 /// Reads an OBJ file; errors and warnings name it (and the line).
-pub fn load_obj(path: &Path) -> Result<ObjMesh, String> {
+pub fn load_obj(path: &Path) -> Result<MeshFile, String> {
+    use std::io::Read;
     let name = super::echo_path(path);
-    // A device or a pipe (/dev/zero, a FIFO) would be read forever.
-    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read mesh file {name}: {e}"))?;
-    if !meta.is_file() {
-        return Err(format!("cannot read mesh file {name}: not a regular file"));
-    }
-    let bytes = std::fs::read(path).map_err(|e| format!("cannot read mesh file {name}: {e}"))?;
+    let mut bytes = Vec::new();
+    super::shapes::open_mesh_file(path, &name)?
+        .read_to_end(&mut bytes)
+        .map_err(|e| format!("cannot read mesh file {name}: {e}"))?;
     parse_obj(&name, &bytes)
 }
 
 /// Parses OBJ text; `name` is the file as messages name it.
-pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<ObjMesh, String> {
+pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
     let at = |line: usize, what: String| format!("mesh file {name} line {line}: {what}");
     let mut positions: Vec<DVec3> = Vec::new();
     let mut file_normals: Vec<Option<DVec3>> = Vec::new();
@@ -188,7 +180,7 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<ObjMesh, String> {
             if bad_normals == 1 { "it" } else { "them" },
         ));
     }
-    Ok(ObjMesh { mesh, warnings })
+    Ok(MeshFile { mesh, warnings })
 }
 
 /// Appends the triangles of a polygon (vertex indices in order): a fan up to `FAN_LIMIT`

@@ -161,11 +161,21 @@ pub fn torus(major_radius: f64, minor_radius: f64, nu: u32, nv: u32) -> Mesh {
     }
 }
 
-/// Reads a Wavefront OBJ file (`super::obj`: polygons triangulated, every group merged into
-/// one mesh, vertex normals kept where the file gives them); its warnings are dropped. The
-/// error names the file and line.
-pub fn load_obj(path: &Path) -> Result<Mesh, String> {
-    super::obj::load_obj(path).map(|m| m.mesh)
+/// A mesh read from a file (OBJ, PLY), with warnings for the user.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct MeshFile {
+    pub mesh: Mesh,
+    pub warnings: Vec<String>,
+}
+
+/// Opens a mesh file (`name` is the path as messages show it): a missing file, a folder, a
+/// device or a pipe (/dev/zero, a FIFO: read forever) is an error naming it.
+pub fn open_mesh_file(path: &Path, name: &str) -> Result<std::fs::File, String> {
+    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read mesh file {name}: {e}"))?;
+    if !meta.is_file() {
+        return Err(format!("cannot read mesh file {name}: not a regular file"));
+    }
+    std::fs::File::open(path).map_err(|e| format!("cannot read mesh file {name}: {e}"))
 }
 
 #[cfg(test)]

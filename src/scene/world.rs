@@ -1,5 +1,5 @@
 //! The scene as a hecs world: the camera, each material and each object is an entity.
-//! `build` fills it from the parsed file (meshing every shape, reading OBJ files);
+//! `build` fills it from the parsed file (meshing every shape, reading OBJ and PLY files);
 //! `super::prepare` reads it once into render data.
 
 use super::format::{CameraDesc, MaterialDesc, ShapeDesc, TransformDesc};
@@ -112,7 +112,7 @@ pub fn build_with(parsed: &ParsedScene, limits: &super::Limits) -> Result<SceneW
                     defined_names(&parsed.materials)
                 ))
             })?;
-        // Procedural shapes are counted before they are meshed, OBJ meshes once read.
+        // Procedural shapes are counted before they are meshed, mesh files once read.
         let memory_check = |triangles: u64| {
             crate::sysinfo::check_memory(
                 &format!("the scene's {triangles} triangles"),
@@ -170,7 +170,7 @@ fn defined_names(materials: &[(String, MaterialDesc)]) -> String {
     names.join(", ")
 }
 
-/// The number of triangles a procedural shape will have (None for an OBJ file: counted when
+/// The number of triangles a procedural shape will have (None for a mesh file: counted when
 /// read).
 fn triangle_count(shape: &ShapeDesc) -> Option<u64> {
     Some(match shape {
@@ -179,7 +179,7 @@ fn triangle_count(shape: &ShapeDesc) -> Option<u64> {
         ShapeDesc::Box { .. } => 12,
         ShapeDesc::Icosphere { level, .. } => 20u64 << (2 * level.0),
         ShapeDesc::Torus { nu, nv, .. } => 2 * nu.0 as u64 * nv.0 as u64,
-        ShapeDesc::Obj(_) => return None,
+        ShapeDesc::Obj(_) | ShapeDesc::Ply(_) => return None,
     })
 }
 
@@ -233,7 +233,7 @@ fn make_material(desc: &MaterialDesc) -> Material {
     }
 }
 
-/// The mesh of a shape; an OBJ file's warnings go to `warnings`.
+/// The mesh of a shape; a mesh file's warnings go to `warnings`.
 fn make_mesh(
     shape: &ShapeDesc,
     base_dir: &Path,
@@ -263,6 +263,11 @@ fn make_mesh(
             let obj = super::obj::load_obj(&base_dir.join(file))?;
             warnings.extend(obj.warnings);
             obj.mesh
+        }
+        ShapeDesc::Ply(file) => {
+            let ply = super::ply::load_ply(&base_dir.join(file))?;
+            warnings.extend(ply.warnings);
+            ply.mesh
         }
     })
 }

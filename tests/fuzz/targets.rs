@@ -168,10 +168,24 @@ pub fn check_prepared(s: &PreparedScene) {
 
 /// An OBJ file: parsed, its mesh checked, and a tree built over its triangles.
 pub fn obj(data: &[u8]) -> String {
-    let parsed = match scene::obj::parse_obj("fuzz.obj", data) {
-        Ok(m) => m,
-        Err(e) => return check_message(&e, "fuzz.obj"),
-    };
+    match scene::obj::parse_obj("fuzz.obj", data) {
+        Ok(m) => check_mesh(&m, "fuzz.obj"),
+        Err(e) => check_message(&e, "fuzz.obj"),
+    }
+}
+
+/// A PLY file (ASCII or binary): parsed, its mesh checked, and a tree built over its
+/// triangles.
+pub fn ply(data: &[u8]) -> String {
+    match scene::ply::parse_ply("fuzz.ply", data) {
+        Ok(m) => check_mesh(&m, "fuzz.ply"),
+        Err(e) => check_message(&e, "fuzz.ply"),
+    }
+}
+
+/// A mesh read from `file`: triangles, finite positions, unit (or zero) normals, indices
+/// inside, a tree built over it, warnings that are one line naming the file.
+fn check_mesh(parsed: &scene::shapes::MeshFile, file: &str) -> String {
     let m = &parsed.mesh;
     assert!(!m.triangles.is_empty());
     assert!(m.positions.iter().all(|p| p.is_finite()));
@@ -206,7 +220,7 @@ pub fn obj(data: &[u8]) -> String {
     let accel = stagelight::accel::Accel::build(&columns);
     assert!(accel.len() <= columns.len());
     for w in &parsed.warnings {
-        check_message(w, "fuzz.obj");
+        check_message(w, file);
     }
     format!(
         "ok normals:{} warnings:{}",

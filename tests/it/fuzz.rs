@@ -503,6 +503,108 @@ fn mutate_obj(rng: &mut Rng, input: &[u8], corpus: &[Vec<u8>]) -> Vec<u8> {
     lines.join(&b'\n')
 }
 
+// ------------------------------------------------------------------------- PLY mutations
+
+/// Header lines a PLY mutant may gain: other formats, types, counts and elements.
+const PLY_LINES: &[&str] = &[
+    "format ascii 1.0",
+    "format binary_little_endian 1.0",
+    "format binary_big_endian 1.0",
+    "format binary_middle_endian 1.0",
+    "element vertex 4294967296",
+    "element vertex 0",
+    "element face 1",
+    "element face 99999999",
+    "element tristrips 1",
+    "property float x",
+    "property double nx",
+    "property uchar red",
+    "property list uchar int vertex_indices",
+    "property list uint uint vertex_indices",
+    "property list int int vertex_index",
+    "property list uchar float vertex_indices",
+    "property list uchar char vertex_indices",
+    "comment x",
+    "obj_info y",
+    "end_header",
+    "ply",
+];
+
+/// A mutation of a PLY file: a header line replaced, inserted, duplicated or removed; in the
+/// ASCII body a number changed or a face of many vertices added; else a byte-level mutation
+/// (for binary payloads above all).
+fn mutate_ply(rng: &mut Rng, input: &[u8], corpus: &[Vec<u8>]) -> Vec<u8> {
+    let end = input
+        .windows(11)
+        .position(|w| w == b"end_header\n")
+        .map_or(input.len(), |p| p + 11);
+    if rng.chance(3) {
+        return mutate_bytes(rng, input, corpus);
+    }
+    let (header, body) = input.split_at(end);
+    let mut lines: Vec<Vec<u8>> = header
+        .split(|&b| b == b'\n')
+        .filter(|l| !l.is_empty())
+        .map(|l| l.to_vec())
+        .collect();
+    let ascii = header.windows(5).any(|w| w == b"ascii");
+    let mut body = body.to_vec();
+    let i = rng.below(lines.len().max(1));
+    match rng.below(6) {
+        0 if !lines.is_empty() => lines[i] = rng.pick(PLY_LINES).as_bytes().to_vec(),
+        1 => lines.insert(i.min(lines.len()), rng.pick(PLY_LINES).as_bytes().to_vec()),
+        2 if lines.len() > 1 => {
+            lines.remove(i);
+        }
+        3 if ascii => {
+            let toks = tokens(&body);
+            let numbers: Vec<_> = toks
+                .into_iter()
+                .filter(|t| body[t.start].is_ascii_digit() || body[t.start] == b'-')
+                .collect();
+            if !numbers.is_empty() {
+                let t = numbers[rng.below(numbers.len())].clone();
+                body.splice(t, rng.pick(NUMBERS).bytes());
+            }
+        }
+        4 if ascii => {
+            let longest = if rng.chance(4) { 3000 } else { 40 };
+            let n = 3 + rng.below(longest);
+            let mut face = format!("{n}");
+            for k in 0..n {
+                face += &format!(" {}", k % 4);
+            }
+            face.push('\n');
+            body.extend_from_slice(face.as_bytes());
+        }
+        _ => {
+            // A count changed.
+            let counted: Vec<usize> = (0..lines.len())
+                .filter(|&k| lines[k].starts_with(b"element "))
+                .collect();
+            if !counted.is_empty() {
+                let k = counted[rng.below(counted.len())];
+                let name = lines[k]
+                    .split(|&b| b == b' ')
+                    .nth(1)
+                    .unwrap_or_default()
+                    .to_vec();
+                lines[k] = [
+                    b"element ".as_slice(),
+                    &name,
+                    b" ",
+                    rng.pick(NUMBERS).as_bytes(),
+                ]
+                .concat();
+            }
+        }
+    }
+    let mut out = lines.join(&b'\n');
+    out.push(b'\n');
+    out.extend_from_slice(&body);
+    out
+}
+
 // ------------------------------------------------------------------------- EXR mutations
 
 const EXR_ATTRIBUTES: &[&[u8]] = &[
@@ -688,6 +790,11 @@ fn fuzz_scene() {
 #[test]
 fn fuzz_obj() {
     fuzz("obj", corpus("obj"), mutate_obj, targets::obj);
+}
+
+#[test]
+fn fuzz_ply() {
+    fuzz("ply", corpus("ply"), mutate_ply, targets::ply);
 }
 
 #[test]

@@ -975,3 +975,40 @@ fn obj_faces_of_one_or_two_vertices_are_malformed_and_bad_normals_warn() {
         "{err}"
     );
 }
+
+// 22 --------------------------------------------------------------------------------------
+
+/// A binary PLY cut anywhere is one line naming the mesh file, at the object; the whole file
+/// renders.
+#[test]
+fn a_truncated_binary_ply_is_refused_and_the_whole_one_renders() {
+    let dir = temp_dir("hostile-ply");
+    let out = dir.join("o.exr");
+    let mut ply = b"ply\nformat binary_little_endian 1.0\nelement vertex 3\nproperty float x\n\
+                    property float y\nproperty float z\nelement face 1\n\
+                    property list uchar uint vertex_indices\nend_header\n"
+        .to_vec();
+    for v in [-1.0f32, 0.5, 0.0, 1.0, 0.5, 0.0, 0.0, 1.5, 0.0] {
+        ply.extend(v.to_le_bytes());
+    }
+    ply.push(3);
+    for i in [0u32, 1, 2] {
+        ply.extend(i.to_le_bytes());
+    }
+    let scene = write_scene(
+        &dir,
+        "ply.ron",
+        &[
+            FLOOR,
+            LIGHT,
+            "(shape: Ply(\"cut.ply\"), material: \"white\"),",
+        ],
+    );
+    for cut in [ply.len() - 1, ply.len() - 13, 40] {
+        std::fs::write(dir.join("cut.ply"), &ply[..cut]).unwrap();
+        let o = run(&render_args(s(&scene), s(&out), &["--spp", "1"]));
+        refused(&o, "ply.ron:7:1", &["cut.ply"]);
+    }
+    std::fs::write(dir.join("cut.ply"), &ply).unwrap();
+    rendered(&run(&render_args(s(&scene), s(&out), &["--spp", "1"])));
+}

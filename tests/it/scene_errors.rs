@@ -186,6 +186,55 @@ fn unknown_variants() {
 }
 
 #[test]
+fn missing_or_malformed_ply_file() {
+    let object = "(shape: Ply(\"meshes/absent.ply\"), material: \"spare\"),";
+    expect(
+        "missing_ply",
+        &scene(CAMERA, MATERIAL, object),
+        9,
+        Some(5),
+        &["meshes/absent.ply", "cannot read"],
+    );
+    let dir = temp_dir("malformed_ply");
+    let header = "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n\
+                  property float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+                  end_header\n";
+    for (file, body, phrase) in [
+        ("truncated.ply", "0 0 0\n1 0 0\n", "end of file"),
+        (
+            "dangling.ply",
+            "0 0 0\n1 0 0\n0 1 0\n3 0 1 7\n",
+            "refers to vertex 7",
+        ),
+        (
+            "word.ply",
+            "0 0 0\n1 zero 0\n0 1 0\n3 0 1 2\n",
+            "element \"vertex\"",
+        ),
+    ] {
+        std::fs::write(dir.join(file), format!("{header}{body}")).unwrap();
+        let object = format!("(shape: Ply(\"{file}\"), material: \"spare\"),");
+        expect(
+            "malformed_ply",
+            &scene(CAMERA, MATERIAL, &object),
+            9,
+            Some(5),
+            &[file, phrase],
+        );
+    }
+    // The same file, whole, loads.
+    std::fs::write(
+        dir.join("whole.ply"),
+        format!("{header}0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"),
+    )
+    .unwrap();
+    let path = dir.join("whole.ron");
+    let object = "(shape: Ply(\"whole.ply\"), material: \"spare\"),";
+    std::fs::write(&path, scene(CAMERA, MATERIAL, object)).unwrap();
+    scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+}
+
+#[test]
 fn missing_mesh_file() {
     let object = "(shape: Obj(\"meshes/absent.obj\"), material: \"spare\"),";
     expect(

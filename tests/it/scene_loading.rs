@@ -460,3 +460,127 @@ fn file_extensions_apply_to_objects() {
     assert_eq!(s.emitters.triangle.len(), 1);
     assert!((s.emitters.area[0] - 0.5).abs() < 1e-7);
 }
+
+/// A PLY file's shape equals the same shape written inline, through the same transforms: a
+/// box as a binary big-endian PLY of 6 quads, and as `Box`, scaled, turned and mirrored.
+#[test]
+fn ply_mesh_transforms_as_inline_shapes_do() {
+    // The 8 corners of [0,1]^3 and the 6 faces wound outward, as quads.
+    let corners: Vec<[f32; 3]> = (0..8)
+        .map(|k| [(k & 1) as f32, ((k >> 1) & 1) as f32, ((k >> 2) & 1) as f32])
+        .collect();
+    let faces: [[u32; 4]; 6] = [
+        [0, 2, 3, 1], // z = 0, normal -z
+        [4, 5, 7, 6], // z = 1
+        [0, 1, 5, 4], // y = 0
+        [2, 6, 7, 3], // y = 1
+        [0, 4, 6, 2], // x = 0
+        [1, 3, 7, 5], // x = 1
+    ];
+    let mut ply = String::from(
+        "ply\nformat binary_big_endian 1.0\nelement vertex 8\nproperty float x\n\
+         property float y\nproperty float z\nelement face 6\n\
+         property list uchar int vertex_indices\nend_header\n",
+    )
+    .into_bytes();
+    for c in &corners {
+        for v in c {
+            ply.extend(v.to_be_bytes());
+        }
+    }
+    for f in &faces {
+        ply.push(4);
+        for i in f {
+            ply.extend((*i as i32).to_be_bytes());
+        }
+    }
+    let transform = "transform: [Scale((-1, 2, 3)), Rotate(axis: (1, 1, 0), degrees: 40), \
+                     Translate((5, 0, 1))]";
+    let scene_text = |shape: &str| {
+        format!(
+            "Scene({CAMERA} materials: {{\"m\": Diffuse(reflectance: (0.5, 0.5, 0.5))}},
+             objects: [(shape: {shape}, material: \"m\", {transform})])"
+        )
+    };
+    let path = temp_scene("ply", "scene.ron", &scene_text("Ply(\"meshes/box.ply\")"));
+    let meshes = path.parent().unwrap().join("meshes");
+    std::fs::create_dir_all(&meshes).unwrap();
+    std::fs::write(meshes.join("box.ply"), &ply).unwrap();
+    let from_ply = scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+    let inline = scene::load_from_str(
+        Path::new("inline.ron"),
+        &scene_text("Box(min: (0, 0, 0), max: (1, 1, 1))"),
+    )
+    .unwrap();
+    check_columns(&from_ply);
+    assert_eq!(from_ply.triangles.len(), 12);
+    assert_vec_near(from_ply.bounds_min, inline.bounds_min, 1e-6);
+    assert_vec_near(from_ply.bounds_max, inline.bounds_max, 1e-6);
+    // Every PLY triangle lies on a face of the inline box with the same outward normal.
+    let centre = (inline.bounds_min + inline.bounds_max) / 2.0;
+    for i in 0..12 {
+        let centroid =
+            (from_ply.triangles.p0[i] + from_ply.triangles.p1[i] + from_ply.triangles.p2[i]) / 3.0;
+        assert!(
+            normal(&from_ply, i).dot(centroid - centre) > 0.0,
+            "triangle {i} faces inward"
+        );
+        let same_plane = (0..12).any(|j| {
+            (normal(&inline, j) - normal(&from_ply, i)).length() < 1e-5
+                && normal(&inline, j)
+                    .dot(centroid - inline.triangles.p0[j])
+                    .abs()
+                    < 1e-5
+        });
+        assert!(same_plane, "triangle {i} is on no face of the inline box");
+    }
+    let area = |s: &PreparedScene| -> f32 {
+        (0..s.triangles.len())
+            .map(|i| {
+                let t = &s.triangles;
+                (t.p1[i] - t.p0[i]).cross(t.p2[i] - t.p0[i]).length() / 2.0
+            })
+            .sum()
+    };
+    assert!((area(&from_ply) - area(&inline)).abs() < 1e-4 * area(&inline));
+}
+
+/// The scenes `bench --big` writes load with the triangles they promise, in both renderers'
+/// files (the Mitsuba scene names the same PLY files).
+#[test]
+fn generated_big_scenes_load() {
+    use stagelight::commands::big_scenes::{BIG_SCENES, write_big_scene};
+    let dir = crate::common::temp_dir("big-scenes");
+    for size in &BIG_SCENES[..2] {
+        let path = write_big_scene(&dir, size).unwrap();
+        let s = scene::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        check_columns(&s);
+        assert_eq!(s.triangles.len() as u64, size.triangles(), "{}", size.name);
+        assert!(s.warnings.is_empty(), "{:?}", s.warnings);
+        // The box's light: 2 triangles of 130 x 105 mm emitting (17, 12, 4).
+        assert_eq!(s.emitters.triangle.len(), 2);
+        assert_vec_near(
+            s.emitters.total_power,
+            PI * 130.0 * 105.0 * Vec3::new(17.0, 12.0, 4.0),
+            1.0,
+        );
+        // Everything inside the box (the torus dips 5 mm before its open front, z < 0).
+        assert_vec_near(s.bounds_min, Vec3::new(0.0, 0.0, 0.0), 10.0);
+        assert!(s.bounds_max.cmple(Vec3::new(556.0, 548.8, 559.2)).all());
+        let xml = std::fs::read_to_string(path.with_extension("xml")).unwrap();
+        let plys: Vec<&str> = xml.matches(".ply\"").collect();
+        assert_eq!(
+            plys.len(),
+            std::fs::read_to_string(&path)
+                .unwrap()
+                .matches("Ply(")
+                .count()
+        );
+        if size.sphere_level.is_some() {
+            // The sphere is smooth-shaded (its PLY has normals), the torus flat.
+            assert!(s.triangles.smooth.iter().any(|&i| i != FLAT));
+            assert!(xml.contains("sphere.ply\"/><boolean name=\"face_normals\" value=\"false\""));
+            assert!(xml.contains("torus.ply\"/><boolean name=\"face_normals\" value=\"true\""));
+        }
+    }
+}
