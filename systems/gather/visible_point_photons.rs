@@ -15,14 +15,14 @@ pub struct GatherPhotons;
 crate::system! {
     GatherPhotons = "gather_photons";
     on ProgressiveState {
-        read data, visible = camera_walk.visible, tracing = photon_pass.tracing, grid, pixels;
+        read data, visible = camera_walk.visible, tracing = photon_pass.tracing, grid, hit_points = camera_walk.points;
         write estimates;
     }
     run {
         let photons = &tracing.photons;
         let points = &photons.p[..tracing.stored];
         let grid = grid.as_ref();
-        let pixels = *pixels;
+        let pixels = *hit_points;
         let found: usize = estimates
             .chunks_mut(0..pixels)
             .into_par_iter()
