@@ -26,6 +26,7 @@ pub mod shade {
     pub mod extend_subpaths;
     pub mod interpolate_surfaces;
     pub mod material;
+    pub mod order_hit_points;
     pub mod russian_roulette;
     pub mod scatter_photons;
     pub mod sort_by_material;

@@ -143,6 +143,15 @@ macro_rules! soa {
                 lens[0]
             }
 
+            /// Grows the store to at least `capacity` slots (doubling, so that appending one
+            /// item at a time stays linear), keeping its items.
+            pub fn reserve_slots(&mut self, capacity: usize) {
+                if self.capacity() < capacity {
+                    let grown = capacity.max(2 * self.capacity());
+                    $(self.$field.resize(grown, <$ty>::default());)+
+                }
+            }
+
             pub fn bytes_per_item() -> usize {
                 0 $(+ std::mem::size_of::<$ty>())+
             }

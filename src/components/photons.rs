@@ -25,8 +25,8 @@ crate::soa! {
         wi: Vec3,
         /// Power carried (flux), before division by the photons emitted.
         power: Vec3,
-        /// Unit geometric normal of the surface it landed on (density estimation keeps to
-        /// photons on the side and plane of the query).
+        /// Unit geometric normal of the surface it landed on, on the side it arrived from
+        /// (density estimation keeps to photons on the side and plane of the query).
         ng: Vec3,
         /// Scattering events before it landed.
         depth: u32,

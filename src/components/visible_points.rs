@@ -30,9 +30,12 @@ crate::soa! {
 }
 
 crate::soa! {
-    /// One visible point per pixel (slot = pixel): where the pixel's camera chain met a
-    /// surface that is not specular, and what the chain carried there.
+    /// Where camera chains met a surface that is not specular, and what they carried there:
+    /// one per pixel (slot = pixel), or for PPM's ray tree a list of a pixel's hit points.
     pub struct VisiblePoints, VisiblePointsChunk, VisiblePointsView, VisiblePoint {
+        pixel: u32,
+        /// The point's rank among its pixel's (0 where a pixel has one).
+        branch: u32,
         p: Vec3,
         p_error: Vec3,
         ng: Vec3,

@@ -3,12 +3,20 @@
 //! that is not specular, which becomes its pixel's gather point in `visible`. PM runs two
 //! walks (to the visible points, then to the final-gather points), PPM and SPPM one; each is a
 //! nested graph over its walk.
+//!
+//! PPM's walk is a ray tree (Hachisuka, Ogaki and Jensen 2008): at a smooth dielectric a
+//! chain follows both the reflection and the refraction, each weighted by its Fresnel term,
+//! so a pixel owns a hit point at every non-specular surface its tree reaches. Branches
+//! lighter than `MIN_BRANCH_WEIGHT` or deeper than `TREE_DEPTH` end (nothing is chosen at
+//! random, so the hit points, kept for the whole render, carry no frozen choice).
 
 use crate::components::{CameraChains, Hits, Rays, VisiblePoints};
 use crate::pipeline::{Graph, Node};
+use crate::sampling::SampleKey;
 use crate::sampling::Sampler;
 use crate::scene::SceneData;
 use crate::systems::{generate, shade, trace};
+use glam::Vec3;
 use std::sync::Arc;
 
 /// Chains in flight (slots `0..active`) with their rays and hits, the scratch stores that
@@ -31,9 +39,33 @@ pub struct CameraWalk {
     pub scratch_chains: CameraChains,
     pub scratch_rays: Rays,
     pub order: Vec<u32>,
-    /// Where ended chains go, at their pixel's slot.
+    /// Where ended chains go: at their pixel's slot, or (`tree`) appended.
     pub visible: VisiblePoints,
+    /// Entries of `visible` in use: every pixel's slot, or the hit points of the tree.
+    pub points: usize,
+    /// Follow both branches at dielectrics (PPM's ray tree) instead of sampling one.
+    pub tree: bool,
+    /// Per chunk of chains, the branches it split off this bounce (started in chunk order).
+    pub spawned: Vec<Vec<Branch>>,
 }
+
+/// A branch of the ray tree split off at a dielectric, to start as a chain of its own.
+#[derive(Clone, Copy, Debug)]
+pub struct Branch {
+    pub pixel: u32,
+    pub key: SampleKey,
+    pub beta: Vec3,
+    pub depth: u32,
+    pub origin: Vec3,
+    pub dir: Vec3,
+}
+
+/// Ray-tree branches whose weight (largest channel of the product of Fresnel terms) falls
+/// below this end: a pixel then owns at most a few hundred hit points, and what is lost is
+/// at most this fraction of the pixel per branch cut.
+pub const MIN_BRANCH_WEIGHT: f32 = 1e-3;
+/// Deepest bounce of a ray-tree branch (total internal reflection keeps a branch's weight).
+pub const TREE_DEPTH: u32 = 32;
 
 /// Columns set before a walk's graph runs (for `Graph::check`); `visible` persists across
 /// passes.
@@ -47,6 +79,9 @@ pub const INPUTS: &[&str] = &[
     "scratch_rays",
     "order",
     "visible",
+    "points",
+    "tree",
+    "spawned",
 ];
 
 impl CameraWalk {
@@ -67,6 +102,9 @@ impl CameraWalk {
             scratch_rays: Rays::new(slots),
             order: Vec::with_capacity(slots),
             visible: VisiblePoints::new(slots),
+            points: slots,
+            tree: false,
+            spawned: Vec::new(),
         }
     }
 

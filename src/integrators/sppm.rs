@@ -39,7 +39,7 @@ use crate::integrators::{
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::{Sampler, SamplerKind};
-use crate::systems::{connect, gather, trace};
+use crate::systems::{connect, gather, shade, trace};
 use glam::DVec3;
 use std::sync::Arc;
 
@@ -133,8 +133,14 @@ impl ProgressiveState {
         let mut photon_pass = PhotonPass::new(data.clone(), sampler, settings.max_depth);
         // Direct light comes from light sampling at the visible points.
         photon_pass.tracing.store_direct = false;
+        let mut camera_walk = CameraWalk::new(data.clone(), sampler, settings.max_depth);
+        if !settings.stochastic {
+            // PPM: the ray tree, whose hit points the first pass appends.
+            camera_walk.tree = true;
+            camera_walk.points = 0;
+        }
         ProgressiveState {
-            camera_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
+            camera_walk,
             data,
             settings,
             pixels,
@@ -159,25 +165,25 @@ impl ProgressiveState {
             .begin_pass(pass, self.settings.photons_per_pass);
     }
 
-    /// The image so far: per pixel D / passes + tau / (pi R^2 N_emitted).
+    /// The image so far: per pixel, over its hit points (one, but for PPM's ray tree),
+    /// D / passes + tau / (pi R^2 N_emitted).
     pub fn film(&self, passes: u64) -> Film {
         let cam = self.data.scene.camera;
         let e = &self.estimates;
         let n_emitted = self.photons_emitted.max(1) as f64;
         let mut nonfinite = self.nonfinite;
-        let sum = (0..self.pixels)
-            .map(|i| {
-                let r = e.radius[i] as f64;
-                let photons = e.flux[i] / (std::f64::consts::PI * r * r * n_emitted);
-                let value = e.direct[i] + photons * passes as f64;
-                if value.is_finite() {
-                    value
-                } else {
-                    nonfinite += 1;
-                    DVec3::ZERO
-                }
-            })
-            .collect();
+        let mut sum = vec![DVec3::ZERO; self.pixels];
+        let points = self.camera_walk.points.min(e.capacity());
+        for i in 0..points {
+            let r = e.radius[i] as f64;
+            let photons = e.flux[i] / (std::f64::consts::PI * r * r * n_emitted);
+            let value = e.direct[i] + photons * passes as f64;
+            if value.is_finite() {
+                sum[self.camera_walk.visible.pixel[i] as usize] += value;
+            } else {
+                nonfinite += 1;
+            }
+        }
         Film::from_parts(
             cam.width as usize,
             cam.height as usize,
@@ -209,6 +215,7 @@ pub fn graph() -> Graph<ProgressiveState> {
                 |s: &mut ProgressiveState| &mut s.camera_walk,
                 camera_walk::INPUTS,
             ),
+            Node::system(shade::order_hit_points::OrderHitPoints),
             Node::system(connect::sample_direct_light::SampleDirectLight),
             Node::system(trace::shadow::TraceShadow),
             Node::system(gather::direct_light::AddDirectLight),

@@ -225,50 +225,99 @@ impl PhotonMaps {
     }
 }
 
-/// Least |cos| between a photon's surface normal and the query's: photons on other planes
-/// (round a corner) do not count.
+/// Least cos between a photon's surface normal (on the side it arrived from) and the query's
+/// (on the viewer's side): photons on other planes (round a corner) or on the far side of a
+/// two-sided surface do not count.
 pub const NORMAL_COSINE: f32 = 0.5;
 
+/// The segment a photon must see its gather point along rises off both surfaces by this
+/// fraction of its length: it then clears a convex surface curving away (within the
+/// normals' 60 degrees a chord sinks below it by at most length^2 / 8 r, less than length / 4
+/// while length < 2 r), and a coplanar floor, while a wall standing between the two points
+/// (the zero-thickness wall of two rooms, whose floors meet under it) still cuts it.
+pub const VISIBILITY_LIFT: f32 = 0.25;
+
+/// The visibility test's segment starts this fraction of the scene's diagonal behind the
+/// gather point. The accelerator rejects hits within the rounding error of a ray's origin
+/// (about 1e-7 of the triangle's extent: they may be the surface the ray leaves), so a
+/// segment from a point on the floor a hair from a wall would pass the wall unseen; started
+/// this far back, it meets the wall well past that margin. Photons are missed only where the
+/// point lies within this distance of a surface behind it (1e-5 of the diagonal).
+pub const VISIBILITY_MARGIN: f32 = 1e-5;
+
 /// Where a density estimate is made: a point, its normal on the viewer's side, and the BSDF.
-pub struct GatherPoint {
+pub struct GatherPoint<'a> {
     pub p: Vec3,
+    /// Offset off the surface that clears its rounding error (`offset_ray_origin`'s).
+    pub clearance: f32,
+    /// How far the visibility test starts behind the point (`VISIBILITY_MARGIN` of the
+    /// scene's diagonal).
+    pub margin: f32,
     pub ng: Vec3,
     pub frame: crate::math::Frame,
     pub wo_local: Vec3,
     pub material: crate::bsdf::Material,
+    /// The scene's geometry, to test that a photon sees the point.
+    pub accel: &'a crate::accel::Accel,
 }
 
-impl GatherPoint {
+impl<'a> GatherPoint<'a> {
     /// The gather point of slot `i` of `visible`, if it has one.
     #[inline]
     pub fn of(
-        scene: &crate::scene::PreparedScene,
+        data: &'a SceneData,
         visible: &crate::components::VisiblePoints,
         i: usize,
-    ) -> Option<GatherPoint> {
+    ) -> Option<GatherPoint<'a>> {
         let tri = visible.triangle[i];
         if tri == crate::components::NO_VISIBLE_POINT {
             return None;
         }
+        let scene = &data.scene;
         let frame = crate::math::Frame::from_normal(visible.ns[i]);
+        let (p, ng) = (visible.p[i], visible.ng[i]);
+        let lifted = crate::geometry::offset_ray_origin(p, visible.p_error[i], ng, ng);
         Some(GatherPoint {
-            p: visible.p[i],
-            ng: visible.ng[i],
+            p,
+            clearance: 2.0 * (lifted - p).length(),
+            margin: VISIBILITY_MARGIN * (scene.bounds_max - scene.bounds_min).length(),
+            ng,
             frame,
             wo_local: frame.to_local(visible.wo[i]),
             material: scene.materials[scene.triangles.material[tri as usize] as usize],
+            accel: &data.accel,
         })
     }
 
-    /// f(wo, wi) times the power of photon `k`, or None when the photon is on another
-    /// plane or arrived from the other side.
+    /// f(wo, wi) times the power of photon `k`, or None when the photon lies on another
+    /// plane, on the other side of the surface, or out of the point's sight (behind a wall
+    /// that crosses the gather disc: without the test, a band as wide as the radius along a
+    /// thin wall gathers the next room's photons).
     #[inline]
     pub fn reflected(&self, photons: &crate::components::Photons, k: usize) -> Option<Vec3> {
-        let wi = photons.wi[k];
-        if photons.ng[k].dot(self.ng).abs() < NORMAL_COSINE || wi.dot(self.ng) <= 0.0 {
+        let (wi, side) = (photons.wi[k], photons.ng[k]);
+        if side.dot(self.ng) < NORMAL_COSINE || wi.dot(self.ng) <= 0.0 {
+            return None;
+        }
+        if !self.sees(photons.p[k], side) {
             return None;
         }
         Some(self.material.eval(self.wo_local, self.frame.to_local(wi)) * photons.power[k])
+    }
+
+    /// Whether the segment between the point and `q` (a photon on a surface of normal
+    /// `side`), each end lifted off its surface by `VISIBILITY_LIFT` of the distance, meets
+    /// no surface.
+    #[inline]
+    pub fn sees(&self, q: Vec3, side: Vec3) -> bool {
+        let lift = VISIBILITY_LIFT * (q - self.p).length() + self.clearance;
+        let start = self.p + lift * self.ng;
+        let to = q + lift * side;
+        let Some(dir) = (to - start).try_normalize() else {
+            return true;
+        };
+        let from = start - self.margin * dir;
+        !self.accel.any_hit(from, dir, (to - from).dot(dir))
     }
 }
 
@@ -329,7 +378,7 @@ impl MapQuery<'_> {
     /// Returns (estimates made, NaN or Inf estimates dropped).
     pub fn add_estimates(
         &self,
-        scene: &crate::scene::PreparedScene,
+        data: &SceneData,
         points: &crate::components::VisiblePoints,
         keep: impl Fn(PhotonFlags) -> bool + Sync,
         out: &mut [glam::DVec3],
@@ -343,7 +392,7 @@ impl MapQuery<'_> {
                 let (mut made, mut nonfinite) = (0, 0);
                 for (j, sum) in out.iter_mut().enumerate() {
                     let pixel = c * chunk + j;
-                    let Some(at) = GatherPoint::of(scene, points, pixel) else {
+                    let Some(at) = GatherPoint::of(data, points, pixel) else {
                         continue;
                     };
                     let l = density_estimate(

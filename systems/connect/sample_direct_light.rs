@@ -15,17 +15,17 @@ pub struct SampleDirectLight;
 crate::system! {
     SampleDirectLight = "sample_direct_light";
     on PmState {
-        read data, visible = camera_walk.visible, sampler = camera_walk.sampler, index = pass;
+        read data, visible = camera_walk.visible, points = camera_walk.points, sampler = camera_walk.sampler, index = pass;
         write shadow;
     }
     on ProgressiveState {
-        read data, visible = camera_walk.visible, sampler = camera_walk.sampler, index = pass;
+        read data, visible = camera_walk.visible, points = camera_walk.points, sampler = camera_walk.sampler, index = pass;
         write shadow;
     }
     run {
         let index = *index;
         let scene = &data.scene;
-        let pixels = visible.capacity();
+        let pixels = *points;
         let has_emitters = !scene.emitters.triangle.is_empty();
         let cast: usize = shadow
             .chunks_mut(0..pixels)
@@ -39,15 +39,18 @@ crate::system! {
                     if tri == NO_VISIBLE_POINT || !has_emitters {
                         continue;
                     }
-                    let key = sampler.key(Stream::DirectLight, pixel as u64, index);
+                    // A pixel's hit points (PPM's ray tree) draw from its key's dimensions
+                    // in turn.
+                    let key = sampler.key(Stream::DirectLight, visible.pixel[pixel] as u64, index);
+                    let dim = 3 * visible.branch[pixel];
                     let wo = visible.wo[pixel];
                     let Some(light) = scene.sample_light_from(
                         visible.p[pixel],
                         visible.p_error[pixel],
                         visible.ng[pixel],
                         wo,
-                        sampler.get(key, 0),
-                        sampler.get2(key, 1),
+                        sampler.get(key, dim),
+                        sampler.get2(key, dim + 1),
                     ) else {
                         continue;
                     };

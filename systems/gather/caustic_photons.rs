@@ -28,7 +28,7 @@ crate::system! {
             scale: 1.0 / maps.emitted.max(1) as f32,
         };
         let (made, dropped) =
-            query.add_estimates(&data.scene, visible, |_| true, pass_radiance);
+            query.add_estimates(data, visible, |_| true, pass_radiance);
         *nonfinite += dropped;
         Flow::new(*pixels, made)
     }

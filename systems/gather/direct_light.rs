@@ -11,16 +11,16 @@ pub struct AddDirectLight;
 crate::system! {
     AddDirectLight = "add_direct_light";
     on PmState {
-        read visible = camera_walk.visible, shadow;
+        read visible = camera_walk.visible, points = camera_walk.points, shadow;
         write direct = pass_radiance, nonfinite;
     }
     on ProgressiveState {
-        read visible = camera_walk.visible, shadow;
+        read visible = camera_walk.visible, points = camera_walk.points, shadow;
         write direct = estimates.direct, nonfinite;
     }
     run {
-        let pixels = visible.capacity();
-        let (lit, dropped) = direct
+        let pixels = *points;
+        let (lit, dropped) = direct[..pixels]
             .par_chunks_mut(crate::components::CHUNK)
             .enumerate()
             .map(|(k, sums)| {

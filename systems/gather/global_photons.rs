@@ -59,7 +59,7 @@ fn gather(
         max_radius: settings.max_radius_in(data),
         scale: 1.0 / maps.emitted.max(1) as f32,
     };
-    let (made, dropped) = query.add_estimates(&data.scene, points, keep, pass_radiance);
+    let (made, dropped) = query.add_estimates(data, points, keep, pass_radiance);
     *nonfinite += dropped;
     Flow::new(points.capacity(), made)
 }

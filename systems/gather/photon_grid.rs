@@ -11,13 +11,13 @@ pub struct BuildPhotonGrid;
 crate::system! {
     BuildPhotonGrid = "build_photon_grid";
     on ProgressiveState {
-        read radius = estimates.radius, triangle = camera_walk.visible.triangle, tracing = photon_pass.tracing;
+        read radius = estimates.radius, triangle = camera_walk.visible.triangle, points = camera_walk.points, tracing = photon_pass.tracing;
         write grid;
     }
     run {
-        let radius = radius
+        let radius = radius[..*points]
             .iter()
-            .zip(triangle)
+            .zip(&triangle[..*points])
             .filter(|(_, t)| **t != NO_VISIBLE_POINT)
             .fold(0.0f32, |m, (r, _)| m.max(*r));
         let t = tracing;

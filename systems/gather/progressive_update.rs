@@ -38,12 +38,12 @@ pub struct UpdatePixelEstimates;
 crate::system! {
     UpdatePixelEstimates = "update_pixel_estimates";
     on ProgressiveState {
-        read alpha = settings.alpha, pixels, emitted = photon_pass.tracing.emitted;
+        read alpha = settings.alpha, points = camera_walk.points, emitted = photon_pass.tracing.emitted;
         write estimates, nonfinite, photons_emitted;
     }
     run {
         let alpha = *alpha as f64;
-        let pixels = *pixels;
+        let pixels = *points;
         let (updated, dropped) = estimates
             .chunks_mut(0..pixels)
             .into_par_iter()

@@ -1,7 +1,8 @@
 //! Finds, for every visible point, this pass's photons within its pixel's radius: their
 //! count M and the flux tau_M = beta sum f(wo, wi) power they bring. A photon counts only on
-//! the visible point's side and plane (see `photons::GatherPoint::reflected`), so light does
-//! not bleed round corners or through a wall from the photons on its far side.
+//! the visible point's side and plane and in its sight (see `photons::GatherPoint::reflected`),
+//! so light does not bleed round corners, through a wall from the photons on its far side,
+//! or under a wall from the next room's floor.
 
 use crate::integrators::sppm::ProgressiveState;
 use crate::photons::GatherPoint;
@@ -14,14 +15,14 @@ pub struct GatherPhotons;
 crate::system! {
     GatherPhotons = "gather_photons";
     on ProgressiveState {
-        read scene = data.scene, visible = camera_walk.visible, tracing = photon_pass.tracing, grid, pixels;
+        read data, visible = camera_walk.visible, tracing = photon_pass.tracing, grid, hit_points = camera_walk.points;
         write estimates;
     }
     run {
         let photons = &tracing.photons;
         let points = &photons.p[..tracing.stored];
         let grid = grid.as_ref();
-        let pixels = *pixels;
+        let pixels = *hit_points;
         let found: usize = estimates
             .chunks_mut(0..pixels)
             .into_par_iter()
@@ -31,7 +32,7 @@ crate::system! {
                     e.pass_photons[i] = 0;
                     e.pass_flux[i] = Vec3::ZERO;
                     let pixel = e.start + i;
-                    let (Some(grid), Some(at)) = (grid, GatherPoint::of(scene, visible, pixel))
+                    let (Some(grid), Some(at)) = (grid, GatherPoint::of(data, visible, pixel))
                     else {
                         continue;
                     };

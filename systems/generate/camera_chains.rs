@@ -13,8 +13,8 @@ pub struct GenerateCameraChains;
 crate::system! {
     GenerateCameraChains = "generate_camera_chains";
     on CameraWalk {
-        read camera = data.scene.camera, sampler, sample_index, starts;
-        write chains, rays, active;
+        read camera = data.scene.camera, sampler, sample_index, starts, tree;
+        write chains, rays, active, points;
     }
     run {
         let (sample_index, n) = (*sample_index, *starts);
@@ -42,6 +42,10 @@ crate::system! {
                 }
             });
         *active = n;
+        if *tree && n > 0 {
+            // A new tree: its hit points are appended as its chains end.
+            *points = 0;
+        }
         Flow::new(n, n)
     }
 }

@@ -1,33 +1,52 @@
 //! Ends the camera chains that stopped this bounce: each writes its gather point (or none)
-//! and the emission it met to its pixel's slot of `visible`; the live chains move to the
-//! front, in slot order.
+//! and the emission it met to its pixel's slot of `visible` (in a ray tree, appends them,
+//! when it has either); the live chains move to the front, in slot order, and the branches
+//! split off this bounce start after them, in chunk order.
 
-use crate::components::{gather_column, live_slots};
+use crate::components::{CameraChain, NO_VISIBLE_POINT, VisiblePoint, gather_column, live_slots};
 use crate::integrators::camera_walk::CameraWalk;
 use crate::pipeline::Flow;
+use glam::Vec3;
 
 pub struct CompactCameraChains;
 
 crate::system! {
     CompactCameraChains = "compact_camera_chains";
     on CameraWalk {
-        write chains, rays, active, visible, order, scratch_chains, scratch_rays;
+        read tree;
+        write chains, rays, hits, active, visible, points, spawned, order, scratch_chains, scratch_rays;
     }
     run {
         use std::mem::swap;
         let n = *active;
-        let (c, v) = (&*chains, visible);
-        // Each pixel has one chain: ended chains write disjoint slots.
+        let c = &*chains;
         for i in (0..n).filter(|&i| !c.alive[i]) {
-            let pixel = c.pixel[i] as usize;
-            v.p[pixel] = c.p[i];
-            v.p_error[pixel] = c.p_error[i];
-            v.ng[pixel] = c.ng[i];
-            v.ns[pixel] = c.ns[i];
-            v.wo[pixel] = c.wo[i];
-            v.triangle[pixel] = c.triangle[i];
-            v.beta[pixel] = c.beta[i];
-            v.emitted[pixel] = c.emitted[i];
+            let slot = if *tree {
+                if c.triangle[i] == NO_VISIBLE_POINT && c.emitted[i] == Vec3::ZERO {
+                    continue;
+                }
+                visible.reserve_slots(*points + 1);
+                *points += 1;
+                *points - 1
+            } else {
+                // Each pixel has one chain: ended chains write disjoint slots.
+                c.pixel[i] as usize
+            };
+            visible.set(
+                slot,
+                VisiblePoint {
+                    pixel: c.pixel[i],
+                    branch: 0,
+                    p: c.p[i],
+                    p_error: c.p_error[i],
+                    ng: c.ng[i],
+                    ns: c.ns[i],
+                    wo: c.wo[i],
+                    triangle: c.triangle[i],
+                    beta: c.beta[i],
+                    emitted: c.emitted[i],
+                },
+            );
         }
         live_slots(&c.alive[..n], order);
         scratch_chains.gather_from(chains, order);
@@ -35,7 +54,41 @@ crate::system! {
         gather_column(&mut scratch_rays.dir, &rays.dir, order);
         swap(chains, scratch_chains);
         swap(rays, scratch_rays);
-        *active = order.len();
+        let mut slot = order.len();
+        let branches: usize = spawned.iter().map(Vec::len).sum();
+        if branches > 0 {
+            let needed = slot + branches;
+            for store in [&mut *chains, &mut *scratch_chains] {
+                store.reserve_slots(needed);
+            }
+            for store in [&mut *rays, &mut *scratch_rays] {
+                store.reserve_slots(needed);
+            }
+            hits.reserve_slots(needed);
+        }
+        for b in spawned.iter_mut().flat_map(|s| s.drain(..)) {
+            chains.set(
+                slot,
+                CameraChain {
+                    pixel: b.pixel,
+                    key: b.key,
+                    beta: b.beta,
+                    emitted: Vec3::ZERO,
+                    depth: b.depth,
+                    alive: true,
+                    p: Vec3::ZERO,
+                    p_error: Vec3::ZERO,
+                    ng: Vec3::ZERO,
+                    ns: Vec3::ZERO,
+                    wo: Vec3::ZERO,
+                    triangle: NO_VISIBLE_POINT,
+                },
+            );
+            rays.origin[slot] = b.origin;
+            rays.dir[slot] = b.dir;
+            slot += 1;
+        }
+        *active = slot;
         Flow::new(n, *active)
     }
 }

@@ -2,16 +2,18 @@
 //! follows a specular (delta) surface by sampling it, or ends on a surface that is not
 //! specular, which becomes the chain's gather point. Chains that leave the scene, reach the
 //! depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by throughput) end with no
-//! gather point.
+//! gather point. In a ray tree (PPM) a chain at a dielectric follows both branches instead,
+//! the second as a new chain, with no roulette (see `camera_walk`).
 
 use crate::bsdf::{Material, TransportMode, sample_direction};
-use crate::components::{MISS, NO_VISIBLE_POINT};
+use crate::components::{CHUNK, MISS, NO_VISIBLE_POINT};
 use crate::geometry::{offset_ray_origin, surface_point};
-use crate::integrators::camera_walk::CameraWalk;
+use crate::integrators::camera_walk::{Branch, CameraWalk, MIN_BRANCH_WEIGHT, TREE_DEPTH};
 use crate::math::Frame;
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::scene::NO_EMITTER;
+use glam::Vec2;
 use rayon::prelude::*;
 
 /// Random-number dimensions of a camera chain: the pixel jitter (2), then per bounce a BSDF
@@ -29,17 +31,21 @@ pub struct ExtendCameraChains;
 crate::system! {
     ExtendCameraChains = "extend_camera_chains";
     on CameraWalk {
-        read scene = data.scene, sampler, max_depth, hits, live = active;
-        write chains, rays;
+        read scene = data.scene, sampler, max_depth, tree, hits, live = active;
+        write chains, rays, spawned;
     }
     run {
-        let (n, max_depth) = (*live, *max_depth);
+        let (n, max_depth, tree) = (*live, *max_depth, *tree);
         let rays = rays.chunks_mut(0..n);
+        let chunks = n.div_ceil(CHUNK);
+        spawned.resize_with(chunks, Vec::new);
         let live: usize = chains
             .chunks_mut(0..n)
             .into_par_iter()
             .zip(rays)
-            .map(|(c, r)| {
+            .zip(&mut spawned[..chunks])
+            .map(|((c, r), out)| {
+                out.clear();
                 let mut live = 0;
                 let hits = hits.view(c.start..c.start + c.len());
                 for i in 0..c.len() {
@@ -80,6 +86,59 @@ crate::system! {
                     }
                     let frame = Frame::from_normal(ns);
                     let wo_local = frame.to_local(wo);
+                    if tree {
+                        if depth >= TREE_DEPTH {
+                            continue;
+                        }
+                        // Refraction (u = 1 is never below F), then reflection (u = 0 is
+                        // below F unless F = 0); each weighs its Fresnel term: f cos, not
+                        // divided by the probability of choosing it.
+                        let mut next = None;
+                        for u in [1.0, 0.0] {
+                            let Some((bs, wi)) = sample_direction(
+                                &material,
+                                &frame,
+                                ng,
+                                wo,
+                                wo_local,
+                                Vec2::new(u, 0.0),
+                                TransportMode::Radiance,
+                            ) else {
+                                continue;
+                            };
+                            if (bs.wi.z * wo_local.z > 0.0) != (u == 0.0) {
+                                continue;
+                            }
+                            let beta = c.beta[i] * bs.value * bs.wi.z.abs();
+                            let weight = beta.max_element();
+                            if weight.is_nan() || weight < MIN_BRANCH_WEIGHT {
+                                continue;
+                            }
+                            let origin = offset_ray_origin(sp.p, sp.p_error, sp.ng, wi);
+                            if next.is_none() {
+                                next = Some((beta, origin, wi));
+                            } else {
+                                out.push(Branch {
+                                    pixel: c.pixel[i],
+                                    key: c.key[i],
+                                    beta,
+                                    depth: depth + 1,
+                                    origin,
+                                    dir: wi,
+                                });
+                            }
+                        }
+                        let Some((beta, origin, wi)) = next else {
+                            continue;
+                        };
+                        c.beta[i] = beta;
+                        c.depth[i] = depth + 1;
+                        c.alive[i] = true;
+                        r.origin[i] = origin;
+                        r.dir[i] = wi;
+                        live += 1;
+                        continue;
+                    }
                     let dim = bounce_dim(depth);
                     let Some((bs, wi)) = sample_direction(
                         &material,

@@ -64,11 +64,14 @@ crate::system! {
                         } else if w.specular_chain[i] {
                             flags |= PhotonFlags::CAUSTIC;
                         }
+                        // The side it arrived on: a two-sided wall's photons belong to
+                        // one room each.
+                        let side = if wo.dot(sp.ng) < 0.0 { -sp.ng } else { sp.ng };
                         out.push(StoredPhoton {
                             p: sp.p,
                             wi: wo,
                             power: w.power[i],
-                            ng: sp.ng,
+                            ng: side,
                             depth,
                             flags: PhotonFlags(flags),
                         });
