@@ -463,21 +463,35 @@ impl PassState for MltState {
 /// (rounded up to whole passes), a time budget ends at a pass boundary.
 pub fn render(
     data: Arc<SceneData>,
-    mut settings: MltSettings,
+    settings: MltSettings,
+    budget: Budget,
+    control: &Control,
+) -> RenderOutcome {
+    render_chains::<MltState>(data, settings, |s| s, budget, control)
+}
+
+/// Renders a Metropolis integrator whose chains `chains` describes (pssmlt, mmlt, or the
+/// bootstrap settings of path-space mlt): `--spp M` is M mutations per pixel (rounded up to
+/// whole passes), and the outcome counts mutations as its samples.
+pub fn render_chains<S: PassState>(
+    data: Arc<SceneData>,
+    mut settings: S::Settings,
+    chains: fn(&mut S::Settings) -> &mut MltSettings,
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
     let cam = data.scene.camera;
     let pixels = cam.width as u64 * cam.height as u64;
+    let mlt = chains(&mut settings);
     let budget = match budget {
         Budget::SamplesPerPixel(m) => {
-            settings.mutations_per_pixel = Some(m);
-            Budget::SamplesPerPixel(settings.passes_for(pixels, m))
+            mlt.mutations_per_pixel = Some(m);
+            Budget::SamplesPerPixel(mlt.passes_for(pixels, m))
         }
         b => b,
     };
-    let mutations_per_pass = settings.steps_per_pass(pixels) * settings.chain_count(pixels) as u64;
-    let mut outcome = render_passes::<MltState>(data, settings, budget, control);
+    let mutations_per_pass = mlt.steps_per_pass(pixels) * mlt.chain_count(pixels) as u64;
+    let mut outcome = render_passes::<S>(data, settings, budget, control);
     outcome.samples = outcome.passes * mutations_per_pass;
     let wall = outcome.wall.as_secs_f64().max(1e-9);
     outcome.notes.insert(

@@ -27,7 +27,7 @@
 
 use crate::bsdf::MaterialKind;
 use crate::film::Film;
-use crate::integrators::driver::{IntegratorState, PassState, render_passes};
+use crate::integrators::driver::{IntegratorState, PassState};
 use crate::integrators::mlt::{self, MltSettings, MltState};
 use crate::integrators::pt::PtSettings;
 use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
@@ -351,30 +351,9 @@ impl PassState for PathMltState {
 /// passes), a time budget ends at a pass boundary.
 pub fn render(
     data: Arc<SceneData>,
-    mut settings: PathMltSettings,
+    settings: PathMltSettings,
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    let cam = data.scene.camera;
-    let pixels = cam.width as u64 * cam.height as u64;
-    let budget = match budget {
-        Budget::SamplesPerPixel(m) => {
-            settings.bootstrap.mutations_per_pixel = Some(m);
-            Budget::SamplesPerPixel(settings.bootstrap.passes_for(pixels, m))
-        }
-        b => b,
-    };
-    let b = &settings.bootstrap;
-    let mutations_per_pass = b.steps_per_pass(pixels) * b.chain_count(pixels) as u64;
-    let mut outcome = render_passes::<PathMltState>(data, settings, budget, control);
-    outcome.samples = outcome.passes * mutations_per_pass;
-    let wall = outcome.wall.as_secs_f64().max(1e-9);
-    outcome.notes.insert(
-        0,
-        (
-            "mutations/s",
-            crate::report::mega(outcome.samples as f64 / wall),
-        ),
-    );
-    outcome
+    mlt::render_chains::<PathMltState>(data, settings, |s| &mut s.bootstrap, budget, control)
 }

@@ -4,8 +4,8 @@
 //! T(y -> x) / T(x -> y).
 
 use super::path_space::{MAX_VERTICES, Path, PathSpace};
-use crate::components::{PathVertex, PathVertices, PathVerticesChunk};
-use crate::path::{Vertex, VertexKind};
+use crate::components::{PathVertices, PathVerticesChunk, PathVerticesView};
+use crate::path::Vertex;
 use crate::sampling::SampleKey;
 use glam::DVec3;
 
@@ -145,25 +145,10 @@ impl PathChains {
     }
 }
 
-/// Path `chain` (of `len` vertices) from a column chunk whose first slot is chain
-/// `first_chain`'s first vertex.
-pub fn load_path(store: &PathVerticesChunk, local: usize, len: usize) -> Path {
+/// Chain `local`'s path (of `len` vertices) from a view of whole chains' columns.
+pub fn load_path(store: &PathVerticesView, local: usize, len: usize) -> Path {
     let mut path: Path = (0..len)
-        .map(|i| {
-            let v = store.get(local * MAX_VERTICES + i);
-            Vertex {
-                kind: VertexKind::Surface,
-                p: v.p,
-                p_error: v.p_error,
-                ng: v.ng,
-                ns: v.ns,
-                triangle: v.triangle,
-                beta: v.beta,
-                pdf_fwd: v.pdf_fwd,
-                pdf_rev: v.pdf_rev,
-                delta: v.delta,
-            }
-        })
+        .map(|i| Vertex::from_store(store, local * MAX_VERTICES + i, 1))
         .collect();
     PathSpace::fix_kinds(&mut path);
     path
@@ -172,20 +157,7 @@ pub fn load_path(store: &PathVerticesChunk, local: usize, len: usize) -> Path {
 /// Writes `path` as chain `local` of a column chunk.
 pub fn store_path(store: &mut PathVerticesChunk, local: usize, path: &[Vertex]) {
     for (i, v) in path.iter().enumerate() {
-        store.set(
-            local * MAX_VERTICES + i,
-            PathVertex {
-                p: v.p,
-                p_error: v.p_error,
-                ng: v.ng,
-                ns: v.ns,
-                triangle: v.triangle,
-                beta: v.beta,
-                pdf_fwd: v.pdf_fwd,
-                pdf_rev: v.pdf_rev,
-                delta: v.delta,
-            },
-        );
+        store.set(local * MAX_VERTICES + i, v.stored());
     }
 }
 

@@ -6,34 +6,18 @@
 //! the light is reached. All the perturbations are symmetric, so T(y -> x) / T(x -> y) is the
 //! ratio of the Jacobians D(x) / D(y).
 
-use super::lens_perturbation::{camera_chain_end, retrace_camera_chain};
+use super::lens_perturbation::{camera_chain_end, camera_chain_jacobian, retrace_camera_chain};
 use crate::integrators::path_mlt::PathMltState;
 use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
 use crate::mlt::path_space::{
     PathSpace, StepNumbers, dir, perturb_direction, perturb_offset, specular_lobe,
 };
-use crate::path::{Vertex, to_area};
+use crate::path::Vertex;
 
 /// The camera chain's diffuse vertex c, when x_{c-1} is specular (a second chain follows).
 pub fn suitable(ps: &PathSpace, x: &[Vertex]) -> Option<usize> {
     let c = camera_chain_end(ps, x)?;
     (c >= 2 && ps.is_specular(&x[c - 1])).then_some(c)
-}
-
-/// Density of the new vertices `last..=n-2` per unit raster area and per unit solid angle of
-/// each turned direction: the camera ray's, then 1 for every lobe and turn.
-fn jacobian(ps: &PathSpace, p: &[Vertex], last: usize) -> f64 {
-    let n = p.len();
-    let cam = &p[n - 1];
-    let mut d = f64::from(to_area(
-        ps.ctx.camera.pdf_dir(dir(cam, &p[n - 2])),
-        cam,
-        &p[n - 2],
-    ));
-    for i in (last..n - 2).rev() {
-        d *= f64::from(to_area(1.0, &p[i + 1], &p[i]));
-    }
-    d
 }
 
 pub fn propose(
@@ -86,7 +70,11 @@ pub fn propose(
         i = j;
     };
     PathSpace::fix_kinds(&mut y);
-    let (dx, dy) = (jacobian(ps, x, last), jacobian(ps, &y, last));
+    // Each turn is symmetric and each lobe taken with probability 1, as the lens's chain.
+    let (dx, dy) = (
+        camera_chain_jacobian(ps, x, last),
+        camera_chain_jacobian(ps, &y, last),
+    );
     Some(Proposal {
         path: y,
         ratio: if dy > 0.0 { dx / dy } else { 0.0 },

@@ -7,7 +7,7 @@ use super::path_mutation::LANE_ACCEPT;
 use crate::components::CHUNK;
 use crate::integrators::path_mlt::{MutationCounts, PathMltState};
 use crate::mlt::Splat;
-use crate::mlt::path_chains::{chunk_starts, load_path, store_path};
+use crate::mlt::path_chains::chunk_starts;
 use crate::mlt::path_space::MAX_VERTICES;
 use crate::pipeline::Flow;
 use rayon::prelude::*;
@@ -134,8 +134,9 @@ crate::system! {
                     if !accepted[i] {
                         continue;
                     }
-                    let path = load_path(&prop, local, plen[i] as usize);
-                    store_path(&mut cur, local, &path);
+                    for v in local * MAX_VERTICES..local * MAX_VERTICES + plen[i] as usize {
+                        cur.set(v, prop.get(v));
+                    }
                     len[local] = plen[i];
                     f[local] = pf[i];
                     pix[local] = ppix[i];

@@ -90,7 +90,7 @@ fn choose(
             for local in 0..kind.len() {
                 let chain = c * CHUNK + local;
                 key[local] = crate::mlt::step_key(settings.seed, chain, step);
-                let x = load_path(&store, local, len[local] as usize);
+                let x = load_path(&store.view(), local, len[local] as usize);
                 let options = if x.len() >= 2 {
                     suitable(&ps, set, &x)
                 } else {
@@ -146,7 +146,7 @@ pub fn run(
                     pf[local] = DVec3::ZERO;
                     ptarget[local] = 0.0;
                     ratio[local] = 0.0;
-                    let x = load_path(&cur, local, lens[chain] as usize);
+                    let x = load_path(&cur.view(), local, lens[chain] as usize);
                     if x.len() < 2 {
                         continue;
                     }

@@ -72,9 +72,6 @@ crate::system! {
             let ok = path.len() == depth + 2
                 && seeding.chains.current_contributions.target[i] > 0.0
                 && ps.contribution(&path).is_some();
-            if !ok && std::env::var("SL_DEBUG").is_ok() {
-                eprintln!("seed {i}: depth {depth} s {s} t {t} nc {nc} nl {nl} len {} target {} contrib {:?}", path.len(), seeding.chains.current_contributions.target[i], ps.contribution(&path));
-            }
             if !ok {
                 mismatches += (seeding.chains.current_contributions.target[i] > 0.0) as usize;
                 path.clear();

@@ -72,6 +72,27 @@ pub fn block_means(image: &Image, block: usize) -> Vec<[f64; 3]> {
     out
 }
 
+/// Per 16x16 block, the luminance mean over renders (one per seed) and its standard error.
+pub fn block_luminance_stats(images: &[Image]) -> Vec<(f64, f64)> {
+    let blocks: Vec<Vec<f64>> = images
+        .iter()
+        .map(|img| {
+            block_means(img, 16)
+                .iter()
+                .map(|b| 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2])
+                .collect()
+        })
+        .collect();
+    let n = images.len() as f64;
+    (0..blocks[0].len())
+        .map(|i| {
+            let mean = blocks.iter().map(|b| b[i]).sum::<f64>() / n;
+            let var = blocks.iter().map(|b| (b[i] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+            (mean, (var / n).sqrt())
+        })
+        .collect()
+}
+
 pub fn render_bdpt(
     scene: stagelight::scene::PreparedScene,
     spp: u64,

@@ -3,7 +3,7 @@
 //! thread-count independence, seeds replayed exactly, and no zero or invalid proposal ever
 //! accepted.
 
-use crate::common::{block_means, load_small, render_bdpt};
+use crate::common::{block_luminance_stats, block_means, load_small, render_bdpt};
 use stagelight::film::Image;
 use stagelight::integrators::bdpt::BdptSettings;
 use stagelight::integrators::driver::run_passes;
@@ -141,27 +141,6 @@ fn mlt_furnace_is_two_and_depth_caps_give_the_partial_sums() {
     }
 }
 
-/// Per 16x16 block, luminance mean and standard error over seeds.
-fn block_stats(images: &[Image]) -> Vec<(f64, f64)> {
-    let blocks: Vec<Vec<f64>> = images
-        .iter()
-        .map(|img| {
-            block_means(img, 16)
-                .iter()
-                .map(|b| 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2])
-                .collect()
-        })
-        .collect();
-    let n = images.len() as f64;
-    (0..blocks[0].len())
-        .map(|i| {
-            let mean = blocks.iter().map(|b| b[i]).sum::<f64>() / n;
-            let var = blocks.iter().map(|b| (b[i] - mean).powi(2)).sum::<f64>() / (n - 1.0);
-            (mean, (var / n).sqrt())
-        })
-        .collect()
-}
-
 #[test]
 fn mlt_block_means_agree_with_bdpt() {
     const SIZE: u32 = 32;
@@ -180,13 +159,15 @@ fn mlt_block_means_agree_with_bdpt() {
                 .image()
             })
             .collect();
-        let reference = block_stats(&reference);
+        let reference = block_luminance_stats(&reference);
         for (multiplexed, name) in BOTH {
             let images: Vec<Image> = (0..SEEDS)
                 .map(|seed| image(&run(scene, SIZE, settings(multiplexed, seed, DEPTH, 32))))
                 .collect();
-            for (i, ((m, s), (rm, rs))) in
-                block_stats(&images).into_iter().zip(&reference).enumerate()
+            for (i, ((m, s), (rm, rs))) in block_luminance_stats(&images)
+                .into_iter()
+                .zip(&reference)
+                .enumerate()
             {
                 let se = (s * s + rs * rs).sqrt();
                 assert!(

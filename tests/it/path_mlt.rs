@@ -5,13 +5,13 @@
 //! ratio), block means against BDPT on the three scenes (bidirectional mutation alone and all
 //! mutations), and thread-count independence.
 
-use crate::common::{block_means, load_small, render_bdpt};
+use crate::common::{block_luminance_stats, block_means, load_small, render_bdpt};
 use stagelight::film::Image;
 use stagelight::integrators::bdpt::BdptSettings;
 use stagelight::integrators::driver::{PassState, run_passes};
 use stagelight::integrators::path_mlt::{PathMltSettings, PathMltState};
 use stagelight::integrators::{RenderSettings, SceneData};
-use stagelight::mlt::path_chains::MutationKind;
+use stagelight::mlt::path_chains::{MutationKind, load_path};
 use stagelight::mlt::path_space::{MAX_VERTICES, PathSpace, StepNumbers};
 use stagelight::sampling::SampleKey;
 use stagelight::systems::mutate::{bidirectional, path_mutation};
@@ -81,7 +81,7 @@ fn path_mlt_mutations_sample_the_density_they_report_and_can_be_undone() {
             if len < 2 {
                 continue;
             }
-            let x = load_path_view(&store, chain, len);
+            let x = load_path(&store, chain, len);
             let fx = ps.contribution(&x).expect("a chain's path carries light");
             assert!(fx.0.is_finite());
             for kind in path_mutation::suitable(&ps, &set, &x) {
@@ -136,18 +136,6 @@ fn path_mlt_mutations_sample_the_density_they_report_and_can_be_undone() {
     }
 }
 
-fn load_path_view(
-    store: &stagelight::components::PathVerticesView,
-    chain: usize,
-    len: usize,
-) -> Vec<stagelight::path::Vertex> {
-    let mut path: Vec<_> = (0..len)
-        .map(|i| stagelight::path::Vertex::from_store(store, chain * MAX_VERTICES + i, 1))
-        .collect();
-    PathSpace::fix_kinds(&mut path);
-    path
-}
-
 #[test]
 fn path_mlt_bidirectional_transition_sums_every_split_and_is_a_distribution() {
     // The deletion and addition lengths are distributions.
@@ -181,22 +169,6 @@ fn path_mlt_image_mean_is_b_and_the_furnace_is_two() {
     }
 }
 
-/// Per 16x16 block, luminance mean and standard error over seeds.
-fn block_stats(images: &[Image]) -> Vec<(f64, f64)> {
-    let blocks: Vec<Vec<f64>> = images
-        .iter()
-        .map(|img| block_means(img, 16).into_iter().map(luminance).collect())
-        .collect();
-    let n = images.len() as f64;
-    (0..blocks[0].len())
-        .map(|i| {
-            let mean = blocks.iter().map(|b| b[i]).sum::<f64>() / n;
-            let var = blocks.iter().map(|b| (b[i] - mean).powi(2)).sum::<f64>() / (n - 1.0);
-            (mean, (var / n).sqrt())
-        })
-        .collect()
-}
-
 #[test]
 fn path_mlt_block_means_agree_with_bdpt() {
     const SIZE: u32 = 32;
@@ -215,13 +187,15 @@ fn path_mlt_block_means_agree_with_bdpt() {
                 .image()
             })
             .collect();
-        let reference = block_stats(&reference);
+        let reference = block_luminance_stats(&reference);
         for (mutations, name) in [(BIDIR_ONLY, "bidir"), (0b1111, "all")] {
             let images: Vec<Image> = (0..SEEDS)
                 .map(|seed| image(run(scene, SIZE, seed, DEPTH, 4, mutations, 32)))
                 .collect();
-            for (i, ((m, s), (rm, rs))) in
-                block_stats(&images).into_iter().zip(&reference).enumerate()
+            for (i, ((m, s), (rm, rs))) in block_luminance_stats(&images)
+                .into_iter()
+                .zip(&reference)
+                .enumerate()
             {
                 let se = (s * s + rs * rs).sqrt();
                 assert!(
