@@ -531,6 +531,11 @@ pub struct CompareArgs {
     /// Where --preset finds its scenes.
     #[arg(long, default_value = "scenes")]
     pub scenes_dir: PathBuf,
+    /// With --preset: a folder of given references, one SCENE.exr per scene (halves
+    /// SCENE.a.exr and SCENE.b.exr beside them give the references' own noise); default: the
+    /// preset makes its own with pt at --reference-spp.
+    #[arg(long, requires = "preset")]
+    pub references: Option<PathBuf>,
     /// Photons per pass of the thesis preset's biased runs (PM traces this many in all).
     #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(1..),
           default_values_t = crate::compare::thesis::PHOTONS_PER_PASS)]
@@ -865,6 +870,7 @@ impl CompareArgs {
             photons: self.photons.settings(),
             photon_budgets: self.thesis_photons.clone(),
             reference_spp: self.reference_spp,
+            references: self.references.clone(),
             threads: self.threads.map(|t| t as usize),
             quiet: self.quiet,
         }

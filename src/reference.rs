@@ -923,6 +923,16 @@ pub struct LoadedReference {
     pub spp: Option<u64>,
     pub seed: Option<u64>,
     pub integrator: Option<String>,
+    /// What the reference's own noise adds to a relMSE against it, when its two independent
+    /// halves lie beside it as REF.a.exr and REF.b.exr (as ../mitsuba's references do).
+    pub noise_relmse: Option<f64>,
+}
+
+/// REF.a.exr and REF.b.exr beside REF.exr, when both exist.
+fn reference_halves(path: &Path) -> Option<(PathBuf, PathBuf)> {
+    let half = |tag: &str| path.with_extension(format!("{tag}.exr"));
+    let (a, b) = (half("a"), half("b"));
+    (a.is_file() && b.is_file()).then_some((a, b))
 }
 
 /// Reads a reference EXR and checks it: every value finite, the size `width` x `height`.
@@ -952,10 +962,33 @@ pub fn load_reference(
         ));
     }
     let attributes = reference_attributes(path)?;
+    let noise_relmse = match reference_halves(path) {
+        None => None,
+        Some((a_path, b_path)) => {
+            let read = |p: &Path| Image::read_exr(p).map_err(|e| error(p, e.message));
+            let (a, b) = (read(&a_path)?, read(&b_path)?);
+            Some(
+                crate::metrics::reference_noise(&image, &a, &b).ok_or_else(|| {
+                    error(
+                        &a_path,
+                        format!(
+                            "the halves {} and {} do not match the reference's {}x{} or hold \
+                             a NaN or infinite value",
+                            a_path.display(),
+                            b_path.display(),
+                            width,
+                            height
+                        ),
+                    )
+                })?,
+            )
+        }
+    };
     Ok(LoadedReference {
         image,
         spp: attributes.get("spp").and_then(|s| s.parse().ok()),
         seed: attributes.get("seed").and_then(|s| s.parse().ok()),
         integrator: attributes.get("integrator").cloned(),
+        noise_relmse,
     })
 }

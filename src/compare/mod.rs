@@ -146,6 +146,9 @@ pub struct Comparison {
     /// Where the reference came from, one sentence: "given", "made by this run: ...".
     pub reference_note: String,
     pub reference_spp: Option<u64>,
+    /// What the reference's own noise adds to every relMSE against it (estimated from its
+    /// halves, when they lie beside it); None when unknown.
+    pub reference_noise: Option<f64>,
     pub integrators: Vec<IntegratorKind>,
     pub unit: BudgetUnit,
     pub budgets: Vec<f64>,

@@ -138,6 +138,14 @@ pub fn summary_markdown(c: &Comparison) -> String {
         c.reference_path.display(),
         c.reference_note
     );
+    if let Some(noise) = c.reference_noise {
+        let _ = writeln!(
+            s,
+            "The reference's own noise, estimated from its two halves (REF.a.exr, REF.b.exr), \
+             adds {} to every relMSE below: errors near it are mostly the reference's.\n",
+            crate::compare::format::sci(noise)
+        );
+    }
     if c.interrupted {
         let _ = writeln!(
             s,

@@ -263,6 +263,7 @@ pub(crate) fn compare_scene(
         reference_path,
         reference_note: note,
         reference_spp: loaded.spp,
+        reference_noise: loaded.noise_relmse,
         integrators: plan.integrators.clone(),
         unit: plan.unit,
         budgets: plan.budgets.clone(),

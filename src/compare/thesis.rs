@@ -154,6 +154,22 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
             thin.join(", ")
         );
     }
+    let noisy: Vec<String> = scenes
+        .iter()
+        .filter_map(|sc| {
+            let noise = sc.comparison?.reference_noise?;
+            Some(format!("{} {}", scene_label(sc.key), sci(noise)))
+        })
+        .collect();
+    if !noisy.is_empty() {
+        let _ = writeln!(
+            s,
+            "The references' own noise (estimated from each reference's two halves) adds to \
+             every relMSE of its scene: {}. A relMSE minus that estimates the run's own error; \
+             relMSEs within a few times of it are mostly the reference's.\n",
+            noisy.join(", ")
+        );
+    }
     let mut missing: Vec<String> = Vec::new();
 
     let _ = writeln!(s, "## Unbiased algorithms, by samples per pixel\n");
@@ -314,6 +330,10 @@ pub struct ThesisOptions {
     pub photon_budgets: Vec<u64>,
     /// Samples per pixel of the references the preset makes.
     pub reference_spp: u64,
+    /// A folder of given references, one SCENE.exr per scene (e.g. an independent renderer's,
+    /// with its halves SCENE.a.exr and SCENE.b.exr beside it for its noise); None: the preset
+    /// makes its own with pt.
+    pub references: Option<PathBuf>,
     /// Worker threads (None: all cores).
     pub threads: Option<usize>,
     /// No progress bar.
@@ -334,11 +354,26 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
             ..RenderSettings::default()
         },
     };
+    // Every given reference is checked before the first run of hours.
+    let given: Vec<Option<PathBuf>> = SCENES
+        .iter()
+        .map(|(key, _)| o.references.as_ref().map(|d| d.join(format!("{key}.exr"))))
+        .collect();
+    for path in given.iter().flatten() {
+        if !path.is_file() {
+            anyhow::bail!(
+                "{}: no such reference (--references needs one SCENE.exr per scene of the \
+                 study: {})",
+                path.display(),
+                SCENES.map(|(k, _)| format!("{k}.exr")).join(", ")
+            );
+        }
+    }
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
     let mut comparisons: Vec<(&'static str, Comparison)> = Vec::new();
     let mut interrupted = false;
-    for (key, _label) in SCENES {
+    for ((key, _label), given) in SCENES.into_iter().zip(&given) {
         let scene = o.scenes_dir.join(format!("{key}.ron"));
         let data = load_scene(&scene)?;
         let scene_dir = out_dir.join(key);
@@ -348,7 +383,7 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
         match compare_scene(
             &scene,
             data,
-            None,
+            given.as_deref(),
             &scene_dir,
             &plan,
             o.reference_spp,

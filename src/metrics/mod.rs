@@ -66,6 +66,27 @@ pub fn compare(image: &Image, reference: &Image) -> Result<ErrorMetrics, Metrics
     })
 }
 
+/// The relMSE of a reference against the truth it estimates, from two independent halves
+/// `a` and `b` of it (the reference being their average): per pixel and channel the
+/// reference's variance is estimated by ((a - b) / 2)^2, so the mean of that over
+/// (r^2 + 0.01) is what the reference's own noise adds to an image's expected relMSE against
+/// it. Returns None when the halves do not match the reference in size or are not finite.
+pub fn reference_noise(reference: &Image, a: &Image, b: &Image) -> Option<f64> {
+    let same = |i: &Image| i.width == reference.width && i.height == reference.height;
+    if !same(a) || !same(b) {
+        return None;
+    }
+    let mut sum = 0.0f64;
+    for ((r, a), b) in reference.pixels.iter().zip(&a.pixels).zip(&b.pixels) {
+        for c in 0..3 {
+            let (r, half_gap) = (r[c] as f64, (a[c] as f64 - b[c] as f64) / 2.0);
+            sum += half_gap * half_gap / (r * r + 0.01);
+        }
+    }
+    let n = (reference.pixels.len() * 3).max(1) as f64;
+    (sum.is_finite()).then_some(sum / n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -77,6 +98,49 @@ mod tests {
             height: h,
             pixels: vec![Vec3::splat(v); w * h],
         }
+    }
+
+    #[test]
+    fn reference_noise_is_what_independent_halves_add_to_the_error() {
+        // Truth 0.5 everywhere; halves with independent noise of variance s^2 each, so the
+        // reference (their mean) has variance s^2 / 2 per value.
+        let (w, h) = (64, 64);
+        let mut rng = 12345u64;
+        let mut gauss = || {
+            let mut u = || {
+                rng = rng
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                ((rng >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            let (u1, u2) = (u(), u());
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        };
+        let s = 0.05f64;
+        let mut noisy = || {
+            let mut img = constant(w, h, 0.5);
+            for p in &mut img.pixels {
+                for c in 0..3 {
+                    p[c] += (s * gauss()) as f32;
+                }
+            }
+            img
+        };
+        let (a, b) = (noisy(), noisy());
+        let mut r = constant(w, h, 0.0);
+        for ((p, a), b) in r.pixels.iter_mut().zip(&a.pixels).zip(&b.pixels) {
+            *p = (*a + *b) * 0.5;
+        }
+        let noise = reference_noise(&r, &a, &b).unwrap();
+        // Expected s^2 / 2 / (0.25 + 0.01), to a few percent with 12288 values.
+        let expected = s * s / 2.0 / 0.26;
+        assert!(
+            (noise / expected - 1.0).abs() < 0.05,
+            "{noise} vs {expected}"
+        );
+        // The exact reference has no noise; a mismatched half gives None.
+        assert_eq!(reference_noise(&r, &r, &r), Some(0.0));
+        assert_eq!(reference_noise(&r, &constant(2, 2, 0.5), &b), None);
     }
 
     #[test]

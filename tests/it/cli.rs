@@ -125,6 +125,54 @@ fn ctrl_c_case(integrator: &str) {
     assert!(mean.x > 0.0 && mean.x.is_finite());
 }
 
+/// Path-space MLT stopped mid-run writes the steps its chains finished, normalised by them:
+/// with direct light kept in the chains, the image's mean luminance is the bootstrap's b
+/// whatever the number of steps, so an image scaled by the steps asked for (or by a step
+/// count other than the one splatted) fails.
+#[test]
+fn ctrl_c_saves_the_finished_metropolis_steps_normalised_by_them() {
+    let dir = temp_dir("cli-sigint-mlt");
+    let scene = crate::common::shrunk_scene("cornell_box", 32, &dir.join("cb.ron"));
+    let out = dir.join("long.exr");
+    let mut child = spawn(
+        stagelight_command()
+            .arg("render")
+            .arg(&scene)
+            .args([
+                "--integrator",
+                "mlt",
+                "--direct-spp",
+                "0",
+                "--spp",
+                "100000000",
+                "--threads",
+                "2",
+                "--quiet",
+                "-o",
+            ])
+            .arg(&out),
+    );
+    // The bootstrap of a 32x32 image takes a fraction of a CPU second.
+    wait_for_progress(&mut child, 2.0);
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    let report = stdout(&o);
+    assert!(report.contains("interrupted: saved the"), "{report}");
+    let b: f64 = report
+        .split("b = ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|v| v.trim_end_matches(',').parse().ok())
+        .unwrap_or_else(|| panic!("no b in the report: {report}"));
+    let image = stagelight::film::Image::read_exr(&out).expect("the finished steps were written");
+    let m = image.channel_means();
+    let mean = 0.2126 * m.x + 0.7152 * m.y + 0.0722 * m.z;
+    assert!(
+        b > 0.0 && (mean / b - 1.0).abs() < 1e-3,
+        "mean {mean}, b {b}"
+    );
+}
+
 #[test]
 fn bdpt_writes_the_image_and_one_image_per_strategy() {
     let dir = temp_dir("cli-bdpt");

@@ -461,6 +461,61 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         45,
         "3 scenes x (PT, BDPT and MLT (mmlt) at 3 budgets + PM, PPM 3 and PPM 75 at 2 photon budgets)"
     );
+
+    // Given references: a folder without them is refused before any run, naming the file;
+    // with them (the made ones copied, the Cornell box's with two halves) the preset uses
+    // them and reports the halves' noise.
+    let given = dir.join("given");
+    std::fs::create_dir_all(&given).unwrap();
+    let preset_with = |references: &Path, out: &Path| {
+        stagelight(&[
+            "compare",
+            "--preset",
+            "thesis",
+            "--scenes-dir",
+            scenes.to_str().unwrap(),
+            "--references",
+            references.to_str().unwrap(),
+            "--thesis-photons",
+            "2000",
+            "--quiet",
+            "-o",
+            out.to_str().unwrap(),
+        ])
+    };
+    let o = preset_with(&given, &dir.join("refused"));
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("cornell_box.exr: no such reference"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!dir.join("refused").exists());
+    for name in ["cornell_box", "torus_glass", "door_ajar"] {
+        let made = out.join(name).join("reference.exr");
+        std::fs::copy(&made, given.join(format!("{name}.exr"))).unwrap();
+    }
+    let cornell = Image::read_exr(&given.join("cornell_box.exr")).unwrap();
+    let mut brighter = cornell.clone();
+    for p in &mut brighter.pixels {
+        *p *= 1.5;
+    }
+    cornell.write_exr(&given.join("cornell_box.a.exr")).unwrap();
+    brighter.write_exr(&given.join("cornell_box.b.exr")).unwrap();
+    let out_given = dir.join("thesis-given");
+    let o = preset_with(&given, &out_given);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(!out_given.join("cornell_box").join("reference.exr").exists());
+    let md = std::fs::read_to_string(out_given.join("summary.md")).unwrap();
+    let noise_line = md
+        .lines()
+        .find(|l| l.contains("two halves"))
+        .unwrap_or_else(|| panic!("no noise line: {md}"));
+    // Halves r and 1.5 r: the noise is the mean of (r / 4)^2 / (r^2 + 0.01), above zero.
+    assert!(
+        noise_line.contains("Cornell box") && !noise_line.contains("torus"),
+        "{noise_line}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -282,7 +282,8 @@ fn furnace_error(image: &stagelight::film::Image) -> (f64, f64) {
 
 /// Shards of the biased integrators are independent runs: shard 1 (from pass 0) is the
 /// plain render of its passes with the render's seed, the other has its own seed, and merge
-/// averages their images weighted by mutations (MLT) or passes x pixels (SPPM). Checked in
+/// averages their images weighted by mutations (the Metropolis integrators) or passes x
+/// pixels (SPPM). Checked in
 /// the furnace (every pixel exactly 2): the weighted average recomputed here from the shards'
 /// EXRs, the merged mean against 2, and less per-pixel error than the worse shard's.
 #[test]
@@ -295,6 +296,7 @@ fn biased_shards_are_independent_runs_averaged_by_their_weights() {
     for (integrator, spp, extra, tolerance) in [
         ("pssmlt", 256u64, &[][..], 0.03),
         ("mmlt", 256, &[][..], 0.03),
+        ("mlt", 256, &["--direct-spp", "4"][..], 0.03),
         ("sppm", 6, &["--photons-per-pass", "20000"][..], 0.03),
     ] {
         let render = |name: &str, spp: u64, more: &[&str]| {
