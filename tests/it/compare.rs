@@ -501,7 +501,9 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         *p *= 1.5;
     }
     cornell.write_exr(&given.join("cornell_box.a.exr")).unwrap();
-    brighter.write_exr(&given.join("cornell_box.b.exr")).unwrap();
+    brighter
+        .write_exr(&given.join("cornell_box.b.exr"))
+        .unwrap();
     let out_given = dir.join("thesis-given");
     let o = preset_with(&given, &out_given);
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
