@@ -166,6 +166,8 @@ pub struct BdptSettings {
     pub strategies: StrategyFilter,
     /// Keep each strategy's weighted contribution as its own image.
     pub strategy_images: bool,
+    /// Paths shallower than this are left out (path-space MLT renders them apart).
+    pub min_depth: u32,
 }
 
 impl From<&RenderSettings> for BdptSettings {
@@ -188,6 +190,7 @@ impl BdptSettings {
             mis: MisHeuristic::Power,
             strategies: StrategyFilter::All,
             strategy_images: false,
+            min_depth: 0,
         }
     }
 
@@ -200,10 +203,14 @@ impl BdptSettings {
     }
 
     /// Whether strategy (s, t) may contribute: a camera vertex, at least two vertices in all,
-    /// a path within the depth cap, and kept by the filter.
+    /// a path within the depth bounds, and kept by the filter.
     #[inline]
     pub fn uses(&self, s: usize, t: usize) -> bool {
-        t >= 1 && s + t >= 2 && s + t - 2 <= self.max_depth as usize && self.strategies.keeps(s, t)
+        t >= 1
+            && s + t >= 2
+            && s + t - 2 <= self.max_depth as usize
+            && s + t - 2 >= self.min_depth as usize
+            && self.strategies.keeps(s, t)
     }
 }
 

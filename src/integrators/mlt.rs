@@ -47,10 +47,28 @@ pub const MLT_MAX_DEPTH: u32 = 16;
 pub const MAX_CHAINS: usize = bdpt::WAVEFRONT;
 /// Fewest chains.
 pub const MIN_CHAINS: usize = 256;
-/// Chains are about (mutations) / this, so each chain takes at least this many steps.
+/// Chains of pssmlt and mmlt are about (mutations) / this, so each takes at least this many
+/// steps.
 pub const STEPS_PER_CHAIN: u64 = 64;
+/// Chains of path-space MLT are about sqrt(this x mutations): its perturbations move a path a
+/// few pixels per step, so a short chain stays where its seed put it (torus_glass wants long
+/// chains), while more chains start from more seeds (door_ajar wants many). relMSE against
+/// Mitsuba's references at 64 mutations per pixel (256x256, 4.2M mutations, one bootstrap):
+/// torus_glass 0.028 / 0.027 / 0.035 / 0.108 with 256 / 1024 / 4096 / 32768 chains,
+/// door_ajar 0.113 / 0.075 / 0.062 / 0.055; this rule gives 4096 there. Mitsuba runs one chain
+/// per ~200k mutations.
+pub const PATH_CHAINS_PER_SQRT_MUTATION: u64 = 4;
+/// The automatic bootstrap draws at least one evaluation per this many mutations asked for
+/// (Mitsuba's 100000 luminance samples are one per 16 mutations at 256x256 and 25 per pixel):
+/// b's error is a heavy-tailed scale error (paths that only a rare strategy finds, such as
+/// light reaching a diffuse surface through glass), and the sample variance cannot warn of
+/// tails it has not yet seen.
+pub const MUTATIONS_PER_BOOTSTRAP_EVALUATION: u64 = 16;
 /// The mutations per pixel a time budget is planned for (chains and bootstrap size).
 pub const TIMED_MUTATIONS_PER_PIXEL: u64 = 256;
+/// Bootstrap evaluations per wave at least: with fewer (a few hundred chains), per-wave
+/// overheads dominate (1.8M evaluations took 44 s in waves of 256, 2.8 s for 1M in 4096).
+pub const BOOTSTRAP_WAVE: usize = 8192;
 /// Most bootstrap evaluations (all groups together) the automatic rule draws.
 pub const MAX_BOOTSTRAP_EVALUATIONS: u64 = 1 << 22;
 /// Bootstrap evaluations per chain at least (so chains rarely share a seed).
@@ -64,6 +82,15 @@ pub const NONZERO_SEEDS_PER_CHAIN: f64 = 0.25;
 
 /// Separates the bootstrap's numbers from every other use of the seed.
 const BOOTSTRAP_DOMAIN: u64 = 0x6d6c_745f_626f_6f74;
+
+/// How the number of chains follows the mutations asked for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ChainRule {
+    /// Mutations / this (pssmlt, mmlt: `STEPS_PER_CHAIN`).
+    StepsPerChain(u64),
+    /// sqrt(this x mutations) (path-space mlt: `PATH_CHAINS_PER_SQRT_MUTATION`).
+    SqrtOfMutations(u64),
+}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct MltSettings {
@@ -84,6 +111,8 @@ pub struct MltSettings {
     pub bootstrap_image: bool,
     /// Depths below this get no weight (path-space MLT renders them apart).
     pub min_depth: u32,
+    /// How many chains, unless given.
+    pub chain_rule: ChainRule,
 }
 
 impl MltSettings {
@@ -110,6 +139,7 @@ impl MltSettings {
             mutations_per_pixel: None,
             bootstrap_image: false,
             min_depth: 0,
+            chain_rule: ChainRule::StepsPerChain(STEPS_PER_CHAIN),
         }
     }
 
@@ -137,14 +167,18 @@ impl MltSettings {
         }
     }
 
-    /// Chains for a `pixels`-pixel image: the mutations / `STEPS_PER_CHAIN`, within
-    /// [`MIN_CHAINS`, `MAX_CHAINS`], unless given.
+    /// Chains for a `pixels`-pixel image by `chain_rule`, within [`MIN_CHAINS`,
+    /// `MAX_CHAINS`], unless given.
     pub fn chain_count(&self, pixels: u64) -> usize {
         self.chains.unwrap_or_else(|| {
             let m = self
                 .mutations_per_pixel
                 .unwrap_or(TIMED_MUTATIONS_PER_PIXEL);
-            ((m * pixels / STEPS_PER_CHAIN) as usize).clamp(MIN_CHAINS, MAX_CHAINS)
+            let chains = match self.chain_rule {
+                ChainRule::StepsPerChain(steps) => m * pixels / steps,
+                ChainRule::SqrtOfMutations(k) => ((k * m * pixels) as f64).sqrt() as u64,
+            };
+            (chains as usize).clamp(MIN_CHAINS, MAX_CHAINS)
         })
     }
 
@@ -400,11 +434,14 @@ impl PassState for MltState {
         let dims = settings.dims();
         let bdpt_settings = BdptSettings {
             mis: settings.mis,
+            min_depth: settings.min_depth,
             ..BdptSettings::new(settings.seed, settings.max_depth)
         };
-        let mut bdpt = BdptState::new(data.clone(), bdpt_settings, chains);
+        // The bootstrap evaluates in waves of at least `BOOTSTRAP_WAVE`, however few chains.
+        let wave = chains.max(BOOTSTRAP_WAVE);
+        let mut bdpt = BdptState::new(data.clone(), bdpt_settings, wave);
         bdpt.sampler = Numbers::Primary {
-            store: PrimarySamples::new(chains, dims),
+            store: PrimarySamples::new(wave, dims),
             fallback_seed: mix64(settings.seed ^ BOOTSTRAP_DOMAIN),
         };
         // The most contributions one evaluation makes: its own pixel and a light-tracing
@@ -430,7 +467,7 @@ impl PassState for MltState {
             settings,
             pixels,
             bdpt,
-            chains: ChainStates::new(chains, dims, stride),
+            chains: ChainStates::new(chains, dims, stride, wave),
             selection: None,
             step: 0,
             steps_left: 0,

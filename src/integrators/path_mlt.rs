@@ -14,7 +14,7 @@
 //!
 //! ```text
 //! once direct_illumination: render_direct_illumination
-//! once bootstrap: [mmlt bootstrap, balance heuristic] -> adopt_seed_paths
+//! once bootstrap: [pssmlt bootstrap: full BDPT, balance heuristic] -> adopt_seed_paths
 //! loop mutation_steps:
 //!     choose_mutations -> bidirectional_mutation -> lens_perturbation -> caustic_perturbation
 //!     -> multichain_perturbation -> accept_path_proposals -> splat_path_expected_values
@@ -52,7 +52,8 @@ pub struct PathMltSettings {
     pub mutations: MutationSet,
     /// Direct illumination rendered apart at this many samples per pixel (0: none).
     pub direct_spp: u32,
-    /// The bootstrap's settings (multiplexed BDPT, balance heuristic).
+    /// The bootstrap's settings (full BDPT, balance heuristic, depth >= 2 with direct
+    /// illumination apart).
     pub bootstrap: MltSettings,
 }
 
@@ -64,8 +65,9 @@ impl PathMltSettings {
         if let Some(m) = s.mlt.mutations {
             mutations.enabled = m;
         }
-        let mut bootstrap = MltSettings::from_render(s, true);
+        let mut bootstrap = MltSettings::from_render(s, false);
         bootstrap.mis = MisHeuristic::Balance;
+        bootstrap.chain_rule = mlt::ChainRule::SqrtOfMutations(mlt::PATH_CHAINS_PER_SQRT_MUTATION);
         if direct_spp == 0 {
             mutations.min_vertices = 2;
         } else {
@@ -109,7 +111,7 @@ pub struct PathMltState {
     pub settings: PathMltSettings,
     pub pixels: u64,
     pub steps_per_pass: u64,
-    /// The multiplexed BDPT bootstrap that seeds the chains.
+    /// The BDPT bootstrap that seeds the chains.
     pub seeding: MltState,
     pub seeded: bool,
     pub seed_mismatches: usize,

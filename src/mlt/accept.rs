@@ -193,7 +193,7 @@ mod tests {
     fn zero_and_non_finite_proposals_are_never_accepted_and_are_counted() {
         let bad = [0.0, -1.0, f32::NAN, f32::INFINITY, f32::NEG_INFINITY];
         let chains = 4000;
-        let mut s = ChainStates::new(chains, 2, 1);
+        let mut s = ChainStates::new(chains, 2, 1, 0);
         for i in 0..chains {
             s.current_contributions.set_single(i, 7, Vec3::splat(2.0));
             let t = bad[i % bad.len()];

@@ -53,6 +53,14 @@ impl Contributions {
         self.target.len()
     }
 
+    /// Keeps the first `chains` chains (an evaluation wave may hold more than the chains).
+    pub fn truncate(&mut self, chains: usize) {
+        self.target.truncate(chains);
+        self.count.truncate(chains);
+        self.pixel.truncate(chains * self.stride);
+        self.value.truncate(chains * self.stride);
+    }
+
     pub fn stride(&self) -> usize {
         self.stride
     }
@@ -199,13 +207,19 @@ pub struct ChainStates {
 
 impl ChainStates {
     /// `chains` chains of `dims`-dimensional primary-sample vectors, each evaluation making
-    /// at most `contributions_per_chain` contributions.
-    pub fn new(chains: usize, dims: u32, contributions_per_chain: usize) -> ChainStates {
+    /// at most `contributions_per_chain` contributions, evaluated in waves of up to
+    /// `wave` (at least `chains`) evaluations (the bootstrap's).
+    pub fn new(
+        chains: usize,
+        dims: u32,
+        contributions_per_chain: usize,
+        wave: usize,
+    ) -> ChainStates {
         ChainStates {
             current: PrimarySamples::new(chains, dims),
             proposal: PrimarySamples::new(chains, dims),
             current_contributions: Contributions::new(chains, contributions_per_chain),
-            proposal_contributions: Contributions::new(chains, contributions_per_chain),
+            proposal_contributions: Contributions::new(wave.max(chains), contributions_per_chain),
             group: vec![0; chains],
             splat_scale: vec![1.0; chains],
             step_key: vec![SampleKey::default(); chains],

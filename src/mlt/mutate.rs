@@ -195,7 +195,7 @@ mod tests {
     }
 
     fn proposals(settings: &MutationSettings, chains: usize, dims: u32, step: u64) -> ChainStates {
-        let mut states = ChainStates::new(chains, dims, 1);
+        let mut states = ChainStates::new(chains, dims, 1, 0);
         for d in 0..dims {
             for i in 0..chains {
                 states
@@ -282,7 +282,7 @@ mod tests {
     #[test]
     fn proposals_are_keyed_by_chain_and_step() {
         // Two chains at the same state (resampled from one seed) must not propose the same.
-        let mut s = ChainStates::new(2, 4, 1);
+        let mut s = ChainStates::new(2, 4, 1, 0);
         for d in 0..4 {
             s.current.set(0, d, 0.25);
             s.current.set(1, d, 0.25);

@@ -380,7 +380,7 @@ mod tests {
         assert!(s.group[..10].iter().all(|&g| g == 0));
         assert_eq!(s.splat_scale(1), 0.1);
         assert_eq!(s.total_normalisation(), 4.0);
-        let mut chains = ChainStates::new(40, 1, 1);
+        let mut chains = ChainStates::new(40, 1, 1, 0);
         s.apply(&mut chains);
         assert_eq!(chains.group[39], 1);
         assert_eq!(chains.splat_scale[0], 0.1);

@@ -154,7 +154,7 @@ fn run_toy(
     kernel: Kernel,
     splat_scale: f32,
 ) -> ToyRun {
-    let mut chains = ChainStates::new(n, 2, 1);
+    let mut chains = ChainStates::new(n, 2, 1, 0);
     let mut initial_cells = Vec::with_capacity(n);
     for i in 0..n {
         let (x, y) = toy.sample(SampleKey::new(mix64(seed ^ 0x5eed), i as u64, 0));
@@ -434,7 +434,7 @@ fn results_are_bit_identical_for_any_thread_count() -> Result<(), rayon::ThreadP
 #[test]
 fn chains_sharing_a_seed_diverge_at_once() {
     let toy = Toy::new();
-    let mut chains = ChainStates::new(64, 2, 1);
+    let mut chains = ChainStates::new(64, 2, 1, 0);
     for i in 0..64 {
         chains.current.set(i, 0, 0.22);
         chains.current.set(i, 1, 0.3);

@@ -80,7 +80,7 @@ pub fn transition(
 }
 
 /// Proposes a mutation of `x`; `None` when the regrown path is impossible (a miss, a joint
-/// at a specular vertex, an occluded joint).
+/// at a specular vertex, an occluded joint) or could not be turned back into x.
 pub fn propose(
     ps: &PathSpace,
     set: &MutationSet,
@@ -161,6 +161,12 @@ pub fn propose(
             added: deleted,
         },
     );
+    // No split of x's deleted vertices can be regrown from y (x had a specular vertex next to
+    // a kept one, which no joint may touch): the move could never be undone, so it is
+    // rejected here, before the acceptance test would (a = 0).
+    if reverse <= 0.0 {
+        return None;
+    }
     let recomputed = two_tailed(2, 1, n, deleted) / positions as f64
         * two_tailed(deleted, lo, hi, added)
         / added as f64

@@ -4,8 +4,9 @@
 //!   primary-sample vector (a pure function of seed and evaluation index), evaluated by the
 //!   BDPT systems; in mmlt evaluation i is at depth i mod (max depth + 1).
 //! - `collect_bootstrap_weights`: each evaluation's target into its group's weights; ends the
-//!   bootstrap by the size rule: at least `BOOTSTRAP_PER_CHAIN` evaluations per chain and
-//!   `MIN_BOOTSTRAP_SAMPLES` per group, then until b's relative error is below half the
+//!   bootstrap by the size rule: at least `BOOTSTRAP_PER_CHAIN` evaluations per chain,
+//!   `MIN_BOOTSTRAP_SAMPLES` per group and one per `MUTATIONS_PER_BOOTSTRAP_EVALUATION`
+//!   mutations, then until b's relative error is below half the
 //!   image's expected noise at M mutations per pixel (`crate::mlt::needs_more_bootstrap`; M =
 //!   --spp, or `TIMED_MUTATIONS_PER_PIXEL` under --time), but never more evaluations than
 //!   the M x pixels mutations asked for nor `MAX_BOOTSTRAP_EVALUATIONS`; `--bootstrap N`
@@ -20,8 +21,8 @@ use crate::components::CHUNK;
 use crate::integrators::Wave;
 use crate::integrators::bdpt::Numbers;
 use crate::integrators::mlt::{
-    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MltSettings, MltState, NONZERO_SEEDS_PER_CHAIN,
-    TIMED_MUTATIONS_PER_PIXEL,
+    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MUTATIONS_PER_BOOTSTRAP_EVALUATION,
+    MltSettings, MltState, NONZERO_SEEDS_PER_CHAIN, TIMED_MUTATIONS_PER_PIXEL,
 };
 use crate::mlt::{MIN_BOOTSTRAP_SAMPLES, bootstrap_error, needs_more_bootstrap};
 use crate::pipeline::Flow;
@@ -95,7 +96,7 @@ crate::system! {
         let n = wave.len;
         let pixels = *pixels;
         let groups = settings.groups() as u64;
-        let chains = contributions.chains() as u64;
+        let chains = settings.chain_count(pixels) as u64;
         for k in 0..n {
             let item = bootstrap.evaluated + k as u64;
             let g = (item % groups) as usize;
@@ -121,8 +122,9 @@ crate::system! {
     }
 }
 
-/// The automatic bootstrap rule, given the weights so far (per group): at least `BOOTSTRAP_PER_CHAIN` evaluations per chain (and `MIN_BOOTSTRAP_SAMPLES`
-/// per group), then more until b's relative error is below `BOOTSTRAP_NOISE_FRACTION` of the
+/// The automatic bootstrap rule, given the weights so far (per group): at least
+/// `BOOTSTRAP_PER_CHAIN` evaluations per chain, `MIN_BOOTSTRAP_SAMPLES` per group and one per
+/// `MUTATIONS_PER_BOOTSTRAP_EVALUATION` mutations (within `MAX_BOOTSTRAP_EVALUATIONS`), then more until b's relative error is below `BOOTSTRAP_NOISE_FRACTION` of the
 /// image noise at `mutations_per_pixel` and the non-zero evaluations number
 /// `NONZERO_SEEDS_PER_CHAIN` per chain; never more than `MAX_BOOTSTRAP_EVALUATIONS`, nor more
 /// than the mutations asked for (beyond that the bootstrap would take most of the render). A
@@ -140,7 +142,12 @@ pub fn automatic_bootstrap_done(
         .filter(|&&x| x > 0.0)
         .count();
     let groups = weights.len() as u64;
-    let floor = (BOOTSTRAP_PER_CHAIN * chains).max(MIN_BOOTSTRAP_SAMPLES as u64 * groups);
+    let floor = (BOOTSTRAP_PER_CHAIN * chains)
+        .max(MIN_BOOTSTRAP_SAMPLES as u64 * groups)
+        .max(
+            (mutations_per_pixel * pixels / MUTATIONS_PER_BOOTSTRAP_EVALUATION)
+                .min(MAX_BOOTSTRAP_EVALUATIONS),
+        );
     let cap = MAX_BOOTSTRAP_EVALUATIONS.min(floor.max(mutations_per_pixel * pixels));
     let black = bootstrap_error(weights).normalisation <= 0.0;
     let seeds_enough = nonzero as f64 >= NONZERO_SEEDS_PER_CHAIN * chains as f64;
@@ -167,22 +174,33 @@ mod tests {
 
     #[test]
     fn bootstrap_goes_on_while_seeds_are_scarce() {
-        // 1024 chains: the floor is 16k evaluations. One mutation per pixel of 1M pixels: b's
-        // error may be up to half the (large) image noise, and the cap is 1M evaluations.
-        let (chains, m, pixels) = (1024, 1, 1 << 20);
+        // 1024 chains: the floor is 16k evaluations. One mutation per pixel of 256k pixels: b's
+        // error may be up to half the (large) image noise, one evaluation per 16 mutations is
+        // 16k too, and the cap is 256k evaluations.
+        let (chains, m, pixels) = (1024, 1, 1 << 18);
         // Light in one evaluation of 4: past the floor, plenty of seeds, b known: done.
         assert!(done(&weights(2, 1 << 14, 4), chains, m, pixels));
         // Light in one of 256: b is known well enough, but 128 non-zero evaluations for 1024
         // chains are too few seeds, so it goes on ...
         assert!(!done(&weights(2, 1 << 14, 256), chains, m, pixels));
-        // ... until there are a quarter as many as chains,
-        assert!(done(&weights(2, 1 << 17, 256), chains, m, pixels));
+        // ... until there are a quarter as many as chains (512 of 128k, below the cap),
+        assert!(done(&weights(2, 1 << 16, 256), chains, m, pixels));
         // or the cap: no more evaluations than the mutations asked for (here 2 x 16k).
         assert!(done(&weights(2, 1 << 14, 256), chains, m, 1 << 15));
         // A black scene stops at the floor.
         let black = |n: usize| vec![vec![0.0f32; n]; 2];
         assert!(done(&black(1 << 13), chains, m, pixels));
         assert!(!done(&black(1 << 12), chains, m, pixels));
+    }
+
+    #[test]
+    fn bootstrap_draws_one_evaluation_per_sixteen_mutations() {
+        // 4M mutations: at least 256k evaluations, however well the weights look before.
+        let (chains, m, pixels) = (1024, 4, 1 << 20);
+        assert!(!done(&weights(2, 1 << 16, 4), chains, m, pixels));
+        assert!(done(&weights(2, 1 << 17, 4), chains, m, pixels));
+        // Within `MAX_BOOTSTRAP_EVALUATIONS` (4M) when the mutations are many more.
+        assert!(done(&weights(2, 1 << 21, 4), chains, 1024, pixels));
     }
 }
 
@@ -249,6 +267,7 @@ crate::system! {
     }
     run {
         chains.current_contributions.clone_from(&chains.proposal_contributions);
+        chains.current_contributions.truncate(chains.chains());
         // The same numbers give the same contribution: each seed's target is its weight.
         if let Some(sel) = selection.as_ref() {
             bootstrap.replay_mismatches = sel

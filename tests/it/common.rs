@@ -74,10 +74,19 @@ pub fn block_means(image: &Image, block: usize) -> Vec<[f64; 3]> {
 
 /// Per 16x16 block, the luminance mean over renders (one per seed) and its standard error.
 pub fn block_luminance_stats(images: &[Image]) -> Vec<(f64, f64)> {
+    block_luminance_stats_of(images, 16)
+}
+
+/// `block_luminance_stats` over `block` x `block` blocks (at least one block).
+pub fn block_luminance_stats_of(images: &[Image], block: usize) -> Vec<(f64, f64)> {
+    assert!(
+        images[0].width >= block && images[0].height >= block,
+        "no whole {block}x{block} block"
+    );
     let blocks: Vec<Vec<f64>> = images
         .iter()
         .map(|img| {
-            block_means(img, 16)
+            block_means(img, block)
                 .iter()
                 .map(|b| 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2])
                 .collect()

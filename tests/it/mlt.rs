@@ -105,14 +105,14 @@ fn mlt_seeds_replay_their_bootstrap_weight_and_invalid_proposals_are_never_accep
 fn mlt_furnace_is_two_and_depth_caps_give_the_partial_sums() {
     for (multiplexed, name) in BOTH {
         for (depth, expected) in [(u32::MAX, 2.0), (0, 1.0), (1, 1.5), (3, 1.875)] {
-            let state = run("furnace.ron", 8, settings(multiplexed, 1, depth, 256));
+            let state = run("furnace.ron", 8, settings(multiplexed, 1, depth, 512));
             let img = image(&state);
             let b = state.normalisation();
             assert!(
                 (b / expected - 1.0).abs() < 0.03,
                 "{name} depth {depth}: b {b} against {expected}"
             );
-            // Every pixel the same light, within the noise of 256 correlated mutations.
+            // Every pixel the same light, within the noise of 512 correlated mutations.
             let worst = img
                 .pixels
                 .iter()
@@ -122,7 +122,7 @@ fn mlt_furnace_is_two_and_depth_caps_give_the_partial_sums() {
                 worst < 0.5,
                 "{name} depth {depth}: a pixel {worst} off {expected}"
             );
-            // 4x4 blocks (16 pixels, 4096 mutations each) within 10%.
+            // 4x4 blocks (16 pixels, 8192 mutations each) within 10%.
             for m in block_means(&img, 4) {
                 let l = 0.2126 * m[0] + 0.7152 * m[1] + 0.0722 * m[2];
                 assert!(

@@ -5,7 +5,7 @@
 //! ratio), block means against BDPT on the three scenes (bidirectional mutation alone and all
 //! mutations), and thread-count independence.
 
-use crate::common::{block_luminance_stats, block_means, load_small, render_bdpt};
+use crate::common::{block_luminance_stats, block_luminance_stats_of, load_small, render_bdpt};
 use stagelight::film::Image;
 use stagelight::integrators::bdpt::BdptSettings;
 use stagelight::integrators::driver::{PassState, run_passes};
@@ -103,9 +103,13 @@ fn path_mlt_mutations_sample_the_density_they_report_and_can_be_undone() {
                         p.path.len(),
                         x.len()
                     );
+                    // The sampled density multiplies the cosines of the sampled directions, the
+                    // recomputed one those between the stored (rounded) hit points; on the
+                    // faceted furnace sphere they differed by up to 4.7e-3 (a wrong factor in a
+                    // density is far larger).
                     let rel = (p.sampled_density / p.recomputed_density - 1.0).abs();
                     assert!(
-                        p.recomputed_density > 0.0 && rel < 2e-3,
+                        p.recomputed_density > 0.0 && rel < 1e-2,
                         "{scene} {kind:?}: sampled {} recomputed {}",
                         p.sampled_density,
                         p.recomputed_density
@@ -158,14 +162,24 @@ fn path_mlt_image_mean_is_b_and_the_furnace_is_two() {
     let mean = luminance(img.channel_means().to_array());
     assert!((mean / b - 1.0).abs() < 1e-4, "image mean {mean}, b {b}");
     // The furnace: every pixel 2 (less 2^-17 beyond the depth cap), direct part apart or not.
+    // Each run's mean within 1%; 4x4 blocks, whose noise at 64 steps per chain is ~6% (the
+    // chains mix slowly across an 8x8 image), within 5 standard errors over four seeds.
     for direct in [0, 4] {
-        let img = image(run("furnace.ron", 8, 1, u32::MAX, direct, 0b1111, 256));
-        for m in block_means(&img, 4) {
-            let l = luminance(m);
-            assert!((l / 2.0 - 1.0).abs() < 0.05, "direct {direct}: a block {l}");
+        let images: Vec<Image> = (1..=4)
+            .map(|seed| image(run("furnace.ron", 8, seed, u32::MAX, direct, 0b1111, 256)))
+            .collect();
+        for img in &images {
+            let l = luminance(img.channel_means().to_array());
+            assert!((l / 2.0 - 1.0).abs() < 0.01, "direct {direct}: mean {l}");
         }
-        let l = luminance(img.channel_means().to_array());
-        assert!((l / 2.0 - 1.0).abs() < 0.01, "direct {direct}: mean {l}");
+        for (i, (m, se)) in block_luminance_stats_of(&images, 4).into_iter().enumerate() {
+            assert!(se < 0.1, "direct {direct}: block {i} standard error {se}");
+            assert!(
+                (m - 2.0).abs() <= 5.0 * se,
+                "direct {direct}: block {i} {m} against 2, {:.2} standard errors",
+                (m - 2.0).abs() / se
+            );
+        }
     }
 }
 
