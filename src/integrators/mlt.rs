@@ -66,7 +66,7 @@ pub const PATH_CHAINS_PER_SQRT_MUTATION: u64 = 4;
 pub const MUTATIONS_PER_BOOTSTRAP_EVALUATION: u64 = 16;
 /// The mutations per pixel a time budget is planned for (chains and bootstrap size).
 pub const TIMED_MUTATIONS_PER_PIXEL: u64 = 256;
-/// Bootstrap evaluations per wave at least: with fewer (a few hundred chains), per-wave
+/// Bootstrap evaluations per wave at least in path-space MLT: with fewer (a few hundred chains), per-wave
 /// overheads dominate (1.8M evaluations took 44 s in waves of 256, 2.8 s for 1M in 4096).
 pub const BOOTSTRAP_WAVE: usize = 8192;
 /// Most bootstrap evaluations (all groups together) the automatic rule draws.
@@ -113,6 +113,9 @@ pub struct MltSettings {
     pub min_depth: u32,
     /// How many chains, unless given.
     pub chain_rule: ChainRule,
+    /// Bootstrap evaluations per wave at least (path-space MLT: `BOOTSTRAP_WAVE`; else the
+    /// chains, which evaluate in the same columns).
+    pub bootstrap_wave: usize,
 }
 
 impl MltSettings {
@@ -140,6 +143,7 @@ impl MltSettings {
             bootstrap_image: false,
             min_depth: 0,
             chain_rule: ChainRule::StepsPerChain(STEPS_PER_CHAIN),
+            bootstrap_wave: 0,
         }
     }
 
@@ -437,8 +441,7 @@ impl PassState for MltState {
             min_depth: settings.min_depth,
             ..BdptSettings::new(settings.seed, settings.max_depth)
         };
-        // The bootstrap evaluates in waves of at least `BOOTSTRAP_WAVE`, however few chains.
-        let wave = chains.max(BOOTSTRAP_WAVE);
+        let wave = chains.max(settings.bootstrap_wave);
         let mut bdpt = BdptState::new(data.clone(), bdpt_settings, wave);
         bdpt.sampler = Numbers::Primary {
             store: PrimarySamples::new(wave, dims),

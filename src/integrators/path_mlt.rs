@@ -67,6 +67,7 @@ impl PathMltSettings {
         }
         let mut bootstrap = MltSettings::from_render(s, false);
         bootstrap.mis = MisHeuristic::Balance;
+        bootstrap.bootstrap_wave = mlt::BOOTSTRAP_WAVE;
         bootstrap.chain_rule = mlt::ChainRule::SqrtOfMutations(mlt::PATH_CHAINS_PER_SQRT_MUTATION);
         if direct_spp == 0 {
             mutations.min_vertices = 2;
