@@ -60,15 +60,20 @@ def inclusive_costs(out):
         check=True, capture_output=True, text=True,
     ).stdout
     costs = {}
-    number = r"([\d,]+)(?: \([^)]*\))?"
+    # A zero count prints as "."; a count may carry its share, "(12.3%)".
+    number = r"([\d,]+|\.)(?: \([^)]*\))?"
     line_re = re.compile(r"^\s*" + r"\s+".join([number] * len(EVENTS)) + r"\s+(.*)$")
     for line in text.splitlines():
         m = line_re.match(line)
         if not m:
             continue
-        values = [int(v.replace(",", "")) for v in m.groups()[: len(EVENTS)]]
+        values = [0 if v == "." else int(v.replace(",", "")) for v in m.groups()[: len(EVENTS)]]
         name = m.groups()[len(EVENTS)]
-        costs.setdefault(name, values)
+        if name.startswith("=>"):
+            continue  # a call line of the annotated source, not a function's total
+        # Lines come by inclusive cost, largest first: a function's first line is its whole
+        # cost (later ones are inlined pieces attributed to other files).
+        costs.setdefault(name.split(":", 1)[-1] if name.startswith("/") else name, values)
     return costs
 
 
@@ -82,7 +87,8 @@ def per_system(costs):
         m = SYSTEM_RE.search(name)
         if m:
             snake = re.sub(r"(?<!^)([A-Z])", r"_\1", m.group(1)).lower()
-            systems[snake] = values
+            if values[0] > systems.get(snake, [0])[0]:
+                systems[snake] = values
     return systems
 
 
@@ -104,8 +110,8 @@ def main():
     configs.append(("megakernel", ["--kernel", "megakernel"]))
     print(f"{args.scene} at {args.size}x{args.size}, {args.spp} spp ({samples} samples), 1 thread;"
           f" D1 48 KiB 12-way, LL {args.ll} (size,ways,line)")
-    print("| kernel | system | share of instructions | data refs per sample | D1 miss rate | LL miss rate |")
-    print("|---|---|---|---|---|---|")
+    print("| kernel | system | instructions per sample | share | data refs per sample | D1 miss rate | LL miss rate | D1 misses per sample | LL misses per sample |")
+    print("|---|---|---|---|---|---|---|---|---|")
     for label, extra in configs:
         out = run(args, label.replace(" ", "_"), extra, work)
         costs = per_system(inclusive_costs(out))
@@ -113,8 +119,10 @@ def main():
         rows = sorted(costs.items(), key=lambda kv: -kv[1][0]) + [("all systems", total)]
         for name, (ir, dr, dw, d1mr, d1mw, dlmr, dlmw) in rows:
             refs = dr + dw
-            print(f"| {label} | {name} | {100 * ir / max(total[0], 1):.1f}% | {refs / samples:.0f} |"
-                  f" {100 * (d1mr + d1mw) / max(refs, 1):.2f}% | {100 * (dlmr + dlmw) / max(refs, 1):.3f}% |")
+            d1, ll = d1mr + d1mw, dlmr + dlmw
+            print(f"| {label} | {name} | {ir / samples:.0f} | {100 * ir / max(total[0], 1):.1f}% |"
+                  f" {refs / samples:.0f} | {100 * d1 / max(refs, 1):.2f}% | {100 * ll / max(refs, 1):.3f}% |"
+                  f" {d1 / samples:.2f} | {ll / samples:.3f} |")
         sys.stdout.flush()
 
 
