@@ -1,14 +1,15 @@
 #!/usr/bin/env bash
-# kernel_ab.sh BINARY THREADS ROUNDS SCENE:SPP...: PT's wavefront (default 2^18 and 2^16 paths
+# kernel_ab.sh BINARY THREADS ROUNDS SCENE:SPP...: PT's wavefront (default 2^18, 2^16 and 2^14 paths
 # in flight) against its megakernel, renders interleaved round by round so that drift in the
-# machine falls on all three alike; prints each render's samples/s, then the medians. Run it
+# machine falls on all of them alike; prints each render's samples/s, then the medians. Run it
 # under /work/tools/quiet.sh (or on an otherwise idle machine).
 #   benches/kernel_ab.sh target/release/stagelight 2 5 scenes/cornell_box.ron:32 scenes/door_ajar.ron:16
 set -euo pipefail
 bin=$1 threads=$2 rounds=$3
 shift 3
 out=$(mktemp -d)
-configs=("wavefront-262144:--kernel wavefront" "wavefront-65536:--kernel wavefront --wavefront 65536" "megakernel:--kernel megakernel")
+configs=("wavefront-262144:--kernel wavefront" "wavefront-65536:--kernel wavefront --wavefront 65536"
+  "wavefront-16384:--kernel wavefront --wavefront 16384" "megakernel:--kernel megakernel")
 for round in $(seq "$rounds"); do
   for scene_spp in "$@"; do
     scene=${scene_spp%:*} spp=${scene_spp##*:}

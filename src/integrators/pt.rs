@@ -267,8 +267,6 @@ pub enum Kernel {
 }
 
 impl Kernel {
-    pub const ALL: [Kernel; 2] = [Kernel::Wavefront, Kernel::Megakernel];
-
     pub fn as_str(self) -> &'static str {
         match self {
             Kernel::Wavefront => "wavefront",
