@@ -625,7 +625,8 @@ impl PassRange {
         }
         if count > total {
             return Err(format!(
-                "--shard {index}/{count}: {count} shards of {total} passes would leave some                  empty (at most one shard per pass)"
+                "--shard {index}/{count}: {count} shards of {total} passes would leave some \
+                 empty (at most one shard per pass)"
             ));
         }
         let at = |i: u64| (total as u128 * i as u128 / count as u128) as u64;

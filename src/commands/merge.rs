@@ -179,33 +179,26 @@ fn missing(from: u64, to: u64, after: Option<&Part>) -> String {
     }
 }
 
-/// Merges the parts into `output` and says what it did. Returns the exit code (0).
-pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
-    if output
-        .extension()
-        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
-    {
-        bail!("{}: the output must be an .exr file", output.display());
-    }
+/// Reads the parts and checks that they belong to one render and cover each of its passes
+/// once (every problem named), in pass order.
+fn read_parts(parts: &[PathBuf]) -> Result<Vec<Part>> {
     let mut read = parts
         .iter()
         .map(|p| read_part(p))
         .collect::<Result<Vec<_>>>()?;
+    if read.is_empty() {
+        bail!("no parts to merge");
+    }
     read.sort_by_key(|p| (p.header().first_pass, p.header().passes));
     let found = problems(&read);
     if !found.is_empty() {
         bail!("cannot merge {} parts: {}", read.len(), found.join("; "));
     }
-    let is_reference = read[0].header().made_by == "reference";
-    let png = output.with_extension("png");
-    let merged_film_path = checkpoint_path(output);
-    let mut outputs = vec![output, png.as_path()];
-    if is_reference {
-        outputs.push(&merged_film_path);
-    }
-    let inputs: Vec<&Path> = read.iter().map(|p| p.film_path.as_path()).collect();
-    check_outputs(&outputs, &inputs)?;
+    Ok(read)
+}
 
+/// The film of all the parts' passes and its header (that of a whole render).
+fn add_parts(read: &[Part]) -> Result<(CheckpointHeader, Film)> {
     let first = read[0].header().clone();
     let mut film = Film::new(first.width, first.height);
     let mut header = CheckpointHeader {
@@ -218,7 +211,7 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
         out_of_range: 0,
         ..first
     };
-    for part in &read {
+    for part in read {
         film.add_film(&part.checkpoint.film)
             .map_err(|e| anyhow::anyhow!("{}: {e}", part.name()))?;
         let h = part.header();
@@ -228,6 +221,34 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
     header.nonfinite = film.nonfinite;
     header.nonfinite_splats = film.nonfinite_splats;
     header.out_of_range = film.out_of_range;
+    Ok((header, film))
+}
+
+/// The merged film of shards (`PART.exr` or their checkpoints), checked as `merge` checks
+/// them, without writing anything: what a sharded comparison measures.
+pub fn merged_film(parts: &[PathBuf]) -> Result<(CheckpointHeader, Film)> {
+    add_parts(&read_parts(parts)?)
+}
+
+/// Merges the parts into `output` and says what it did. Returns the exit code (0).
+pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
+    if output
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("{}: the output must be an .exr file", output.display());
+    }
+    let read = read_parts(parts)?;
+    let is_reference = read[0].header().made_by == "reference";
+    let png = output.with_extension("png");
+    let merged_film_path = checkpoint_path(output);
+    let mut outputs = vec![output, png.as_path()];
+    if is_reference {
+        outputs.push(&merged_film_path);
+    }
+    let inputs: Vec<&Path> = read.iter().map(|p| p.film_path.as_path()).collect();
+    check_outputs(&outputs, &inputs)?;
+    let (header, film) = add_parts(&read)?;
 
     if is_reference {
         // A merged reference is a reference: its checkpoint lets `reference` extend it.

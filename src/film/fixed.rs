@@ -13,7 +13,10 @@
 //! whose addition would take its pixel's sum beyond it, is rejected and counted (the film's
 //! `out_of_range`), never wrapped; with samples below 2^32 a pixel holds 2^31 of them before
 //! that can happen. Whether a sum overflows depends on the order of its samples only at the
-//! edge of the range, and such a rejection is reported either way.
+//! edge of the range, and such a rejection is reported either way. The scene format keeps
+//! every emission channel at most 2^32 and the brightest at least 2^-32
+//! (`scene::format::MAX_RADIANCE`, `MIN_BRIGHTEST_RADIANCE`), so that scenes stay inside
+//! both ends of this range.
 
 use glam::{DVec3, Vec3};
 
