@@ -163,9 +163,9 @@ echo "cmp: identical"
 
 # --- 3. a sharded comparison against one process
 if [ "${SKIP_COMPARE:-0}" != 1 ]; then
-    compare_args=(compare scene.ron --integrators pt,bdpt,sppm --budgets 4,16 --budget-unit spp
+    compare_args=(compare scene.ron --integrators pt,bdpt,sppm --budgets 16,64 --budget-unit spp
         --reference-spp "$SPP" --photons-per-pass 5000)
-    echo "== a comparison of pt, bdpt and sppm at 4 and 16 spp as a plan of $SHARDS tasks"
+    echo "== a comparison of pt, bdpt and sppm at 16 and 64 spp as a plan of $SHARDS tasks"
     "$bin" slurm --shards "$SHARDS" --cpus-per-task 1 -o cjob -- "${compare_args[@]}" -o sharded
     t0=$(date +%s.%N)
     sh cjob/submit.sh

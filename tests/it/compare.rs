@@ -701,12 +701,13 @@ fn a_sharded_comparison_reports_the_figures_of_one_machine() {
             &scene_arg,
             "--integrators",
             "pt,bdpt,pm",
+            // 1 shard (fewer than 16 passes each), 3 and 4 shards; the reference 4.
             "--budgets",
-            "3,7",
+            "8,48,80",
             "--budget-unit",
             "spp",
             "--reference-spp",
-            "24",
+            "64",
             "--photons",
             "3000",
             "--quiet",
@@ -732,7 +733,7 @@ fn a_sharded_comparison_reports_the_figures_of_one_machine() {
     let slurm_args: Vec<&str> = args.iter().map(String::as_str).collect();
     let out = succeeds(&slurm_args);
     assert!(
-        out.contains("plan.ron (1 scene, 6 runs (2 whole, 14 shards) and 1 reference (4 shards))"),
+        out.contains("plan.ron (1 scene, 9 runs (3 whole, 16 shards) and 1 reference (4 shards))"),
         "{out}"
     );
     // The report before every task has run names what is missing, and its task.
@@ -764,7 +765,7 @@ fn a_sharded_comparison_reports_the_figures_of_one_machine() {
         untimed_figures(&one.join("results.csv")),
         untimed_figures(&sharded.join("results.csv")),
     );
-    assert_eq!(a.len(), 6);
+    assert_eq!(a.len(), 9);
     assert_eq!(a, b);
     let summary = std::fs::read_to_string(sharded.join("summary.md")).unwrap();
     assert!(
@@ -795,7 +796,7 @@ fn a_sharded_comparison_reports_the_figures_of_one_machine() {
     // refused rather than rendered into shards that do not belong together.
     let plan = job.join("plan.ron");
     let text = std::fs::read_to_string(&plan).unwrap();
-    std::fs::write(&plan, text.replacen("passes: 7,", "passes: 8,", 1)).unwrap();
+    std::fs::write(&plan, text.replacen("passes: 48,", "passes: 47,", 1)).unwrap();
     let o = stagelight(&["compare", "--plan", &path(&plan)]);
     assert_eq!(o.status.code(), Some(1));
     assert!(
