@@ -591,7 +591,8 @@ pub struct CompareArgs {
     #[arg(long, value_name = "PLAN.ron",
           conflicts_with_all = ["scene", "preset", "reference", "integrators", "references",
                                 "budgets", "budget_unit", "seed", "sampler", "max_depth",
-                                "reference_spp", "scenes_dir", "thesis_photons", "output"])]
+                                "reference_spp", "scenes_dir", "thesis_photons", "output",
+                                "kernel", "wavefront"])]
     pub plan: Option<PathBuf>,
     /// With --plan: the task to render, I of N.
     #[arg(long, value_name = "I/N", value_parser = parse_shard, requires = "plan")]

@@ -83,7 +83,7 @@ fn identity(h: &CheckpointHeader) -> Vec<(&'static str, String)> {
     } else {
         h.max_depth.to_string()
     };
-    vec![
+    let mut identity = vec![
         ("command", h.made_by.clone()),
         ("integrator", h.integrator.clone()),
         ("seed", h.seed.to_string()),
@@ -99,7 +99,17 @@ fn identity(h: &CheckpointHeader) -> Vec<(&'static str, String)> {
             "total passes",
             h.shard.map_or(0, |s| s.total_passes).to_string(),
         ),
-    ]
+    ];
+    // An unbiased part's film is in its scene's unit, so the parts of one scene agree on it
+    // unless one was made by a stagelight from before units followed the scene. (A biased
+    // part's unit follows its image; merge converts those.)
+    if h.is_unbiased() {
+        identity.push((
+            "film unit",
+            format!("2^{}", h.unit_exponent - crate::film::fixed::FRACTION_BITS),
+        ));
+    }
+    identity
 }
 
 /// Checks that the parts belong to one render and cover each of its passes once; returns
@@ -200,7 +210,14 @@ fn read_parts(parts: &[PathBuf]) -> Result<Vec<Part>> {
 /// The film of all the parts' passes and its header (that of a whole render).
 fn add_parts(read: &[Part]) -> Result<(CheckpointHeader, Film)> {
     let first = read[0].header().clone();
-    let mut film = Film::new(first.width, first.height);
+    // One unit for all: the parts' own for the unbiased integrators (`problems` checked that
+    // they agree), the coarsest for the biased ones' weighted images, each rounded to it.
+    let unit = read
+        .iter()
+        .map(|p| p.checkpoint.film.unit_exponent())
+        .max()
+        .unwrap_or(0);
+    let mut film = Film::with_unit(first.width, first.height, unit);
     let mut header = CheckpointHeader {
         first_pass: 0,
         shard: None,
@@ -212,7 +229,17 @@ fn add_parts(read: &[Part]) -> Result<(CheckpointHeader, Film)> {
         ..first
     };
     for part in read {
-        film.add_film(&part.checkpoint.film)
+        let added = &part.checkpoint.film;
+        let converted;
+        let added = if added.unit_exponent() == unit {
+            added
+        } else {
+            converted = added
+                .in_unit(unit)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", part.name()))?;
+            &converted
+        };
+        film.add_film(added)
             .map_err(|e| anyhow::anyhow!("{}: {e}", part.name()))?;
         let h = part.header();
         header.passes = header.passes.max(h.passes);

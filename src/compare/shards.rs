@@ -771,7 +771,7 @@ fn render_shard(
                 &control,
             )
         } else {
-            let start = Resume::shard_start(cam.width as usize, cam.height as usize, range.first);
+            let start = Resume::shard_start(data, range.first);
             crate::integrators::resume(
                 run.kind,
                 data.clone(),

@@ -192,15 +192,9 @@ impl TryFrom<[f32; 3]> for Reflectance {
 #[serde(try_from = "[f32; 3]")]
 pub struct Radiance(pub Vec3);
 
-/// The largest radiance a channel may have, 2^32 (4.29e9): the film sums a pixel's samples
-/// in fixed point up to 2^63 (`film::fixed`), room for 2^31 samples of 2^32 each. (f32 light
-/// transport itself overflowed to a black image from about 1e34.)
-pub const MAX_RADIANCE: f32 = 4_294_967_296.0;
-
-/// The least the brightest emission of a scene may be, 2^-32 (2.3e-10): the film's unit is
-/// 2^-64 (`film::fixed`), so light much dimmer than this would be rounded away. Between the
-/// two limits a pixel at a thousandth of the brightest radiance keeps f32 precision.
-pub const MIN_BRIGHTEST_RADIANCE: f32 = 1.0 / 4_294_967_296.0;
+/// The largest radiance a channel may have: radiance times throughput (and, for light
+/// subpaths, times area) is carried in f32, and overflowed to a black image from about 1e34.
+pub const MAX_RADIANCE: f32 = 1e30;
 
 impl TryFrom<[f32; 3]> for Radiance {
     type Error = String;
@@ -211,9 +205,8 @@ impl TryFrom<[f32; 3]> for Radiance {
             ))
         } else if v.iter().any(|c| *c > MAX_RADIANCE) {
             Err(format!(
-                "emission radiance {v:?} is too large: each channel must be at most 2^32 \
-                 ({MAX_RADIANCE}; the film sums a pixel in fixed point up to 2^63): scale the \
-                 scene's emission down, the image is linear in it"
+                "emission radiance {v:?} is too large: each channel must stay below \
+                 {MAX_RADIANCE:e} (f32 light transport overflows)"
             ))
         } else if v.iter().all(|c| *c == 0.0) {
             Err("emission radiance is zero: leave `emission` out instead".to_string())

@@ -221,22 +221,6 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     if emitters.triangle.is_empty() {
         warnings.push("no object emits light: the image will be black".to_string());
     }
-    let brightest = emitters
-        .radiance
-        .iter()
-        .map(|r| r.max_element())
-        .fold(0.0, f32::max);
-    if !emitters.triangle.is_empty() && brightest < super::format::MIN_BRIGHTEST_RADIANCE {
-        return Err(error(
-            None,
-            format!(
-                "the brightest emission radiance, {brightest:e}, is below 2^-32 ({:e}): the \
-                 film sums in fixed point with a unit of 2^-64, which would round such dim \
-                 light away; scale the scene's emission up, the image is linear in it",
-                super::format::MIN_BRIGHTEST_RADIANCE
-            ),
-        ));
-    }
     build_distribution(&mut emitters);
     if emitters.cdf.len() != emitters.triangle.len() {
         return Err(error(
