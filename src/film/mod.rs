@@ -702,6 +702,24 @@ mod tests {
     }
 
     #[test]
+    fn films_in_different_units_do_not_add_until_converted() {
+        let mut a = Film::with_unit(2, 1, 4);
+        a.add_sample(0, Vec3::splat(3.0));
+        let mut b = Film::new(2, 1);
+        b.add_sample(0, Vec3::splat(3.0));
+        let e = a.add_film(&b).unwrap_err();
+        assert!(e.contains("units of 2^-64") && e.contains("2^-60"), "{e}");
+        assert_eq!(a.total_samples(), 1, "left as it was");
+        a.add_film(&b.in_unit(4).unwrap()).unwrap();
+        assert_eq!(a.image().pixels, vec![Vec3::splat(3.0), Vec3::ZERO]);
+        // A sum too large for a finer unit is named, not wrapped.
+        let mut big = Film::with_unit(2, 1, 40);
+        big.add_sample(1, Vec3::splat(1e20));
+        let e = big.in_unit(0).unwrap_err();
+        assert!(e.contains("pixel (1, 0)"), "{e}");
+    }
+
+    #[test]
     fn srgb_endpoints() {
         assert_eq!(srgb8(0.0), 0);
         assert_eq!(srgb8(1.0), 255);
