@@ -153,8 +153,100 @@ fn compare() {
     }
 }
 
+/// Rays of `BVH_BIG=DIR`: a million, the same in `benches/mitsuba_big.py --rays`.
+const BIG_RAYS: usize = 1 << 20;
+
+/// The `k`-th uniform number of ray `i` of the big scenes' rays: splitmix64 of
+/// `i * 8 + k`, its top 24 bits over 2^24. `benches/mitsuba_big.py` computes the same.
+fn big_uniform(i: u64, k: u64) -> f32 {
+    let mut z = (i * 8 + k).wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^= z >> 31;
+    (z >> 40) as f32 * (1.0 / (1u32 << 24) as f32)
+}
+
+/// Incoherent rays in the bounds `lo..hi`: origins uniform, directions uniform on the
+/// sphere, any-hit lengths uniform up to half the diagonal.
+fn big_rays(lo: Vec3, hi: Vec3) -> Vec<Ray> {
+    let diag = (hi - lo).length();
+    (0..BIG_RAYS as u64)
+        .map(|i| {
+            let u = |k| big_uniform(i, k);
+            let z = 1.0 - 2.0 * u(3);
+            let r = (1.0 - z * z).max(0.0).sqrt();
+            let phi = 2.0 * std::f32::consts::PI * u(4);
+            Ray {
+                origin: lo + (hi - lo) * Vec3::new(u(0), u(1), u(2)),
+                dir: Vec3::new(r * phi.cos(), r * phi.sin(), z),
+                t_max: 0.5 * diag * u(5),
+            }
+        })
+        .collect()
+}
+
+/// `BVH_BIG=DIR cargo bench --bench bvh_traversal`: for each big scene that `stagelight bench
+/// --big DIR` wrote, the tree's build (best of 3) and closest-hit and any-hit rays/s of a
+/// million incoherent rays on all threads of the rayon pool (`RAYON_NUM_THREADS`), each the
+/// best of 5 passes.
+fn big(dir: &Path) {
+    use rayon::prelude::*;
+    for size in stagelight::commands::big_scenes::BIG_SCENES {
+        let path = stagelight::commands::big_scenes::scene_path(dir, &size);
+        if !path.is_file() {
+            continue;
+        }
+        let tris = match stagelight::scene::load(&path) {
+            Ok(scene) => scene.triangles,
+            Err(e) => panic!("{e}"),
+        };
+        let mut build_s = f64::INFINITY;
+        let mut accel = None;
+        for _ in 0..3 {
+            drop(accel.take());
+            let start = std::time::Instant::now();
+            accel = Some(Accel::build(&tris));
+            build_s = build_s.min(start.elapsed().as_secs_f64());
+        }
+        let accel = accel.expect("built");
+        let (lo, hi) = bounds(&tris);
+        let rays = big_rays(lo, hi);
+        let pass = |f: &(dyn Fn(&Ray) -> bool + Sync)| {
+            let start = std::time::Instant::now();
+            let hits: usize = rays
+                .par_chunks(4096)
+                .map(|c| c.iter().filter(|r| f(r)).count())
+                .sum();
+            (start.elapsed().as_secs_f64(), hits)
+        };
+        let (mut closest, mut any) = ((f64::INFINITY, 0), (f64::INFINITY, 0));
+        for _ in 0..5 {
+            let c = pass(&|r| accel.closest_hit(r.origin, r.dir, f32::INFINITY).is_some());
+            closest = (closest.0.min(c.0), c.1);
+            let a = pass(&|r| accel.any_hit(r.origin, r.dir, r.t_max));
+            any = (any.0.min(a.0), a.1);
+        }
+        let (nodes, leaves) = accel.memory_bytes();
+        let mrays = |t: f64| BIG_RAYS as f64 / t * 1e-6;
+        println!(
+            "{:9} {:>9} triangles: build {build_s:.3} s, {:.0} bytes/triangle (tree); \
+             closest {:.2} Mrays/s ({} hits), any {:.2} Mrays/s ({} hits), {} threads",
+            size.name,
+            tris.len(),
+            (nodes + leaves) as f64 / tris.len() as f64,
+            mrays(closest.0),
+            closest.1,
+            mrays(any.0),
+            any.1,
+            rayon::current_num_threads()
+        );
+    }
+}
+
 fn main() {
-    if std::env::var_os("BVH_COMPARE").is_some() {
+    if let Some(dir) = std::env::var_os("BVH_BIG") {
+        big(Path::new(&dir));
+    } else if std::env::var_os("BVH_COMPARE").is_some() {
         compare();
     } else {
         benches();

@@ -201,6 +201,45 @@ fn closest_hit_matches_brute_force_on_closed_meshes() {
 
 /// Rays from inside a closed mesh, aimed exactly at its vertices and at points of its edges
 /// and along the axes through grid lines: none may escape.
+/// Past 20,000 triangles the eight-wide tree is collapsed by several tasks, whose parts are
+/// then joined (references moved, the top nodes' boxes widened to their deferred children):
+/// against brute force on a mesh and a soup of that size, with exact copies (the same corners,
+/// any starting corner: left out of the tree) and reversed copies (kept) among them.
+#[test]
+fn closest_hit_matches_brute_force_on_a_tree_collapsed_in_parallel() {
+    let mut rng = Rng::new(5);
+    let mut tris = icosphere(5, Vec3::new(0.1, 0.2, -0.1), 0.7);
+    tris.extend(random_soup(
+        &mut rng,
+        9000,
+        Vec3::splat(-1.0),
+        Vec3::splat(1.0),
+        0.08,
+    ));
+    let originals = tris.len();
+    // Copies of distinct originals (7919 is prime to their number), so that no two reversed
+    // copies are copies of each other.
+    for k in 0..1500 {
+        let [a, b, c] = tris[k * 7919 % originals];
+        tris.push(match k % 3 {
+            0 => [a, b, c],
+            1 => [b, c, a],
+            _ => [a, c, b],
+        });
+    }
+    assert!(tris.len() > 30_000);
+    let cols = columns(&tris);
+    let accel = Accel::build(&cols);
+    assert_eq!(
+        accel.len(),
+        originals + 500,
+        "only the reversed copies are kept"
+    );
+    let hits =
+        check_against_brute_force(&tris, &mut rng, 1500, (Vec3::splat(-1.2), Vec3::splat(1.2)));
+    assert!(hits > 1000, "too few hits ({hits})");
+}
+
 fn assert_watertight(tris: &[[Vec3; 3]], inside: impl Fn(&mut Rng) -> Vec3, rays: usize) {
     let cols = columns(tris);
     let mut rng = Rng::new(3);
