@@ -2,7 +2,7 @@
 //! leaves (up to four triangles each) share four-lane triangle packets with their siblings.
 //!
 //! Each node stores its children's boxes as exact f32 planes (the min and max of the
-//! children's triangle vertices, recomputed here), eight per plane, so that one node is
+//! children's triangle vertices, computed in `collapse`), eight per plane, so that one node is
 //! tested against a ray with a few SSE2 instructions (or fewer AVX2 ones, where the CPU has
 //! them: see `crate::cpu`). The box test is made conservative by one padding per ray (see
 //! `BoxRay`), not per node.
