@@ -256,6 +256,12 @@ impl PathContext<'_> {
     }
 }
 
+/// The unit direction from `v` to `to` (zero where they coincide).
+#[inline]
+pub fn towards(v: &Vertex, to: &Vertex) -> Vec3 {
+    (to.p - v.p).normalize_or_zero()
+}
+
 /// The shading-normal factor of an importance-carrying scattering at `v` (1 where the shading
 /// normal is the geometric one).
 #[inline]
@@ -295,10 +301,7 @@ impl PathContext<'_> {
     ) -> Option<Connection> {
         if s == 0 {
             // The camera subpath found the light by itself.
-            let z = &camera[t - 1];
-            let wo = (camera[t - 2].p - z.p).normalize_or_zero();
-            let le = self.emitted(z, wo);
-            let contribution = z.beta * le;
+            let contribution = self.reached_emission(&camera[t - 1], &camera[t - 2]);
             return (contribution != Vec3::ZERO).then_some(Connection {
                 contribution,
                 segment: None,
@@ -310,26 +313,13 @@ impl PathContext<'_> {
             return None;
         }
         let y_wo = if s >= 2 {
-            (light[s - 2].p - y.p).normalize_or_zero()
+            towards(y, &light[s - 2])
         } else {
             Vec3::ZERO
         };
         if t == 1 {
-            // Light tracing: the light vertex seen by the camera.
-            let cam = &self.camera;
-            let to_y = y.p - cam.position;
-            let dist2 = to_y.length_squared();
-            let dir = to_y / dist2.sqrt();
-            let (pixel, importance) = cam.project(dir)?;
-            let wi = -dir;
-            let f = self.f(y, y_wo, wi, TransportMode::Importance);
-            let cos_y = if y.kind == VertexKind::Light {
-                wi.dot(y.ng).abs()
-            } else {
-                wi.dot(y.ns).abs()
-            };
-            let contribution = y.beta * f * (cos_y * importance / dist2);
-            return (contribution != Vec3::ZERO).then_some(Connection {
+            let (contribution, pixel) = self.connect_to_camera(y, y_wo)?;
+            return Some(Connection {
                 contribution,
                 segment: Some((*y, camera[0])),
                 pixel: Some(pixel),
@@ -339,13 +329,54 @@ impl PathContext<'_> {
         if !self.is_connectible(z) {
             return None;
         }
+        let contribution = self.join(y, y_wo, z, towards(z, &camera[t - 2]))?;
+        Some(Connection {
+            contribution,
+            segment: Some((*y, *z)),
+            pixel: None,
+        })
+    }
+
+    /// Strategy s = 0: what the camera subpath carries from the emitter it reached at `z`,
+    /// arriving from `prev`.
+    #[inline]
+    pub fn reached_emission(&self, z: &Vertex, prev: &Vertex) -> Vec3 {
+        z.beta * self.emitted(z, towards(z, prev))
+    }
+
+    /// Strategy t = 1 (light tracing): the light vertex `y` (connectible, reached along
+    /// `-y_wo`, zero at a light vertex) seen by the camera: its unweighted contribution and
+    /// the pixel it lands in, or `None` outside the image or for no contribution.
+    #[inline]
+    pub fn connect_to_camera(&self, y: &Vertex, y_wo: Vec3) -> Option<(Vec3, usize)> {
+        let cam = &self.camera;
+        let to_y = y.p - cam.position;
+        let dist2 = to_y.length_squared();
+        let dir = to_y / dist2.sqrt();
+        let (pixel, importance) = cam.project(dir)?;
+        let wi = -dir;
+        let f = self.f(y, y_wo, wi, TransportMode::Importance);
+        let cos_y = if y.kind == VertexKind::Light {
+            wi.dot(y.ng).abs()
+        } else {
+            wi.dot(y.ns).abs()
+        };
+        let contribution = y.beta * f * (cos_y * importance / dist2);
+        (contribution != Vec3::ZERO).then_some((contribution, pixel))
+    }
+
+    /// Strategies s >= 1, t >= 2: the unweighted contribution of joining light vertex `y` to
+    /// camera vertex `z` (both connectible; `y_wo`, `z_wo` the unit directions to their
+    /// subpaths' previous vertices, zero at a light vertex), or `None` when it is zero: the
+    /// BSDF at `z` is tested first, so a back-facing joint costs one evaluation.
+    #[inline]
+    pub fn join(&self, y: &Vertex, y_wo: Vec3, z: &Vertex, z_wo: Vec3) -> Option<Vec3> {
         let d = y.p - z.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {
             return None;
         }
         let w = d / dist2.sqrt(); // from z towards y
-        let z_wo = (camera[t - 2].p - z.p).normalize_or_zero();
         let fz = self.f(z, z_wo, w, TransportMode::Radiance);
         if fz == Vec3::ZERO {
             return None;
@@ -358,11 +389,7 @@ impl PathContext<'_> {
         };
         let g = w.dot(z.ns).abs() * cos_y / dist2;
         let contribution = z.beta * fz * y.beta * fy * g;
-        (contribution != Vec3::ZERO).then_some(Connection {
-            contribution,
-            segment: Some((*y, *z)),
-            pixel: None,
-        })
+        (contribution != Vec3::ZERO).then_some(contribution)
     }
 
     /// The MIS weight of strategy (s, t) for the path its connection makes, by Veach's ratio

@@ -328,6 +328,7 @@ pub fn graph() -> Graph<BdptState> {
     nodes.extend([
         Node::system(connect::strategies::ConnectStrategies),
         Node::system(trace::shadow::TraceShadow),
+        Node::system(connect::weights::WeighConnections),
         Node::system(gather::connections::AccumulateConnections),
     ]);
     Graph::new("bdpt", nodes)
@@ -340,6 +341,7 @@ pub fn evaluation_graph() -> Graph<BdptState> {
     nodes.extend([
         Node::system(connect::strategies::ConnectStrategies),
         Node::system(trace::shadow::TraceShadow),
+        Node::system(connect::weights::WeighConnections),
     ]);
     Graph::new("bdpt_evaluation", nodes)
 }
