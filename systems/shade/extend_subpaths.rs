@@ -116,7 +116,7 @@ crate::system! {
                         },
                     );
                     let Some(next) = next else { continue };
-                    pv.pdf_rev[j] = next.pdf_rev_prev;
+                    pv.items[j].pdf_rev = next.pdf_rev_prev;
                     let mut beta = wk.beta[i] * next.weight;
                     if d >= ROULETTE_DEPTH as usize {
                         let q = survival(beta, wk.roulette_scale[i]);
