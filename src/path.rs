@@ -256,6 +256,72 @@ impl PathContext<'_> {
     }
 }
 
+/// A connectible vertex as many connections see it: the cosines of the direction to its
+/// subpath's previous vertex and its BSDF, found once per vertex instead of once per
+/// connection. `Joint::f` is `PathContext::f`, bit for bit.
+#[derive(Clone, Copy, Debug)]
+pub struct Joint {
+    pub v: Vertex,
+    /// wo . ng and wo . ns, wo the unit direction to the previous vertex (zero at a light).
+    wo_ng: f32,
+    wo_ns: f32,
+    lobe: Lobe,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Lobe {
+    /// A point on an emitter (its radiance is in `beta`): 1 on the emitting side.
+    Light,
+    /// Lambertian: reflectance / pi.
+    Diffuse(Vec3),
+    /// Any other connectible BSDF, in the shading frame, with wo in it.
+    Framed {
+        material: Material,
+        frame: Frame,
+        wo_local: Vec3,
+    },
+}
+
+impl Joint {
+    /// f(wo, wi) at the vertex for unit `wi`, given wi . ng and wi . ns.
+    #[inline]
+    fn f(&self, wi: Vec3, wi_ng: f32, wi_ns: f32, mode: TransportMode) -> Vec3 {
+        let f = match self.lobe {
+            Lobe::Light => {
+                return if wi_ng > 0.0 { Vec3::ONE } else { Vec3::ZERO };
+            }
+            _ if wi_ng * self.wo_ng <= 0.0 => return Vec3::ZERO,
+            Lobe::Diffuse(value) => {
+                if (self.wo_ns > 0.0 && wi_ns > 0.0) || (self.wo_ns < 0.0 && wi_ns < 0.0) {
+                    value
+                } else {
+                    return Vec3::ZERO;
+                }
+            }
+            Lobe::Framed {
+                material,
+                frame,
+                wo_local,
+            } => material.eval(wo_local, frame.to_local(wi)),
+        };
+        match mode {
+            TransportMode::Radiance => f,
+            TransportMode::Importance => {
+                // `shading_correction` from the cosines.
+                let v = &self.v;
+                if v.ns == v.ng {
+                    return f;
+                }
+                let den = self.wo_ng.abs() * wi_ns.abs();
+                if den == 0.0 {
+                    return f * 0.0;
+                }
+                f * (self.wo_ns.abs() * wi_ng.abs() / den)
+            }
+        }
+    }
+}
+
 /// The unit direction from `v` to `to` (zero where they coincide).
 #[inline]
 pub fn towards(v: &Vertex, to: &Vertex) -> Vec3 {
@@ -367,28 +433,63 @@ impl PathContext<'_> {
 
     /// Strategies s >= 1, t >= 2: the unweighted contribution of joining light vertex `y` to
     /// camera vertex `z` (both connectible; `y_wo`, `z_wo` the unit directions to their
-    /// subpaths' previous vertices, zero at a light vertex), or `None` when it is zero: the
-    /// BSDF at `z` is tested first, so a back-facing joint costs one evaluation.
+    /// subpaths' previous vertices, zero at a light vertex), or `None` when it is zero.
     #[inline]
     pub fn join(&self, y: &Vertex, y_wo: Vec3, z: &Vertex, z_wo: Vec3) -> Option<Vec3> {
-        let d = y.p - z.p;
+        self.join_prepared(&self.joint(y, y_wo)?, &self.joint(z, z_wo)?)
+    }
+
+    /// A connectible vertex prepared for joining, or `None` if no strategy may join there.
+    #[inline]
+    pub fn joint(&self, v: &Vertex, wo: Vec3) -> Option<Joint> {
+        let lobe = match v.kind {
+            VertexKind::Camera => return None,
+            VertexKind::Light => Lobe::Light,
+            VertexKind::Surface => match self.material(v) {
+                Material::Dielectric { .. } => return None,
+                Material::Diffuse { reflectance } => Lobe::Diffuse(reflectance * FRAC_1_PI),
+                material => {
+                    let frame = Frame::from_normal(v.ns);
+                    Lobe::Framed {
+                        material,
+                        frame,
+                        wo_local: frame.to_local(wo),
+                    }
+                }
+            },
+        };
+        Some(Joint {
+            v: *v,
+            wo_ng: wo.dot(v.ng),
+            wo_ns: wo.dot(v.ns),
+            lobe,
+        })
+    }
+
+    /// `join` of prepared vertices, bit for bit: the BSDF at `z` is tested first, so a
+    /// back-facing joint costs a few dot products.
+    #[inline]
+    pub fn join_prepared(&self, y: &Joint, z: &Joint) -> Option<Vec3> {
+        let d = y.v.p - z.v.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {
             return None;
         }
         let w = d / dist2.sqrt(); // from z towards y
-        let fz = self.f(z, z_wo, w, TransportMode::Radiance);
+        let fz = z.f(w, w.dot(z.v.ng), w.dot(z.v.ns), TransportMode::Radiance);
         if fz == Vec3::ZERO {
             return None;
         }
-        let fy = self.f(y, y_wo, -w, TransportMode::Importance);
-        let cos_y = if y.kind == VertexKind::Light {
-            w.dot(y.ng).abs()
+        // Towards z from y: -w, whose dot products are those of w negated, exactly.
+        let (w_ng_y, w_ns_y) = (w.dot(y.v.ng), w.dot(y.v.ns));
+        let fy = y.f(-w, -w_ng_y, -w_ns_y, TransportMode::Importance);
+        let cos_y = if y.v.kind == VertexKind::Light {
+            w_ng_y.abs()
         } else {
-            w.dot(y.ns).abs()
+            w_ns_y.abs()
         };
-        let g = w.dot(z.ns).abs() * cos_y / dist2;
-        let contribution = z.beta * fz * y.beta * fy * g;
+        let g = w.dot(z.v.ns).abs() * cos_y / dist2;
+        let contribution = z.v.beta * fz * y.v.beta * fy * g;
         (contribution != Vec3::ZERO).then_some(contribution)
     }
 

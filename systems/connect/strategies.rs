@@ -17,7 +17,7 @@ use crate::integrators::bdpt::{
     BdptSettings, BdptState, CONNECT_CHUNK, DIM_LIGHT_PICK, DIM_LIGHT_POINT, StrategyFilter,
     camera_vertex_dim,
 };
-use crate::path::{PathContext, Vertex, VertexKind, towards};
+use crate::path::{Joint, PathContext, Vertex, VertexKind, towards};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, Stream};
 use crate::scene::PreparedScene;
@@ -152,7 +152,7 @@ crate::system! {
                             } else if t == 1 {
                                 // Light tracing: lands where the light vertex projects.
                                 let y = &light.vertices[s - 1];
-                                if !light.connectible[s - 1] {
+                                if light.joints[s - 1].is_none() {
                                     continue;
                                 }
                                 let Some((c, p)) = ctx.connect_to_camera(y, light.wo[s - 1])
@@ -162,28 +162,30 @@ crate::system! {
                                 cn.pixel[slot] = p as u32;
                                 (c, (*y, camera.vertices[0]))
                             } else {
-                                let z = &camera.vertices[t - 1];
-                                if !camera.connectible[t - 1] {
+                                let Some(z) = &camera.joints[t - 1] else {
                                     continue;
-                                }
+                                };
                                 let sampled;
-                                let (y, y_wo) = if s == 1 {
+                                let y = if s == 1 {
                                     // A fresh light sample at z_{t-1}.
                                     if !has_light {
                                         continue;
                                     }
-                                    sampled = sampled_light_vertex(scene, sampler, key, t);
-                                    (&sampled, Vec3::ZERO)
+                                    sampled = ctx.joint(
+                                        &sampled_light_vertex(scene, sampler, key, t),
+                                        Vec3::ZERO,
+                                    );
+                                    sampled.as_ref()
                                 } else {
-                                    if !light.connectible[s - 1] {
-                                        continue;
-                                    }
-                                    (&light.vertices[s - 1], light.wo[s - 1])
+                                    light.joints[s - 1].as_ref()
                                 };
-                                let Some(c) = ctx.join(y, y_wo, z, camera.wo[t - 1]) else {
+                                let Some(y) = y else {
                                     continue;
                                 };
-                                (c, (*y, *z))
+                                let Some(c) = ctx.join_prepared(y, z) else {
+                                    continue;
+                                };
+                                (c, (y.v, z.v))
                             };
                             // Unweighted until the ray is found unoccluded.
                             let (y, z) = segment;
@@ -253,29 +255,30 @@ pub fn connection_weight(
     }
 }
 
-/// One subpath of a sample as its connections read it: the vertices, and per vertex whether
-/// a strategy may join there and the unit direction to the previous vertex (zero at the
-/// first), each found once rather than per connection.
+/// One subpath of a sample as its connections read it: the vertices, and per vertex the unit
+/// direction to the previous vertex (zero at the first) and, where a strategy may join there,
+/// the vertex prepared for joining, each found once rather than per connection.
 #[derive(Default)]
 struct Subpath {
     vertices: Vec<Vertex>,
-    connectible: Vec<bool>,
     wo: Vec<Vec3>,
+    joints: Vec<Option<Joint>>,
 }
 
 impl Subpath {
     /// Subpath `sub`'s first `len` vertices.
     fn gather(&mut self, ctx: &PathContext, stores: &[PathVerticesView], sub: usize, len: usize) {
         self.vertices.clear();
-        self.connectible.clear();
         self.wo.clear();
+        self.joints.clear();
         for (d, store) in stores.iter().enumerate().take(len) {
             let v = Vertex::from_store(store, sub, d);
-            self.wo.push(match self.vertices.last() {
+            let wo = match self.vertices.last() {
                 Some(prev) => towards(&v, prev),
                 None => Vec3::ZERO,
-            });
-            self.connectible.push(ctx.is_connectible(&v));
+            };
+            self.wo.push(wo);
+            self.joints.push(ctx.joint(&v, wo));
             self.vertices.push(v);
         }
     }
