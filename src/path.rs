@@ -256,15 +256,17 @@ impl PathContext<'_> {
     }
 }
 
-/// A connectible vertex as many connections see it: the cosines of the direction to its
-/// subpath's previous vertex and its BSDF, found once per vertex instead of once per
-/// connection. `Joint::f` is `PathContext::f`, bit for bit.
+/// What many connections need of a connectible vertex besides the vertex itself: the cosines
+/// of the direction to its subpath's previous vertex and its BSDF, found once per vertex
+/// instead of once per connection. `Joint::f` is `PathContext::f`, bit for bit.
 #[derive(Clone, Copy, Debug)]
 pub struct Joint {
-    pub v: Vertex,
     /// wo . ng and wo . ns, wo the unit direction to the previous vertex (zero at a light).
+    wo: Vec3,
     wo_ng: f32,
     wo_ns: f32,
+    /// The shading normal is not the geometric one (importance needs a correction).
+    shading_normal: bool,
     lobe: Lobe,
 }
 
@@ -274,18 +276,15 @@ enum Lobe {
     Light,
     /// Lambertian: reflectance / pi.
     Diffuse(Vec3),
-    /// Any other connectible BSDF, in the shading frame, with wo in it.
-    Framed {
-        material: Material,
-        frame: Frame,
-        wo_local: Vec3,
-    },
+    /// Any other connectible BSDF.
+    Other(Material),
 }
 
 impl Joint {
-    /// f(wo, wi) at the vertex for unit `wi`, given wi . ng and wi . ns.
+    /// f(wo, wi) at vertex `v` (the one the joint was prepared for) for unit `wi`, given
+    /// wi . ng and wi . ns.
     #[inline]
-    fn f(&self, wi: Vec3, wi_ng: f32, wi_ns: f32, mode: TransportMode) -> Vec3 {
+    fn f(&self, v: &Vertex, wi: Vec3, wi_ng: f32, wi_ns: f32, mode: TransportMode) -> Vec3 {
         let f = match self.lobe {
             Lobe::Light => {
                 return if wi_ng > 0.0 { Vec3::ONE } else { Vec3::ZERO };
@@ -298,26 +297,18 @@ impl Joint {
                     return Vec3::ZERO;
                 }
             }
-            Lobe::Framed {
-                material,
-                frame,
-                wo_local,
-            } => material.eval(wo_local, frame.to_local(wi)),
+            Lobe::Other(material) => material.eval_world(v.ns, self.wo, wi),
         };
         match mode {
-            TransportMode::Radiance => f,
-            TransportMode::Importance => {
+            TransportMode::Importance if self.shading_normal => {
                 // `shading_correction` from the cosines.
-                let v = &self.v;
-                if v.ns == v.ng {
-                    return f;
-                }
                 let den = self.wo_ng.abs() * wi_ns.abs();
                 if den == 0.0 {
                     return f * 0.0;
                 }
                 f * (self.wo_ns.abs() * wi_ng.abs() / den)
             }
+            _ => f,
         }
     }
 }
@@ -436,10 +427,11 @@ impl PathContext<'_> {
     /// subpaths' previous vertices, zero at a light vertex), or `None` when it is zero.
     #[inline]
     pub fn join(&self, y: &Vertex, y_wo: Vec3, z: &Vertex, z_wo: Vec3) -> Option<Vec3> {
-        self.join_prepared(&self.joint(y, y_wo)?, &self.joint(z, z_wo)?)
+        self.join_prepared((y, &self.joint(y, y_wo)?), (z, &self.joint(z, z_wo)?))
     }
 
-    /// A connectible vertex prepared for joining, or `None` if no strategy may join there.
+    /// Vertex `v`, reached from direction `wo`, prepared for joining, or `None` if no
+    /// strategy may join there.
     #[inline]
     pub fn joint(&self, v: &Vertex, wo: Vec3) -> Option<Joint> {
         let lobe = match v.kind {
@@ -448,20 +440,14 @@ impl PathContext<'_> {
             VertexKind::Surface => match self.material(v) {
                 Material::Dielectric { .. } => return None,
                 Material::Diffuse { reflectance } => Lobe::Diffuse(reflectance * FRAC_1_PI),
-                material => {
-                    let frame = Frame::from_normal(v.ns);
-                    Lobe::Framed {
-                        material,
-                        frame,
-                        wo_local: frame.to_local(wo),
-                    }
-                }
+                material => Lobe::Other(material),
             },
         };
         Some(Joint {
-            v: *v,
+            wo,
             wo_ng: wo.dot(v.ng),
             wo_ns: wo.dot(v.ns),
+            shading_normal: v.ns != v.ng,
             lobe,
         })
     }
@@ -469,27 +455,27 @@ impl PathContext<'_> {
     /// `join` of prepared vertices, bit for bit: the BSDF at `z` is tested first, so a
     /// back-facing joint costs a few dot products.
     #[inline]
-    pub fn join_prepared(&self, y: &Joint, z: &Joint) -> Option<Vec3> {
-        let d = y.v.p - z.v.p;
+    pub fn join_prepared(&self, (y, yj): (&Vertex, &Joint), (z, zj): (&Vertex, &Joint)) -> Option<Vec3> {
+        let d = y.p - z.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {
             return None;
         }
         let w = d / dist2.sqrt(); // from z towards y
-        let fz = z.f(w, w.dot(z.v.ng), w.dot(z.v.ns), TransportMode::Radiance);
+        let fz = zj.f(z, w, w.dot(z.ng), w.dot(z.ns), TransportMode::Radiance);
         if fz == Vec3::ZERO {
             return None;
         }
         // Towards z from y: -w, whose dot products are those of w negated, exactly.
-        let (w_ng_y, w_ns_y) = (w.dot(y.v.ng), w.dot(y.v.ns));
-        let fy = y.f(-w, -w_ng_y, -w_ns_y, TransportMode::Importance);
-        let cos_y = if y.v.kind == VertexKind::Light {
+        let (w_ng_y, w_ns_y) = (w.dot(y.ng), w.dot(y.ns));
+        let fy = yj.f(y, -w, -w_ng_y, -w_ns_y, TransportMode::Importance);
+        let cos_y = if y.kind == VertexKind::Light {
             w_ng_y.abs()
         } else {
             w_ns_y.abs()
         };
-        let g = w.dot(z.v.ns).abs() * cos_y / dist2;
-        let contribution = z.v.beta * fz * y.v.beta * fy * g;
+        let g = w.dot(z.ns).abs() * cos_y / dist2;
+        let contribution = z.beta * fz * y.beta * fy * g;
         (contribution != Vec3::ZERO).then_some(contribution)
     }
 

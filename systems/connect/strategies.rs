@@ -32,8 +32,11 @@ pub struct ConnectStrategies;
 fn slot_count(settings: &BdptSettings, nc: usize, nl: usize, only: Option<(usize, usize)>) -> usize {
     match only {
         Some((s, t)) => (s <= nl && t <= nc && settings.uses(s, t)) as usize,
+        None if settings.strategies == StrategyFilter::All => {
+            (1..=nc).map(|t| settings.light_vertices(t, nl).len()).sum()
+        }
         None => (1..=nc)
-            .map(|t| (0..=nl).filter(|&s| settings.uses(s, t)).count())
+            .map(|t| settings.light_vertices(t, nl).filter(|&s| settings.uses(s, t)).count())
             .sum(),
     }
 }
@@ -92,6 +95,8 @@ crate::system! {
         let (wave, pixels) = (*wave, *pixels);
         let scene = &data.scene;
         let has_light = !scene.emitters.triangle.is_empty();
+        // Every strategy within the depth bounds counts (no filter to ask).
+        let all = settings.strategies == StrategyFilter::All;
         let made: usize = shadow
             .into_par_iter()
             .zip(conns)
@@ -106,7 +111,6 @@ crate::system! {
                     *out = Vec3::ZERO;
                     let k = first_sample + local;
                     let pixel = sample_pixel[k];
-                    let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
                     let strategy_count = if multiplexed { multiplex[k] as f32 + 2.0 } else { 1.0 };
                     let (nc, nl) = (lens[k] as usize, lens[cap + k] as usize);
                     camera.gather(&ctx, &vertices, k, nc);
@@ -114,8 +118,8 @@ crate::system! {
                     let only = only(k);
                     let mut this = starts[k] - sh.start;
                     for t in 1..=nc {
-                        for s in 0..=nl {
-                            if !settings.uses(s, t) || only.is_some_and(|st| st != (s, t)) {
+                        for s in settings.light_vertices(t, nl) {
+                            if !(all || settings.uses(s, t)) || only.is_some_and(|st| st != (s, t)) {
                                 continue;
                             }
                             let slot = this;
@@ -162,30 +166,31 @@ crate::system! {
                                 cn.pixel[slot] = p as u32;
                                 (c, (*y, camera.vertices[0]))
                             } else {
-                                let Some(z) = &camera.joints[t - 1] else {
+                                let Some(zj) = &camera.joints[t - 1] else {
                                     continue;
                                 };
+                                let z = &camera.vertices[t - 1];
                                 let sampled;
                                 let y = if s == 1 {
                                     // A fresh light sample at z_{t-1}.
                                     if !has_light {
                                         continue;
                                     }
-                                    sampled = ctx.joint(
-                                        &sampled_light_vertex(scene, sampler, key, t),
-                                        Vec3::ZERO,
-                                    );
-                                    sampled.as_ref()
+                                    let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
+                                    let v = sampled_light_vertex(scene, sampler, key, t);
+                                    sampled = ctx.joint(&v, Vec3::ZERO).map(|j| (v, j));
+                                    sampled.as_ref().map(|(v, j)| (v, j))
                                 } else {
-                                    light.joints[s - 1].as_ref()
+                                    let v = &light.vertices[s - 1];
+                                    light.joints[s - 1].as_ref().map(|j| (v, j))
                                 };
                                 let Some(y) = y else {
                                     continue;
                                 };
-                                let Some(c) = ctx.join_prepared(y, z) else {
+                                let Some(c) = ctx.join_prepared(y, (z, zj)) else {
                                     continue;
                                 };
-                                (c, (y.v, z.v))
+                                (c, (*y.0, *z))
                             };
                             // Unweighted until the ray is found unoccluded.
                             let (y, z) = segment;

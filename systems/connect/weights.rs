@@ -44,23 +44,36 @@ crate::system! {
                 let mut weighed = 0;
                 let first_sample = c * CONNECT_CHUNK;
                 for k in first_sample..(first_sample + CONNECT_CHUNK).min(n) {
-                    let mut gathered = false;
-                    for slot in starts[k]..starts[k + 1] {
+                    // The vertices the sample's weights read: camera z_0..z_{t-1} and light
+                    // y_0..y_{s-1} of each unoccluded connection (s = 1 with t >= 2 joins a
+                    // fresh light sample instead).
+                    let slots = starts[k]..starts[k + 1];
+                    let (mut nc, mut nl) = (0, 0);
+                    for slot in slots.clone() {
+                        let this = slot - sh.start;
+                        if sh.t_max[this] > 0.0 && sh.unoccluded[this] {
+                            let (s, t) = (connections.s[slot] as usize, connections.t[slot] as usize);
+                            nc = nc.max(t);
+                            if s >= 2 || t == 1 {
+                                nl = nl.max(s);
+                            }
+                        }
+                    }
+                    if nc == 0 {
+                        continue;
+                    }
+                    camera.clear();
+                    light.clear();
+                    for (d, store) in vertices.iter().enumerate().take(nc) {
+                        camera.push(Vertex::from_store(store, k, d));
+                    }
+                    for (d, store) in vertices.iter().enumerate().take(nl) {
+                        light.push(Vertex::from_store(store, cap + k, d));
+                    }
+                    for slot in slots {
                         let this = slot - sh.start;
                         if sh.t_max[this] <= 0.0 || !sh.unoccluded[this] {
                             continue;
-                        }
-                        if !gathered {
-                            camera.clear();
-                            light.clear();
-                            let (nc, nl) = (lens[k] as usize, lens[cap + k] as usize);
-                            for (d, store) in vertices.iter().enumerate().take(nc) {
-                                camera.push(Vertex::from_store(store, k, d));
-                            }
-                            for (d, store) in vertices.iter().enumerate().take(nl) {
-                                light.push(Vertex::from_store(store, cap + k, d));
-                            }
-                            gathered = true;
                         }
                         let (s, t) = (connections.s[slot] as usize, connections.t[slot] as usize);
                         let sampled;
