@@ -455,7 +455,11 @@ impl PathContext<'_> {
     /// `join` of prepared vertices, bit for bit: the BSDF at `z` is tested first, so a
     /// back-facing joint costs a few dot products.
     #[inline]
-    pub fn join_prepared(&self, (y, yj): (&Vertex, &Joint), (z, zj): (&Vertex, &Joint)) -> Option<Vec3> {
+    pub fn join_prepared(
+        &self,
+        (y, yj): (&Vertex, &Joint),
+        (z, zj): (&Vertex, &Joint),
+    ) -> Option<Vec3> {
         let d = y.p - z.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {

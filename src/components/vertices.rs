@@ -81,10 +81,14 @@ impl PathVerticesView<'_> {
 }
 
 impl PathVertices {
+    /// A store of `capacity` default vertices, written in parallel: a BDPT wave allocates one
+    /// store of two vertices per sample for each depth it reaches first, and filling those
+    /// serially kept one core busy while the other waited.
     pub fn new(capacity: usize) -> PathVertices {
-        PathVertices {
-            items: vec![PathVertex::default(); capacity],
-        }
+        use rayon::prelude::*;
+        let mut items = Vec::with_capacity(capacity);
+        items.par_extend(rayon::iter::repeat_n(PathVertex::default(), capacity));
+        PathVertices { items }
     }
 
     pub fn capacity(&self) -> usize {

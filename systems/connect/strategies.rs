@@ -29,14 +29,24 @@ pub struct ConnectStrategies;
 /// Connection slots of a sample with `nc` camera and `nl` light vertices: its strategies
 /// (s, t), laid out t outer, s inner; a multiplexed sample keeps only `only`.
 #[inline]
-fn slot_count(settings: &BdptSettings, nc: usize, nl: usize, only: Option<(usize, usize)>) -> usize {
+fn slot_count(
+    settings: &BdptSettings,
+    nc: usize,
+    nl: usize,
+    only: Option<(usize, usize)>,
+) -> usize {
     match only {
         Some((s, t)) => (s <= nl && t <= nc && settings.uses(s, t)) as usize,
         None if settings.strategies == StrategyFilter::All => {
             (1..=nc).map(|t| settings.light_vertices(t, nl).len()).sum()
         }
         None => (1..=nc)
-            .map(|t| settings.light_vertices(t, nl).filter(|&s| settings.uses(s, t)).count())
+            .map(|t| {
+                settings
+                    .light_vertices(t, nl)
+                    .filter(|&s| settings.uses(s, t))
+                    .count()
+            })
             .sum(),
     }
 }

@@ -387,7 +387,10 @@ fn light_vertices_are_the_strategies_within_the_depth_bounds() {
                 for nl in 0..14 {
                     let expected: Vec<usize> = (0..=nl).filter(|&l| s.uses(l, t)).collect();
                     let got: Vec<usize> = s.light_vertices(t, nl).collect();
-                    assert_eq!(got, expected, "max {max_depth} min {min_depth} t {t} nl {nl}");
+                    assert_eq!(
+                        got, expected,
+                        "max {max_depth} min {min_depth} t {t} nl {nl}"
+                    );
                 }
             }
         }
