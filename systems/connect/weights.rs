@@ -27,7 +27,7 @@ crate::system! {
         let sampler = numbers.sampler();
         let sampler = &sampler;
         let (wave, pixels) = (*wave, *pixels);
-        let starts = &*connection_start;
+        let starts = connection_start;
         let total = *connections_len;
         let ctx = PathContext::new(&data.scene);
         let scene = &data.scene;
