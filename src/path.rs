@@ -256,6 +256,69 @@ impl PathContext<'_> {
     }
 }
 
+/// What many connections need of a connectible vertex besides the vertex itself: the cosines
+/// of the direction to its subpath's previous vertex and its BSDF, found once per vertex
+/// instead of once per connection. `Joint::f` is `PathContext::f`, bit for bit.
+#[derive(Clone, Copy, Debug)]
+pub struct Joint {
+    /// wo . ng and wo . ns, wo the unit direction to the previous vertex (zero at a light).
+    wo: Vec3,
+    wo_ng: f32,
+    wo_ns: f32,
+    /// The shading normal is not the geometric one (importance needs a correction).
+    shading_normal: bool,
+    lobe: Lobe,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Lobe {
+    /// A point on an emitter (its radiance is in `beta`): 1 on the emitting side.
+    Light,
+    /// Lambertian: reflectance / pi.
+    Diffuse(Vec3),
+    /// Any other connectible BSDF.
+    Other(Material),
+}
+
+impl Joint {
+    /// f(wo, wi) at vertex `v` (the one the joint was prepared for) for unit `wi`, given
+    /// wi . ng and wi . ns.
+    #[inline]
+    fn f(&self, v: &Vertex, wi: Vec3, wi_ng: f32, wi_ns: f32, mode: TransportMode) -> Vec3 {
+        let f = match self.lobe {
+            Lobe::Light => {
+                return if wi_ng > 0.0 { Vec3::ONE } else { Vec3::ZERO };
+            }
+            _ if wi_ng * self.wo_ng <= 0.0 => return Vec3::ZERO,
+            Lobe::Diffuse(value) => {
+                if (self.wo_ns > 0.0 && wi_ns > 0.0) || (self.wo_ns < 0.0 && wi_ns < 0.0) {
+                    value
+                } else {
+                    return Vec3::ZERO;
+                }
+            }
+            Lobe::Other(material) => material.eval_world(v.ns, self.wo, wi),
+        };
+        match mode {
+            TransportMode::Importance if self.shading_normal => {
+                // `shading_correction` from the cosines.
+                let den = self.wo_ng.abs() * wi_ns.abs();
+                if den == 0.0 {
+                    return f * 0.0;
+                }
+                f * (self.wo_ns.abs() * wi_ng.abs() / den)
+            }
+            _ => f,
+        }
+    }
+}
+
+/// The unit direction from `v` to `to` (zero where they coincide).
+#[inline]
+pub fn towards(v: &Vertex, to: &Vertex) -> Vec3 {
+    (to.p - v.p).normalize_or_zero()
+}
+
 /// The shading-normal factor of an importance-carrying scattering at `v` (1 where the shading
 /// normal is the geometric one).
 #[inline]
@@ -295,10 +358,7 @@ impl PathContext<'_> {
     ) -> Option<Connection> {
         if s == 0 {
             // The camera subpath found the light by itself.
-            let z = &camera[t - 1];
-            let wo = (camera[t - 2].p - z.p).normalize_or_zero();
-            let le = self.emitted(z, wo);
-            let contribution = z.beta * le;
+            let contribution = self.reached_emission(&camera[t - 1], &camera[t - 2]);
             return (contribution != Vec3::ZERO).then_some(Connection {
                 contribution,
                 segment: None,
@@ -310,26 +370,13 @@ impl PathContext<'_> {
             return None;
         }
         let y_wo = if s >= 2 {
-            (light[s - 2].p - y.p).normalize_or_zero()
+            towards(y, &light[s - 2])
         } else {
             Vec3::ZERO
         };
         if t == 1 {
-            // Light tracing: the light vertex seen by the camera.
-            let cam = &self.camera;
-            let to_y = y.p - cam.position;
-            let dist2 = to_y.length_squared();
-            let dir = to_y / dist2.sqrt();
-            let (pixel, importance) = cam.project(dir)?;
-            let wi = -dir;
-            let f = self.f(y, y_wo, wi, TransportMode::Importance);
-            let cos_y = if y.kind == VertexKind::Light {
-                wi.dot(y.ng).abs()
-            } else {
-                wi.dot(y.ns).abs()
-            };
-            let contribution = y.beta * f * (cos_y * importance / dist2);
-            return (contribution != Vec3::ZERO).then_some(Connection {
+            let (contribution, pixel) = self.connect_to_camera(y, y_wo)?;
+            return Some(Connection {
                 contribution,
                 segment: Some((*y, camera[0])),
                 pixel: Some(pixel),
@@ -339,30 +386,101 @@ impl PathContext<'_> {
         if !self.is_connectible(z) {
             return None;
         }
+        let contribution = self.join(y, y_wo, z, towards(z, &camera[t - 2]))?;
+        Some(Connection {
+            contribution,
+            segment: Some((*y, *z)),
+            pixel: None,
+        })
+    }
+
+    /// Strategy s = 0: what the camera subpath carries from the emitter it reached at `z`,
+    /// arriving from `prev`.
+    #[inline]
+    pub fn reached_emission(&self, z: &Vertex, prev: &Vertex) -> Vec3 {
+        z.beta * self.emitted(z, towards(z, prev))
+    }
+
+    /// Strategy t = 1 (light tracing): the light vertex `y` (connectible, reached along
+    /// `-y_wo`, zero at a light vertex) seen by the camera: its unweighted contribution and
+    /// the pixel it lands in, or `None` outside the image or for no contribution.
+    #[inline]
+    pub fn connect_to_camera(&self, y: &Vertex, y_wo: Vec3) -> Option<(Vec3, usize)> {
+        let cam = &self.camera;
+        let to_y = y.p - cam.position;
+        let dist2 = to_y.length_squared();
+        let dir = to_y / dist2.sqrt();
+        let (pixel, importance) = cam.project(dir)?;
+        let wi = -dir;
+        let f = self.f(y, y_wo, wi, TransportMode::Importance);
+        let cos_y = if y.kind == VertexKind::Light {
+            wi.dot(y.ng).abs()
+        } else {
+            wi.dot(y.ns).abs()
+        };
+        let contribution = y.beta * f * (cos_y * importance / dist2);
+        (contribution != Vec3::ZERO).then_some((contribution, pixel))
+    }
+
+    /// Strategies s >= 1, t >= 2: the unweighted contribution of joining light vertex `y` to
+    /// camera vertex `z` (both connectible; `y_wo`, `z_wo` the unit directions to their
+    /// subpaths' previous vertices, zero at a light vertex), or `None` when it is zero.
+    #[inline]
+    pub fn join(&self, y: &Vertex, y_wo: Vec3, z: &Vertex, z_wo: Vec3) -> Option<Vec3> {
+        self.join_prepared((y, &self.joint(y, y_wo)?), (z, &self.joint(z, z_wo)?))
+    }
+
+    /// Vertex `v`, reached from direction `wo`, prepared for joining, or `None` if no
+    /// strategy may join there.
+    #[inline]
+    pub fn joint(&self, v: &Vertex, wo: Vec3) -> Option<Joint> {
+        let lobe = match v.kind {
+            VertexKind::Camera => return None,
+            VertexKind::Light => Lobe::Light,
+            VertexKind::Surface => match self.material(v) {
+                Material::Dielectric { .. } => return None,
+                Material::Diffuse { reflectance } => Lobe::Diffuse(reflectance * FRAC_1_PI),
+                material => Lobe::Other(material),
+            },
+        };
+        Some(Joint {
+            wo,
+            wo_ng: wo.dot(v.ng),
+            wo_ns: wo.dot(v.ns),
+            shading_normal: v.ns != v.ng,
+            lobe,
+        })
+    }
+
+    /// `join` of prepared vertices, bit for bit: the BSDF at `z` is tested first, so a
+    /// back-facing joint costs a few dot products.
+    #[inline]
+    pub fn join_prepared(
+        &self,
+        (y, yj): (&Vertex, &Joint),
+        (z, zj): (&Vertex, &Joint),
+    ) -> Option<Vec3> {
         let d = y.p - z.p;
         let dist2 = d.length_squared();
         if dist2 == 0.0 {
             return None;
         }
         let w = d / dist2.sqrt(); // from z towards y
-        let z_wo = (camera[t - 2].p - z.p).normalize_or_zero();
-        let fz = self.f(z, z_wo, w, TransportMode::Radiance);
+        let fz = zj.f(z, w, w.dot(z.ng), w.dot(z.ns), TransportMode::Radiance);
         if fz == Vec3::ZERO {
             return None;
         }
-        let fy = self.f(y, y_wo, -w, TransportMode::Importance);
+        // Towards z from y: -w, whose dot products are those of w negated, exactly.
+        let (w_ng_y, w_ns_y) = (w.dot(y.ng), w.dot(y.ns));
+        let fy = yj.f(y, -w, -w_ng_y, -w_ns_y, TransportMode::Importance);
         let cos_y = if y.kind == VertexKind::Light {
-            w.dot(y.ng).abs()
+            w_ng_y.abs()
         } else {
-            w.dot(y.ns).abs()
+            w_ns_y.abs()
         };
         let g = w.dot(z.ns).abs() * cos_y / dist2;
         let contribution = z.beta * fz * y.beta * fy * g;
-        (contribution != Vec3::ZERO).then_some(Connection {
-            contribution,
-            segment: Some((*y, *z)),
-            pixel: None,
-        })
+        (contribution != Vec3::ZERO).then_some(contribution)
     }
 
     /// The MIS weight of strategy (s, t) for the path its connection makes, by Veach's ratio

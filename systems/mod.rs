@@ -41,6 +41,7 @@ pub mod connect {
     pub mod sample_direct_light;
     pub mod sample_lights;
     pub mod strategies;
+    pub mod weights;
 }
 
 /// Metropolis chains: the bootstrap and its seeds, proposals, acceptance and splats; for

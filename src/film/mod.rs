@@ -21,6 +21,35 @@ use glam::{DVec3, Vec3};
 use std::io::{Read, Seek};
 use std::path::Path;
 
+/// Pixels per block of the splat sums that `Film::add_splats` gives one task.
+pub const SPLAT_BLOCK: usize = 4096;
+
+/// Splats (pixel, value) gathered by one task, sorted by `SPLAT_BLOCK` block of their pixel,
+/// for `Film::add_splats`.
+#[derive(Clone, Debug, Default)]
+pub struct Splats {
+    by_block: Vec<Vec<(u32, Vec3)>>,
+}
+
+impl Splats {
+    #[inline]
+    pub fn push(&mut self, pixel: usize, value: Vec3) {
+        let block = pixel / SPLAT_BLOCK;
+        if self.by_block.len() <= block {
+            self.by_block.resize_with(block + 1, Vec::new);
+        }
+        self.by_block[block].push((pixel as u32, value));
+    }
+
+    pub fn len(&self) -> usize {
+        self.by_block.iter().map(Vec::len).sum()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
 /// Accumulated samples of one render.
 #[derive(Clone, Debug)]
 pub struct Film {
@@ -166,6 +195,51 @@ impl Film {
             Err(Rejected::NonFinite) => self.nonfinite_splats += 1,
             Err(Rejected::OutOfRange) => self.out_of_range += 1,
         }
+    }
+
+    /// Adds batches of splats, as `add_splat` one by one would (the sums are exact, so neither
+    /// the order of the splats nor how they were batched changes the film), in parallel: the
+    /// splat sums are shared out between threads in blocks of `SPLAT_BLOCK` pixels, and each
+    /// batch has sorted its splats by block already (the serial loop over a wave's splats
+    /// was a stretch of one busy core in BDPT).
+    pub fn add_splats(&mut self, batches: &[Splats]) {
+        use rayon::prelude::*;
+        let finite = batches
+            .iter()
+            .flat_map(|b| &b.by_block)
+            .flatten()
+            .any(|(_, v)| v.is_finite());
+        if finite && self.splat.is_empty() {
+            self.splat = vec![FixedRgb::ZERO; self.width * self.height];
+        }
+        let exponent = self.unit_exponent;
+        let (nonfinite, out_of_range) = self
+            .splat
+            .par_chunks_mut(SPLAT_BLOCK)
+            .enumerate()
+            .map(|(block, sums)| {
+                let (mut nonfinite, mut out_of_range) = (0, 0);
+                let first = block * SPLAT_BLOCK;
+                for batch in batches {
+                    for &(pixel, value) in batch.by_block.get(block).into_iter().flatten() {
+                        match sums[pixel as usize - first].add_sample(value, exponent) {
+                            Ok(()) => {}
+                            Err(Rejected::NonFinite) => nonfinite += 1,
+                            Err(Rejected::OutOfRange) => out_of_range += 1,
+                        }
+                    }
+                }
+                (nonfinite, out_of_range)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        // Without a finite splat the sums were never allocated: every splat was non-finite.
+        let unallocated: u64 = if self.splat.is_empty() {
+            batches.iter().map(Splats::len).sum::<usize>() as u64
+        } else {
+            0
+        };
+        self.nonfinite_splats += nonfinite + unallocated;
+        self.out_of_range += out_of_range;
     }
 
     /// Adds another film of the same size and unit (samples, splats and rejected counts): the
@@ -717,6 +791,44 @@ mod tests {
         big.add_sample(1, Vec3::splat(1e20));
         let e = big.in_unit(0).unwrap_err();
         assert!(e.contains("pixel (1, 0)"), "{e}");
+    }
+
+    #[test]
+    fn splat_batches_add_as_their_splats_one_by_one() {
+        // 3 x SPLAT_BLOCK pixels and a bit: four blocks, the last one short.
+        let (width, height) = (97, 3 * SPLAT_BLOCK / 97 + 2);
+        let pixels = width * height;
+        let splat = |i: usize| {
+            let pixel = (i * 7919) % pixels;
+            let value = match i % 89 {
+                0 => Vec3::new(0.0, f32::INFINITY, 0.0),
+                k => Vec3::new(k as f32 * 0.31, 1.0 / k as f32, 1e-9 * k as f32),
+            };
+            (pixel, value)
+        };
+        for (count, batch_len) in [(20000, 1000), (20000, 7), (3, 1), (0, 1)] {
+            let (mut one_by_one, mut batched) =
+                (Film::new(width, height), Film::new(width, height));
+            let mut batches = Vec::new();
+            for i in 0..count {
+                let (pixel, value) = splat(i);
+                one_by_one.add_splat(pixel, value);
+                if i % batch_len == 0 {
+                    batches.push(Splats::default());
+                }
+                batches.last_mut().unwrap().push(pixel, value);
+            }
+            batched.add_splats(&batches);
+            assert_eq!(batched.fixed_splats(), one_by_one.fixed_splats());
+            assert_eq!(batched.nonfinite_splats, one_by_one.nonfinite_splats);
+        }
+        // Only non-finite splats: counted, and no sums allocated.
+        let mut film = Film::new(3, 3);
+        let mut batch = Splats::default();
+        batch.push(4, Vec3::NAN);
+        film.add_splats(&[batch]);
+        assert_eq!(film.nonfinite_splats, 1);
+        assert!(film.fixed_splats().is_empty());
     }
 
     #[test]

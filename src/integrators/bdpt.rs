@@ -202,6 +202,21 @@ impl BdptSettings {
         if light { d } else { d.saturating_add(1) }
     }
 
+    /// The s of the strategies (s, t) within the depth bounds for t camera vertices and at
+    /// most `nl` light vertices: those `uses` keeps before the strategy filter.
+    #[inline]
+    pub fn light_vertices(&self, t: usize, nl: usize) -> std::ops::Range<usize> {
+        // s + t >= 2 and min_depth <= s + t - 2 <= max_depth.
+        let first = (self.min_depth as usize + 2).max(2).saturating_sub(t);
+        let Some(last) = (self.max_depth as usize + 2).checked_sub(t) else {
+            return 0..0;
+        };
+        if t == 0 {
+            return 0..0;
+        }
+        first..last.min(nl) + 1
+    }
+
     /// Whether strategy (s, t) may contribute: a camera vertex, at least two vertices in all,
     /// a path within the depth bounds, and kept by the filter.
     #[inline]
@@ -329,6 +344,7 @@ pub fn graph() -> Graph<BdptState> {
     nodes.extend([
         Node::system(connect::strategies::ConnectStrategies),
         Node::system(trace::shadow::TraceShadow),
+        Node::system(connect::weights::WeighConnections),
         Node::system(gather::connections::AccumulateConnections),
     ]);
     Graph::new("bdpt", nodes)
@@ -341,6 +357,7 @@ pub fn evaluation_graph() -> Graph<BdptState> {
     nodes.extend([
         Node::system(connect::strategies::ConnectStrategies),
         Node::system(trace::shadow::TraceShadow),
+        Node::system(connect::weights::WeighConnections),
     ]);
     Graph::new("bdpt_evaluation", nodes)
 }

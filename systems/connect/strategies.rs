@@ -1,37 +1,54 @@
 //! Joins the camera and light subpaths of every sample by each strategy (s, t): computes the
-//! strategy's contribution and MIS weight, and for every strategy but s = 0 a shadow ray for
-//! the segment it adds. The connections of a sample take consecutive slots (counted from the
-//! subpath lengths first), so the whole wave's shadow rays form one batch in sample order.
+//! strategy's unweighted contribution, and for every strategy but s = 0 a shadow ray for the
+//! segment it adds. A connection that cannot contribute (a zero BSDF at either end, a
+//! back-facing light or surface, a light subpath that carries nothing) casts no ray. The MIS
+//! weight of a connection with a shadow ray is left to `weigh_connections`, which computes it
+//! only for the unoccluded ones (on door_ajar 96% are occluded); s = 0 is weighted here. The
+//! connections of a sample take consecutive slots (counted from the subpath lengths first), so
+//! the whole wave's shadow rays form one batch in sample order.
 //!
 //! Strategy s = 1 samples a fresh point on a light for each camera vertex (next-event
 //! estimation); t = 1 projects a light vertex onto the image (light tracing: it lands in
 //! whichever pixel it projects to).
 
-use crate::components::{Connections, ShadowRays, split_ranges};
+use crate::components::{Connections, PathVerticesView, ShadowRays, split_ranges};
 use crate::geometry::spawn_ray_to;
 use crate::integrators::bdpt::{
     BdptSettings, BdptState, CONNECT_CHUNK, DIM_LIGHT_PICK, DIM_LIGHT_POINT, StrategyFilter,
     camera_vertex_dim,
 };
-use crate::path::{PathContext, Vertex, VertexKind};
+use crate::path::{Joint, PathContext, Vertex, VertexKind, towards};
 use crate::pipeline::Flow;
-use crate::sampling::Stream;
+use crate::sampling::{SampleKey, Sampler, Stream};
+use crate::scene::PreparedScene;
 use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct ConnectStrategies;
 
-/// Strategies (s, t) a sample with `nc` camera and `nl` light vertices may use, in the order
-/// their connections are laid out: t outer, s inner.
+/// Connection slots of a sample with `nc` camera and `nl` light vertices: its strategies
+/// (s, t), laid out t outer, s inner; a multiplexed sample keeps only `only`.
 #[inline]
-fn strategies(
+fn slot_count(
     settings: &BdptSettings,
     nc: usize,
     nl: usize,
-) -> impl Iterator<Item = (usize, usize)> + '_ {
-    (1..=nc)
-        .flat_map(move |t| (0..=nl).map(move |s| (s, t)))
-        .filter(|&(s, t)| settings.uses(s, t))
+    only: Option<(usize, usize)>,
+) -> usize {
+    match only {
+        Some((s, t)) => (s <= nl && t <= nc && settings.uses(s, t)) as usize,
+        None if settings.strategies == StrategyFilter::All => {
+            (1..=nc).map(|t| settings.light_vertices(t, nl).len()).sum()
+        }
+        None => (1..=nc)
+            .map(|t| {
+                settings
+                    .light_vertices(t, nl)
+                    .filter(|&s| settings.uses(s, t))
+                    .count()
+            })
+            .sum(),
+    }
 }
 
 crate::system! {
@@ -48,19 +65,18 @@ crate::system! {
         let sampler = &sampler;
         // A multiplexed sample keeps its one strategy, its weight times the strategy count.
         let multiplexed = !multiplex.is_empty();
-        let keeps = |k: usize, (s, t): (usize, usize)| {
-            !multiplexed || (s == chosen_s[k] as usize && s + t == multiplex[k] as usize + 2)
+        let only = |k: usize| {
+            multiplexed.then(|| {
+                let s = chosen_s[k] as usize;
+                (s, multiplex[k] as usize + 2 - s)
+            })
         };
         // Slots per sample, then where each sample's begin.
         let lens = subpath_len;
         let counts: Vec<usize> = (0..n)
             .into_par_iter()
             .with_min_len(CONNECT_CHUNK)
-            .map(|k| {
-                strategies(&settings, lens[k] as usize, lens[cap + k] as usize)
-                    .filter(|&st| keeps(k, st))
-                    .count()
-            })
+            .map(|k| slot_count(&settings, lens[k] as usize, lens[cap + k] as usize, only(k)))
             .collect();
         let starts = &mut *connection_start;
         starts[0] = 0;
@@ -87,107 +103,198 @@ crate::system! {
             n,
         );
         let (wave, pixels) = (*wave, *pixels);
-        let weighted = settings.strategies == StrategyFilter::All;
-        let emitters = &data.scene.emitters;
         let scene = &data.scene;
-        let has_light = !emitters.triangle.is_empty();
+        let has_light = !scene.emitters.triangle.is_empty();
+        // Every strategy within the depth bounds counts (no filter to ask).
+        let all = settings.strategies == StrategyFilter::All;
         let made: usize = shadow
             .into_par_iter()
             .zip(conns)
             .zip(radiance)
             .enumerate()
             .map(|(c, ((sh, cn), radiance))| {
-                let mut camera: Vec<Vertex> = Vec::new();
-                let mut light: Vec<Vertex> = Vec::new();
+                let mut camera = Subpath::default();
+                let mut light = Subpath::default();
                 let mut made = 0;
                 let first_sample = c * CONNECT_CHUNK;
                 for (local, out) in radiance.iter_mut().enumerate() {
                     *out = Vec3::ZERO;
                     let k = first_sample + local;
                     let pixel = sample_pixel[k];
-                    let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
                     let strategy_count = if multiplexed { multiplex[k] as f32 + 2.0 } else { 1.0 };
                     let (nc, nl) = (lens[k] as usize, lens[cap + k] as usize);
-                    camera.clear();
-                    light.clear();
-                    for (d, store) in vertices.iter().enumerate().take(nc) {
-                        camera.push(Vertex::from_store(store, k, d));
-                    }
-                    for (d, store) in vertices.iter().enumerate().take(nl) {
-                        light.push(Vertex::from_store(store, cap + k, d));
-                    }
-                    let slots = starts[k] - sh.start..;
-                    let kept = strategies(&settings, nc, nl).filter(|&st| keeps(k, st));
-                    for (this, (si, ti)) in slots.zip(kept) {
-                        sh.t_max[this] = 0.0;
-                        sh.contribution[this] = Vec3::ZERO;
-                        cn.sample[this] = k as u32;
-                        cn.pixel[this] = pixel;
-                        cn.s[this] = si as u16;
-                        cn.t[this] = ti as u16;
-                        // s = 1 with t >= 2: a fresh light sample at z_{t-1}.
-                        let sampled;
-                        let light_side: &[Vertex] = if si == 1 && ti >= 2 {
-                            if !has_light {
+                    camera.gather(&ctx, &vertices, k, nc);
+                    light.gather(&ctx, &vertices, cap + k, nl);
+                    let only = only(k);
+                    let mut this = starts[k] - sh.start;
+                    for t in 1..=nc {
+                        for s in settings.light_vertices(t, nl) {
+                            if !(all || settings.uses(s, t)) || only.is_some_and(|st| st != (s, t)) {
                                 continue;
                             }
-                            let dim = camera_vertex_dim(ti - 1);
-                            let light = scene.sample_emitter(
-                                sampler.get(key, dim + DIM_LIGHT_PICK),
-                                sampler.get2(key, dim + DIM_LIGHT_POINT),
-                            );
-                            let (e, tri, sp) = (light.emitter, light.triangle, light.point);
-                            let pdf_origin = light.pdf_area;
-                            sampled = [Vertex {
-                                kind: VertexKind::Light,
-                                p: sp.p,
-                                p_error: sp.p_error,
-                                ng: sp.ng,
-                                ns: sp.ng,
-                                triangle: tri,
-                                beta: emitters.radiance[e] / pdf_origin,
-                                pdf_fwd: pdf_origin,
-                                pdf_rev: 0.0,
-                                delta: false,
-                            }];
-                            &sampled
-                        } else {
-                            &light
-                        };
-                        let Some(conn) = ctx.connect(&camera, light_side, si, ti) else {
-                            continue;
-                        };
-                        let weight = if weighted {
-                            ctx.mis_weight(&camera, light_side, si, ti, settings.mis)
-                                * strategy_count
-                        } else {
-                            strategy_count
-                        };
-                        let contribution = conn.contribution * weight;
-                        if contribution == Vec3::ZERO {
-                            continue;
-                        }
-                        sh.contribution[this] = contribution;
-                        if let Some(p) = conn.pixel {
-                            cn.pixel[this] = p as u32;
-                        }
-                        match conn.segment {
-                            Some((y, z)) => {
-                                let (origin, dir, t_max) =
-                                    spawn_ray_to(y.p, y.p_error, y.ng, z.p, z.p_error, z.ng);
-                                sh.origin[this] = origin;
-                                sh.dir[this] = dir;
-                                sh.t_max[this] = t_max;
-                                made += 1;
-                            }
-                            // s = 0: nothing to test; it reaches the sample's own pixel.
-                            None => *out += contribution,
+                            let slot = this;
+                            this += 1;
+                            sh.t_max[slot] = 0.0;
+                            sh.contribution[slot] = Vec3::ZERO;
+                            cn.sample[slot] = k as u32;
+                            cn.pixel[slot] = pixel;
+                            cn.s[slot] = s as u16;
+                            cn.t[slot] = t as u16;
+                            let (contribution, segment) = if s == 0 {
+                                // The camera subpath found the light by itself: nothing to
+                                // test, weighted now; it reaches the sample's own pixel.
+                                let z = &camera.vertices[t - 1];
+                                let c = ctx.reached_emission(z, &camera.vertices[t - 2]);
+                                if c == Vec3::ZERO {
+                                    continue;
+                                }
+                                let weight = connection_weight(
+                                    &ctx,
+                                    &settings,
+                                    &camera.vertices,
+                                    &light.vertices,
+                                    (s, t),
+                                    strategy_count,
+                                );
+                                let contribution = c * weight;
+                                if contribution == Vec3::ZERO {
+                                    continue;
+                                }
+                                sh.contribution[slot] = contribution;
+                                *out += contribution;
+                                continue;
+                            } else if t == 1 {
+                                // Light tracing: lands where the light vertex projects.
+                                let y = &light.vertices[s - 1];
+                                if light.joints[s - 1].is_none() {
+                                    continue;
+                                }
+                                let Some((c, p)) = ctx.connect_to_camera(y, light.wo[s - 1])
+                                else {
+                                    continue;
+                                };
+                                cn.pixel[slot] = p as u32;
+                                (c, (*y, camera.vertices[0]))
+                            } else {
+                                let Some(zj) = &camera.joints[t - 1] else {
+                                    continue;
+                                };
+                                let z = &camera.vertices[t - 1];
+                                let sampled;
+                                let y = if s == 1 {
+                                    // A fresh light sample at z_{t-1}.
+                                    if !has_light {
+                                        continue;
+                                    }
+                                    let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
+                                    let v = sampled_light_vertex(scene, sampler, key, t);
+                                    sampled = ctx.joint(&v, Vec3::ZERO).map(|j| (v, j));
+                                    sampled.as_ref().map(|(v, j)| (v, j))
+                                } else {
+                                    let v = &light.vertices[s - 1];
+                                    light.joints[s - 1].as_ref().map(|j| (v, j))
+                                };
+                                let Some(y) = y else {
+                                    continue;
+                                };
+                                let Some(c) = ctx.join_prepared(y, (z, zj)) else {
+                                    continue;
+                                };
+                                (c, (*y.0, *z))
+                            };
+                            // Unweighted until the ray is found unoccluded.
+                            let (y, z) = segment;
+                            sh.contribution[slot] = contribution;
+                            let (origin, dir, t_max) =
+                                spawn_ray_to(y.p, y.p_error, y.ng, z.p, z.p_error, z.ng);
+                            sh.origin[slot] = origin;
+                            sh.dir[slot] = dir;
+                            sh.t_max[slot] = t_max;
+                            made += 1;
                         }
                     }
+                    debug_assert_eq!(this, starts[k + 1] - sh.start);
                 }
                 made
             })
             .sum();
         Flow::new(n, made)
+    }
+}
+
+/// The light vertex strategy s = 1 joins to camera vertex z_{t-1} (t >= 2): a point sampled on
+/// an emitter with that vertex's numbers. The scene must have an emitter.
+#[inline]
+pub fn sampled_light_vertex(
+    scene: &PreparedScene,
+    sampler: &Sampler,
+    key: SampleKey,
+    t: usize,
+) -> Vertex {
+    let dim = camera_vertex_dim(t - 1);
+    let light = scene.sample_emitter(
+        sampler.get(key, dim + DIM_LIGHT_PICK),
+        sampler.get2(key, dim + DIM_LIGHT_POINT),
+    );
+    let (e, tri, sp) = (light.emitter, light.triangle, light.point);
+    let pdf_origin = light.pdf_area;
+    Vertex {
+        kind: VertexKind::Light,
+        p: sp.p,
+        p_error: sp.p_error,
+        ng: sp.ng,
+        ns: sp.ng,
+        triangle: tri,
+        beta: scene.emitters.radiance[e] / pdf_origin,
+        pdf_fwd: pdf_origin,
+        pdf_rev: 0.0,
+        delta: false,
+    }
+}
+
+/// The factor a connection's unweighted contribution is multiplied by: its MIS weight (when
+/// every strategy counts) times the strategy count of a multiplexed sample (1 otherwise).
+#[inline]
+pub fn connection_weight(
+    ctx: &PathContext,
+    settings: &BdptSettings,
+    camera: &[Vertex],
+    light: &[Vertex],
+    (s, t): (usize, usize),
+    strategy_count: f32,
+) -> f32 {
+    if settings.strategies == StrategyFilter::All {
+        ctx.mis_weight(camera, light, s, t, settings.mis) * strategy_count
+    } else {
+        strategy_count
+    }
+}
+
+/// One subpath of a sample as its connections read it: the vertices, and per vertex the unit
+/// direction to the previous vertex (zero at the first) and, where a strategy may join there,
+/// the vertex prepared for joining, each found once rather than per connection.
+#[derive(Default)]
+struct Subpath {
+    vertices: Vec<Vertex>,
+    wo: Vec<Vec3>,
+    joints: Vec<Option<Joint>>,
+}
+
+impl Subpath {
+    /// Subpath `sub`'s first `len` vertices.
+    fn gather(&mut self, ctx: &PathContext, stores: &[PathVerticesView], sub: usize, len: usize) {
+        self.vertices.clear();
+        self.wo.clear();
+        self.joints.clear();
+        for (d, store) in stores.iter().enumerate().take(len) {
+            let v = Vertex::from_store(store, sub, d);
+            let wo = match self.vertices.last() {
+                Some(prev) => towards(&v, prev),
+                None => Vec3::ZERO,
+            };
+            self.wo.push(wo);
+            self.joints.push(ctx.joint(&v, wo));
+            self.vertices.push(v);
+        }
     }
 }

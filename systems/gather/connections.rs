@@ -1,9 +1,10 @@
 //! Adds the wave's connections to the film: each sample's strategies with t >= 2 to its own
 //! pixel; light-tracing splats (t = 1) to the pixels they project to. The film's sums are
-//! exact, so the image never depends on how work was split between threads. With strategy images on, each strategy's share is also
-//! summed on its own.
+//! exact, so the image never depends on how work was split between threads. With strategy
+//! images on, each strategy's share is also summed on its own.
 
 use crate::components::CHUNK;
+use crate::film::Splats;
 use crate::integrators::bdpt::BdptState;
 use crate::pipeline::Flow;
 use glam::{DVec3, Vec3};
@@ -20,30 +21,35 @@ crate::system! {
     run {
         let n = wave.len;
         let (conns, starts) = (connections, connection_start);
-        sample_radiance[..n]
+        // One pass over the slots, in parallel chunks of samples: strategies with t >= 2 to
+        // the sample's own value (in slot order, as always), light-tracing splats (t = 1)
+        // gathered for the film, which adds them block by block in parallel.
+        let batches: Vec<Splats> = sample_radiance[..n]
             .par_chunks_mut(CHUNK)
             .enumerate()
-            .for_each(|(c, out)| {
+            .map(|(c, out)| {
+                let mut splats = Splats::default();
                 for (i, value) in out.iter_mut().enumerate() {
                     let k = c * CHUNK + i;
                     for slot in starts[k]..starts[k + 1] {
-                        if conns.t[slot] >= 2 && shadow.unoccluded[slot] {
+                        if !shadow.unoccluded[slot] {
+                            continue;
+                        }
+                        if conns.t[slot] >= 2 {
                             *value += shadow.contribution[slot];
+                        } else {
+                            splats.push(conns.pixel[slot] as usize, shadow.contribution[slot]);
                         }
                     }
                 }
-            });
+                splats
+            })
+            .collect();
         debug_assert_eq!(*pixels as usize, film.width * film.height);
         film.add_wave(wave.first, &sample_radiance[..n]);
+        film.add_splats(&batches);
+        let splats: usize = batches.iter().map(Splats::len).sum();
         let total = *connections_len;
-        let mut splats = 0;
-        for slot in 0..total {
-            if conns.t[slot] == 1 && shadow.unoccluded[slot] {
-                film
-                    .add_splat(conns.pixel[slot] as usize, shadow.contribution[slot]);
-                splats += 1;
-            }
-        }
         if *strategy_images {
             let size = film.width * film.height;
             for slot in 0..total {

@@ -7,7 +7,7 @@
 //! from its connection stream: its camera subpath then walks to exactly t = depth + 2 - s
 //! vertices and its light subpath to s (none for s = 0, the light vertex alone for s = 1).
 
-use crate::components::CAMERA_VERTEX;
+use crate::components::{CAMERA_VERTEX, PathVertex};
 use crate::geometry::offset_ray_origin;
 use crate::integrators::bdpt::{
     BdptState, CAMERA_DIM_PIXEL, CONNECTION_DIM_STRATEGY, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK,
@@ -85,7 +85,7 @@ crate::system! {
             .zip(camera_walkers)
             .zip(camera_rays)
             .zip(sample_pixels)
-            .for_each(|(((v, wk), r), sample_pixel)| {
+            .for_each(|(((mut v, wk), r), sample_pixel)| {
                 for (i, sample_pixel) in sample_pixel.iter_mut().enumerate() {
                     let k = v.start + i;
                     let (key, raster, pixel) = raster_of(k);
@@ -93,15 +93,20 @@ crate::system! {
                     let dir = cam.direction(raster);
                     // A multiplexed sample with t = 1 needs only the camera vertex.
                     let walks = !multiplexed || lengths(k).0 >= 2;
-                    v.p[i] = cam.position;
-                    v.p_error[i] = Vec3::ZERO;
-                    v.ng[i] = cam.forward;
-                    v.ns[i] = cam.forward;
-                    v.triangle[i] = CAMERA_VERTEX;
-                    v.beta[i] = Vec3::ONE;
-                    v.pdf_fwd[i] = 1.0;
-                    v.pdf_rev[i] = 0.0;
-                    v.delta[i] = false;
+                    v.set(
+                        i,
+                        PathVertex {
+                            p: cam.position,
+                            p_error: Vec3::ZERO,
+                            ng: cam.forward,
+                            ns: cam.forward,
+                            triangle: CAMERA_VERTEX,
+                            beta: Vec3::ONE,
+                            pdf_fwd: 1.0,
+                            pdf_rev: 0.0,
+                            delta: false,
+                        },
+                    );
                     wk.subpath[i] = k as u32;
                     wk.key[i] = key;
                     wk.beta[i] = Vec3::ONE;
@@ -133,7 +138,7 @@ crate::system! {
             .into_par_iter()
             .zip(walkers)
             .zip(rays)
-            .for_each(|((v, wk), r)| {
+            .for_each(|((mut v, wk), r)| {
                 for i in 0..v.len() {
                     let k = v.start - cap + i;
                     let key = numbers.key(sampler, Stream::Light, wave, pixels, k);
@@ -151,15 +156,20 @@ crate::system! {
                     let local = cosine_hemisphere(sampler.get2(key, LIGHT_DIM_DIRECTION));
                     let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
                     let pdf_dir = local.z * FRAC_1_PI;
-                    v.p[i] = sp.p;
-                    v.p_error[i] = sp.p_error;
-                    v.ng[i] = sp.ng;
-                    v.ns[i] = sp.ng;
-                    v.triangle[i] = tri;
-                    v.beta[i] = le / pdf_origin;
-                    v.pdf_fwd[i] = pdf_origin;
-                    v.pdf_rev[i] = 0.0;
-                    v.delta[i] = false;
+                    v.set(
+                        i,
+                        PathVertex {
+                            p: sp.p,
+                            p_error: sp.p_error,
+                            ng: sp.ng,
+                            ns: sp.ng,
+                            triangle: tri,
+                            beta: le / pdf_origin,
+                            pdf_fwd: pdf_origin,
+                            pdf_rev: 0.0,
+                            delta: false,
+                        },
+                    );
                     // Le cos / (pdf_origin pdf_dir), with pdf_dir = cos / pi.
                     let beta = if pdf_dir > 0.0 {
                         le * (std::f32::consts::PI / pdf_origin)

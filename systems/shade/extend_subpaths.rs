@@ -52,17 +52,22 @@ crate::system! {
         let tris = &scene.triangles;
         // Each chunk of walkers owns the subpath slots from its first walker's subpath on
         // (walkers stay in increasing subpath order), so the vertex stores split along them.
-        let first_subpath: Vec<usize> = (0..n)
-            .step_by(crate::components::CHUNK)
-            .map(|slot| walkers.subpath[slot] as usize)
+        // The deep bounces of a wave hold few walkers: there the chunks are smaller, so that
+        // the last bounces do not run on one core (each walker's work is its own, so the
+        // split never changes the result).
+        let chunk = walker_chunk(n);
+        let first_walker: Vec<usize> = (0..n).step_by(chunk).collect();
+        let first_subpath: Vec<usize> = first_walker
+            .iter()
+            .map(|&slot| walkers.subpath[slot] as usize)
             .collect();
         let (before, from_d) = vertices.split_at_mut(d);
         let prev_views = before[d - 1].split_mut(&first_subpath, end);
         let views = from_d[0].split_mut(&first_subpath, end);
         let lens = split_ranges(subpath_len, &first_subpath, end);
         let hits = &hits;
-        let walkers = walkers.chunks_mut(0..n);
-        let rays = rays.chunks_mut(0..n);
+        let walkers = walkers.split_mut(&first_walker, n);
+        let rays = rays.split_mut(&first_walker, n);
         let alive: usize = walkers
             .into_par_iter()
             .zip(rays)
@@ -116,7 +121,7 @@ crate::system! {
                         },
                     );
                     let Some(next) = next else { continue };
-                    pv.pdf_rev[j] = next.pdf_rev_prev;
+                    pv.items[j].pdf_rev = next.pdf_rev_prev;
                     let mut beta = wk.beta[i] * next.weight;
                     if d >= ROULETTE_DEPTH as usize {
                         let q = survival(beta, wk.roulette_scale[i]);
@@ -145,6 +150,15 @@ crate::system! {
             .sum();
         Flow::new(n, alive)
     }
+}
+
+/// Walkers per chunk of a bounce with `n` walkers: `CHUNK`, or for a small bounce enough
+/// smaller chunks (of at least `MIN_WALKER_CHUNK`) to keep every core of a small machine busy.
+fn walker_chunk(n: usize) -> usize {
+    const CHUNKS_AT_LEAST: usize = 16;
+    const MIN_WALKER_CHUNK: usize = 64;
+    n.div_ceil(CHUNKS_AT_LEAST)
+        .clamp(MIN_WALKER_CHUNK, crate::components::CHUNK)
 }
 
 /// A subpath's next step.

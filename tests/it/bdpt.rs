@@ -372,3 +372,27 @@ fn same_image_for_any_thread_count() {
     assert_eq!(one, render(2));
     assert_eq!(one, render(3));
 }
+
+/// The connection layout counts strategies from `light_vertices`: it must hold exactly the s
+/// that `uses` keeps (before the filter), for every depth bound and subpath length.
+#[test]
+fn light_vertices_are_the_strategies_within_the_depth_bounds() {
+    for max_depth in [0, 1, 2, 3, 5, 9, u32::MAX] {
+        for min_depth in [0, 1, 2, 4] {
+            let s = BdptSettings {
+                min_depth,
+                ..settings(0, max_depth)
+            };
+            for t in 0..14 {
+                for nl in 0..14 {
+                    let expected: Vec<usize> = (0..=nl).filter(|&l| s.uses(l, t)).collect();
+                    let got: Vec<usize> = s.light_vertices(t, nl).collect();
+                    assert_eq!(
+                        got, expected,
+                        "max {max_depth} min {min_depth} t {t} nl {nl}"
+                    );
+                }
+            }
+        }
+    }
+}
