@@ -18,7 +18,6 @@
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator pm` prints it with
 //! each system's columns, and the README shows it for `door_ajar`.
 
-use crate::bsdf::MaterialKind;
 use crate::components::ShadowRays;
 use crate::film::Film;
 use crate::integrators::camera_walk::{self, CameraWalk};
@@ -26,6 +25,7 @@ use crate::integrators::driver::render_passes;
 use crate::integrators::{
     Budget, Control, IntegratorState, PassState, RenderOutcome, RenderSettings, SceneData,
 };
+use crate::photons::state::{self, StateReader, StateWriter};
 use crate::photons::{PhotonMaps, PhotonPass};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::{Sampler, SamplerKind};
@@ -221,6 +221,20 @@ impl PassState for PmState {
         self.pass = pass;
         self.camera_walk.sample_index = pass;
         self.camera_walk.starts = self.pixels;
+        self.camera_walk.started = 0;
+    }
+    fn save(&self) -> Option<Vec<u8>> {
+        let mut w = StateWriter::new(state::PM_TAG);
+        w.u64(self.nonfinite);
+        state::write_film(&mut w, &self.film);
+        Some(w.0)
+    }
+    fn restore(&mut self, bytes: &[u8], _passes: u64) {
+        // The maps are traced again (from the seed) by the first pass run.
+        let mut r = StateReader::new(bytes, state::PM_TAG);
+        self.nonfinite = r.u64();
+        self.film = state::read_film(&mut r, self.film.width, self.film.height);
+        r.finish();
     }
     fn finish(mut self, _: u64) -> (Film, usize, usize) {
         self.film.nonfinite += self.nonfinite;
@@ -229,9 +243,10 @@ impl PassState for PmState {
     }
 }
 
-/// Whether the scene has specular surfaces, and so a caustic map.
+/// Whether the scene has surfaces camera chains follow (specular, or nearly: see
+/// `photons::chains_follow`), and so a caustic map.
 fn has_caustics(data: &SceneData) -> bool {
-    crate::integrators::pt::used_kinds(data).contains(&MaterialKind::Dielectric)
+    crate::photons::scene_has_followed(data)
 }
 
 /// Renders with PM: the photon maps once, then passes of one camera sample per pixel until

@@ -29,13 +29,14 @@
 //! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
 //! nothing grows with the number of passes.
 
-use crate::components::{PixelEstimates, ShadowRays};
+use crate::components::{PixelEstimates, ShadowRays, VisiblePoints};
 use crate::film::Film;
 use crate::integrators::camera_walk::{self, CameraWalk};
 use crate::integrators::driver::render_passes;
 use crate::integrators::{
     Budget, Control, IntegratorState, PassState, RenderOutcome, RenderSettings, SceneData,
 };
+use crate::photons::state::{self, StateReader, StateWriter};
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::{Sampler, SamplerKind};
@@ -49,6 +50,8 @@ pub const DEFAULT_PHOTONS_PER_PASS: u64 = 250_000;
 pub const DEFAULT_ALPHA: f32 = 0.7;
 /// Default initial radius, as a fraction of the scene's bounding-box diagonal.
 pub const DEFAULT_RADIUS_FRACTION: f32 = 0.005;
+/// Default eye-ray trees per pixel of PPM.
+pub const DEFAULT_EYE_RAYS: u32 = 16;
 
 /// The settings of PPM and SPPM.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -65,6 +68,8 @@ pub struct ProgressiveSettings {
     pub initial_radius: Option<f32>,
     /// SPPM (true): new visible points every pass. PPM (false): pass 0's, kept.
     pub stochastic: bool,
+    /// PPM: eye-ray trees per pixel, jittered over it (stratified).
+    pub eye_rays: u32,
 }
 
 impl ProgressiveSettings {
@@ -76,6 +81,7 @@ impl ProgressiveSettings {
             photons_per_pass: p.photons_per_pass,
             alpha: p.alpha,
             initial_radius: p.radius,
+            eye_rays: p.eye_rays,
             sampler: s.sampler,
             ..ProgressiveSettings::new(s.seed, stochastic)
         }
@@ -90,7 +96,23 @@ impl ProgressiveSettings {
             alpha: DEFAULT_ALPHA,
             initial_radius: None,
             stochastic,
+            eye_rays: DEFAULT_EYE_RAYS,
         }
+    }
+
+    /// Bytes of state a render of `pixels` pixels is expected to need (photons apart): PPM's
+    /// grow with its eye rays, about two hit points each where a scene has glass (the torus:
+    /// 0.93 per eye ray; `ProgressiveState::bytes` counts what a render holds).
+    pub fn expected_bytes(&self, pixels: u64) -> u64 {
+        let points = if self.stochastic {
+            pixels
+        } else {
+            pixels.saturating_mul(2 * self.eye_rays as u64)
+        };
+        let walk = CameraWalk::bytes_per_slot() - VisiblePoints::bytes_per_item();
+        pixels
+            .saturating_mul(walk as u64)
+            .saturating_add(points.saturating_mul(ProgressiveState::bytes_per_point() as u64))
     }
 
     /// The initial radius in `scene`.
@@ -135,9 +157,8 @@ impl ProgressiveState {
         photon_pass.tracing.store_direct = false;
         let mut camera_walk = CameraWalk::new(data.clone(), sampler, settings.max_depth);
         if !settings.stochastic {
-            // PPM: the ray tree, whose hit points the first pass appends.
-            camera_walk.tree = true;
-            camera_walk.points = 0;
+            // PPM: the ray trees, whose hit points the first pass appends.
+            camera_walk.trace_trees(settings.eye_rays, settings.seed);
         }
         ProgressiveState {
             camera_walk,
@@ -159,7 +180,13 @@ impl ProgressiveState {
         self.pass = pass;
         let find_visible_points = self.settings.stochastic || pass == 0;
         self.camera_walk.sample_index = pass;
-        self.camera_walk.starts = if find_visible_points { self.pixels } else { 0 };
+        let chains = if self.settings.stochastic {
+            self.pixels
+        } else {
+            self.pixels * self.camera_walk.trees as usize
+        };
+        self.camera_walk.starts = if find_visible_points { chains } else { 0 };
+        self.camera_walk.started = 0;
         self.photon_pass
             .tracing
             .begin_pass(pass, self.settings.photons_per_pass);
@@ -195,22 +222,67 @@ impl ProgressiveState {
         .expect("one sum and count per pixel")
     }
 
-    /// Bytes of state per pixel: chains and rays (double buffered), hits, visible point,
-    /// shadow ray and statistics.
+    /// PPM's hit points' hash (`photons::state::points_hash`); 0 for SPPM, whose visible points
+    /// are found anew every pass.
+    fn hit_points_hash(&self) -> u64 {
+        if self.settings.stochastic {
+            0
+        } else {
+            state::points_hash(&self.camera_walk.visible, self.camera_walk.points)
+        }
+    }
+
+    /// Bytes of state per pixel: the walk's chains and rays (double buffered) and hits, and
+    /// per visible point (PPM: per hit point) the point, its shadow ray and its statistics.
     pub fn bytes_per_pixel(&self) -> usize {
-        CameraWalk::bytes_per_slot()
-            + ShadowRays::bytes_per_item()
+        self.bytes().div_ceil(self.pixels.max(1))
+    }
+
+    /// Bytes of state: the walk's per-pixel stores, and the visible or hit points with their
+    /// shadow rays and statistics (the photons of a pass apart).
+    pub fn bytes(&self) -> usize {
+        let points = self.camera_walk.visible.capacity().max(self.pixels);
+        let walk = CameraWalk::bytes_per_slot() - VisiblePoints::bytes_per_item();
+        self.pixels * walk + points * Self::bytes_per_point()
+    }
+
+    /// Bytes per visible (or hit) point: the point, its shadow ray and its statistics.
+    pub fn bytes_per_point() -> usize {
+        ShadowRays::bytes_per_item()
             + PixelEstimates::bytes_per_item()
+            + VisiblePoints::bytes_per_item()
     }
 }
 
-/// The graph of one pass (the same for PPM and SPPM; see the module's documentation).
-pub fn graph() -> Graph<ProgressiveState> {
+/// PPM's eye pass alone: pass 0's trees and their hit points ordered (a resumed run's).
+fn eye_pass() -> Graph<ProgressiveState> {
     Graph::new(
-        "sppm",
+        "ppm_eye_pass",
         vec![
             Node::nested(
-                camera_walk::from_camera("camera_bounces"),
+                camera_walk::from_camera_in_waves("camera_bounces"),
+                "camera_walk",
+                |s: &mut ProgressiveState| &mut s.camera_walk,
+                camera_walk::INPUTS,
+            ),
+            Node::system(shade::order_hit_points::OrderHitPoints),
+        ],
+    )
+}
+
+/// The graph of one pass (PPM's walk starts its trees in waves; see the module's
+/// documentation).
+pub fn graph(stochastic: bool) -> Graph<ProgressiveState> {
+    let walk = if stochastic {
+        camera_walk::from_camera("camera_bounces")
+    } else {
+        camera_walk::from_camera_in_waves("camera_bounces")
+    };
+    Graph::new(
+        if stochastic { "sppm" } else { "ppm" },
+        vec![
+            Node::nested(
+                walk,
                 "camera_walk",
                 |s: &mut ProgressiveState| &mut s.camera_walk,
                 camera_walk::INPUTS,
@@ -246,8 +318,8 @@ impl IntegratorState for ProgressiveState {
         "photons_emitted",
         "nonfinite",
     ];
-    fn graph(_: &SceneData, _: &ProgressiveSettings) -> Graph<ProgressiveState> {
-        graph()
+    fn graph(_: &SceneData, settings: &ProgressiveSettings) -> Graph<ProgressiveState> {
+        graph(settings.stochastic)
     }
 }
 
@@ -257,6 +329,52 @@ impl PassState for ProgressiveState {
     }
     fn begin_pass(&mut self, pass: u64) {
         ProgressiveState::begin_pass(self, pass)
+    }
+    fn save(&self) -> Option<Vec<u8>> {
+        let points = self.camera_walk.points;
+        let mut w = StateWriter::new(state::PROGRESSIVE_TAG);
+        w.u64(self.photons_emitted);
+        w.u64(self.nonfinite);
+        w.u64(points as u64);
+        w.u64(self.hit_points_hash());
+        state::write_estimates(&mut w, &self.estimates, points);
+        Some(w.0)
+    }
+    fn restore(&mut self, bytes: &[u8], _passes: u64) {
+        if !self.settings.stochastic {
+            // PPM's hit points: pass 0's eye rays, traced again from the seed.
+            self.begin_pass(0);
+            eye_pass().run(self, &mut crate::pipeline::Stats::default());
+        }
+        let mut r = StateReader::new(bytes, state::PROGRESSIVE_TAG);
+        self.photons_emitted = r.u64();
+        self.nonfinite = r.u64();
+        let (points, hash) = (r.u64() as usize, r.u64());
+        assert_eq!(
+            (points, hash),
+            (self.camera_walk.points, self.hit_points_hash()),
+            "the saved statistics belong to other visible points"
+        );
+        state::read_estimates(&mut r, &mut self.estimates, points);
+        r.finish();
+    }
+    fn report(&self) -> Vec<(&'static str, String)> {
+        let mib = self.bytes() as f64 / (1 << 20) as f64;
+        let line = if self.settings.stochastic {
+            format!(
+                "{} visible points, one per pixel, {mib:.1} MiB with the walk",
+                self.pixels
+            )
+        } else {
+            let points = self.camera_walk.points;
+            format!(
+                "{points} hit points ({:.2} per pixel, of {} eye-ray trees each), {mib:.1} MiB \
+                 with the walk",
+                points as f64 / self.pixels.max(1) as f64,
+                self.camera_walk.trees
+            )
+        };
+        vec![("state", line)]
     }
     fn finish(self, passes: u64) -> (Film, usize, usize) {
         (self.film(passes), self.bytes_per_pixel(), self.pixels)

@@ -13,6 +13,7 @@
 
 pub mod hash_grid;
 pub mod kd_tree;
+pub mod state;
 
 pub use hash_grid::HashGrid;
 pub use kd_tree::{KdTree, Nearest};
@@ -223,6 +224,48 @@ impl PhotonMaps {
             + self.global.bytes()
             + caustic
     }
+}
+
+/// Conductors whose GGX alpha is below this are followed by the photon mappers' camera chains
+/// (sampled, as a path tracer would) instead of gathering photons: on a near-mirror a density
+/// estimate needs the photons of a tiny solid angle, and its error stays 10-100x a path
+/// tracer's. Rougher conductors gather as diffuse surfaces do.
+pub const FOLLOW_ALPHA: f32 = 0.1;
+
+/// The follow threshold in force (`FOLLOW_ALPHA`; STAGELIGHT_FOLLOW_ALPHA overrides it while
+/// it is being measured).
+pub fn follow_alpha() -> f32 {
+    static ALPHA: std::sync::OnceLock<f32> = std::sync::OnceLock::new();
+    *ALPHA.get_or_init(|| {
+        std::env::var("STAGELIGHT_FOLLOW_ALPHA")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(FOLLOW_ALPHA)
+    })
+}
+
+/// Whether camera chains pass through `material` (sampling it) rather than gather photons on
+/// it: smooth dielectrics, and conductors smoother than `FOLLOW_ALPHA`. Photons are not stored
+/// there (nothing gathers them), and a photon path through them to a diffuse surface is a
+/// caustic (PM's caustic map).
+#[inline]
+pub fn chains_follow(material: &crate::bsdf::Material, follow_alpha: f32) -> bool {
+    use crate::bsdf::Material;
+    match *material {
+        Material::Dielectric { .. } => true,
+        Material::Conductor { alpha, .. } => alpha < follow_alpha,
+        Material::Diffuse { .. } => false,
+    }
+}
+
+/// Whether a scene has a material camera chains follow (and so caustics for PM's map).
+pub fn scene_has_followed(data: &SceneData) -> bool {
+    let (follow, scene) = (follow_alpha(), &data.scene);
+    let mut used = vec![false; scene.materials.len()];
+    for &m in &scene.triangles.material {
+        used[m as usize] = true;
+    }
+    (scene.materials.iter().zip(used)).any(|(m, used)| used && chains_follow(m, follow))
 }
 
 /// Least cos between a photon's surface normal (on the side it arrived from) and the query's

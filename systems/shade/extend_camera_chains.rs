@@ -1,15 +1,17 @@
 //! Camera chains of the photon mappers: at each hit, adds the emission seen, then either
-//! follows a specular (delta) surface by sampling it, or ends on a surface that is not
-//! specular, which becomes the chain's gather point. Chains that leave the scene, reach the
+//! follows a specular surface or a conductor smoother than `photons::FOLLOW_ALPHA` by
+//! sampling it, or ends on any other surface, which becomes the chain's gather point. Chains that leave the scene, reach the
 //! depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by throughput) end with no
 //! gather point. In a ray tree (PPM) a chain at a dielectric follows both branches instead,
-//! the second as a new chain, with no roulette (see `camera_walk`).
+//! the second as a new chain, and at a followed conductor one sampled direction, with no
+//! roulette (see `camera_walk`).
 
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{CHUNK, MISS, NO_VISIBLE_POINT};
 use crate::geometry::{offset_ray_origin, surface_point};
 use crate::integrators::camera_walk::{Branch, CameraWalk, MIN_BRANCH_WEIGHT, TREE_DEPTH};
 use crate::math::Frame;
+use crate::photons::chains_follow;
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::scene::NO_EMITTER;
@@ -36,6 +38,7 @@ crate::system! {
     }
     run {
         let (n, max_depth, tree) = (*live, *max_depth, *tree);
+        let follow = crate::photons::follow_alpha();
         let rays = rays.chunks_mut(0..n);
         let chunks = n.div_ceil(CHUNK);
         spawned.resize_with(chunks, Vec::new);
@@ -71,7 +74,7 @@ crate::system! {
                     if ns.dot(ng) < 0.0 {
                         ns = -ns;
                     }
-                    if !matches!(material, Material::Dielectric { .. }) {
+                    if !chains_follow(&material, follow) {
                         c.p[i] = sp.p;
                         c.p_error[i] = sp.p_error;
                         c.ng[i] = ng;
@@ -81,15 +84,12 @@ crate::system! {
                         continue;
                     }
                     let depth = c.depth[i];
-                    if depth >= max_depth {
+                    if depth >= max_depth || (tree && depth >= TREE_DEPTH) {
                         continue;
                     }
                     let frame = Frame::from_normal(ns);
                     let wo_local = frame.to_local(wo);
-                    if tree {
-                        if depth >= TREE_DEPTH {
-                            continue;
-                        }
+                    if tree && matches!(material, Material::Dielectric { .. }) {
                         // Refraction (u = 1 is never below F), then reflection (u = 0 is
                         // below F unless F = 0); each weighs its Fresnel term: f cos, not
                         // divided by the probability of choosing it.
@@ -152,7 +152,14 @@ crate::system! {
                         continue;
                     };
                     let mut beta = c.beta[i] * bs.value * (bs.wi.z.abs() / bs.pdf);
-                    if depth + 1 >= ROULETTE_DEPTH {
+                    if tree {
+                        // A tree's glossy bounce is one sampled direction, kept with its
+                        // hit points; a branch too light to matter ends, as at glass.
+                        let weight = beta.max_element();
+                        if weight.is_nan() || weight < MIN_BRANCH_WEIGHT {
+                            continue;
+                        }
+                    } else if depth + 1 >= ROULETTE_DEPTH {
                         let q = survival(beta, 1.0);
                         if !survives(q, sampler.get(c.key[i], dim + 2)) {
                             continue;

@@ -25,7 +25,7 @@ crate::system! {
         write shadow;
     }
     on ProgressiveState {
-        read accel = data.accel, len = pixels;
+        read accel = data.accel, len = camera_walk.points;
         write shadow;
     }
     run {

@@ -18,6 +18,7 @@ mod graph;
 mod hostile;
 mod mlt;
 mod path_mlt;
+mod photon_checkpoint;
 mod photon_mapping;
 mod photons;
 mod properties;
