@@ -15,7 +15,7 @@
 //! in waves of one chain per pixel, so the walk's stores never hold more than a pixel's worth
 //! of chains and branches at a time.
 
-use crate::components::{CameraChains, Hits, Rays, VisiblePoints};
+use crate::components::{CameraChains, Hits, Rays, VisiblePoint, VisiblePoints};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::SampleKey;
 use crate::sampling::{Sampler, SamplerKind};
@@ -60,6 +60,20 @@ pub struct CameraWalk {
     pub tree: bool,
     /// Per chunk of chains, the branches it split off this bounce (started in chunk order).
     pub spawned: Vec<Vec<Branch>>,
+    /// Conductors smoother than this are followed (`photons::chains_follow`).
+    pub follow_alpha: f32,
+    /// Sample light at the followed glossy surfaces (camera walks; not PM's gather walk,
+    /// whose emission the caustic map covers).
+    pub direct_light: bool,
+    /// The followed glossy surfaces the chains met (`glossy_points` of them), each with the
+    /// chain's weight there: the integrator samples light at them, with MIS against the
+    /// chain's own bounce, and adds it to their pixel.
+    pub glossy: VisiblePoints,
+    pub glossy_points: usize,
+    /// Glossy points so far per pixel (their `branch`).
+    pub glossy_rank: Vec<u32>,
+    /// Per chunk of chains, the glossy points it met this bounce (kept in chunk order).
+    pub met_glossy: Vec<Vec<VisiblePoint>>,
 }
 
 /// A branch of the ray tree split off at a dielectric, to start as a chain of its own.
@@ -98,6 +112,12 @@ pub const INPUTS: &[&str] = &[
     "points",
     "tree",
     "spawned",
+    "direct_light",
+    "follow_alpha",
+    "glossy",
+    "glossy_points",
+    "glossy_rank",
+    "met_glossy",
 ];
 
 impl CameraWalk {
@@ -124,13 +144,21 @@ impl CameraWalk {
             points: slots,
             tree: false,
             spawned: Vec::new(),
+            direct_light: true,
+            follow_alpha: crate::photons::FOLLOW_ALPHA,
+            glossy: VisiblePoints::new(0),
+            glossy_points: 0,
+            glossy_rank: vec![0; slots],
+            met_glossy: Vec::new(),
         }
     }
 
-    /// Makes the walk PPM's: `trees` ray trees per pixel, their hit points appended.
+    /// Makes the walk PPM's: `trees` ray trees per pixel, their hit points appended, following
+    /// conductors smoother than `photons::PPM_FOLLOW_ALPHA`.
     pub fn trace_trees(&mut self, trees: u32, seed: u64) {
         let cam = self.data.scene.camera;
         self.tree = true;
+        self.follow_alpha = crate::photons::PPM_FOLLOW_ALPHA;
         self.points = 0;
         self.trees = trees.max(1);
         self.jitter = Sampler::new(SamplerKind::Sobol, seed, cam.width, cam.height)

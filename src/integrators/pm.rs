@@ -101,6 +101,8 @@ pub struct PmState {
     /// Chains from the visible points to where their final-gather rays land.
     pub gather_walk: CameraWalk,
     pub shadow: ShadowRays,
+    /// Shadow rays in use: the visible points', then the followed glossy surfaces'.
+    pub shadow_len: usize,
     /// This pass's radiance per pixel.
     pub pass_radiance: Vec<DVec3>,
     pub photon_pass: PhotonPass,
@@ -124,8 +126,13 @@ impl PmState {
             pixels,
             pass: 0,
             camera_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
-            gather_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
+            gather_walk: CameraWalk {
+                // Light reached through the gather walk is the caustic map's.
+                direct_light: false,
+                ..CameraWalk::new(data.clone(), sampler, settings.max_depth)
+            },
             shadow: ShadowRays::new(pixels),
+            shadow_len: 0,
             pass_radiance: vec![DVec3::ZERO; pixels],
             photon_pass,
             maps: None,
@@ -145,8 +152,9 @@ impl PmState {
     }
 }
 
-/// The graph of one pass, for a scene with (`caustics`) or without specular surfaces.
-pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
+/// The graph of one pass, for a scene with (`caustics`) or without surfaces camera chains
+/// follow, and with (`glossy`) or without glossy ones among them.
+pub fn graph(settings: &PmSettings, caustics: bool, glossy: bool) -> Graph<PmState> {
     let mut nodes = vec![
         Node::Once {
             name: "photon_maps",
@@ -171,6 +179,9 @@ pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
         Node::system(trace::shadow::TraceShadow),
         Node::system(gather::direct_light::AddDirectLight),
     ];
+    if glossy {
+        nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
+    }
     if caustics {
         nodes.push(Node::system(gather::caustic_photons::GatherCaustics));
     }
@@ -208,7 +219,11 @@ impl IntegratorState for PmState {
         "gather_walk",
     ];
     fn graph(data: &SceneData, settings: &PmSettings) -> Graph<PmState> {
-        graph(settings, has_caustics(data))
+        graph(
+            settings,
+            has_caustics(data),
+            crate::photons::scene_has_followed_glossy(data, crate::photons::FOLLOW_ALPHA),
+        )
     }
 }
 
@@ -246,7 +261,7 @@ impl PassState for PmState {
 /// Whether the scene has surfaces camera chains follow (specular, or nearly: see
 /// `photons::chains_follow`), and so a caustic map.
 fn has_caustics(data: &SceneData) -> bool {
-    crate::photons::scene_has_followed(data)
+    crate::photons::scene_has_followed(data, crate::photons::FOLLOW_ALPHA)
 }
 
 /// Renders with PM: the photon maps once, then passes of one camera sample per pixel until

@@ -115,6 +115,16 @@ impl ProgressiveSettings {
             .saturating_add(points.saturating_mul(ProgressiveState::bytes_per_point() as u64))
     }
 
+    /// Conductors smoother than this are followed by the camera chains
+    /// (`photons::chains_follow`): PPM's eye rays, traced once, follow fewer.
+    pub fn follow_alpha(&self) -> f32 {
+        if self.stochastic {
+            crate::photons::FOLLOW_ALPHA
+        } else {
+            crate::photons::PPM_FOLLOW_ALPHA
+        }
+    }
+
     /// The initial radius in `scene`.
     pub fn radius_in(&self, data: &SceneData) -> f32 {
         self.initial_radius.unwrap_or_else(|| {
@@ -135,7 +145,12 @@ pub struct ProgressiveState {
     /// pass only by PPM).
     pub camera_walk: CameraWalk,
     pub shadow: ShadowRays,
+    /// Shadow rays in use: the visible points', then the followed glossy surfaces'.
+    pub shadow_len: usize,
     pub estimates: PixelEstimates,
+    /// Per pixel, the sum over passes of the light sampled at the glossy surfaces its chains
+    /// followed.
+    pub glossy_direct: Vec<DVec3>,
     pub photon_pass: PhotonPass,
     /// Grid over this pass's photons (built by `build_photon_grid`).
     pub grid: Option<HashGrid>,
@@ -155,6 +170,7 @@ impl ProgressiveState {
         let mut photon_pass = PhotonPass::new(data.clone(), sampler, settings.max_depth);
         // Direct light comes from light sampling at the visible points.
         photon_pass.tracing.store_direct = false;
+        photon_pass.tracing.follow_alpha = settings.follow_alpha();
         let mut camera_walk = CameraWalk::new(data.clone(), sampler, settings.max_depth);
         if !settings.stochastic {
             // PPM: the ray trees, whose hit points the first pass appends.
@@ -167,7 +183,9 @@ impl ProgressiveState {
             pixels,
             pass: 0,
             shadow: ShadowRays::new(pixels),
+            shadow_len: 0,
             estimates,
+            glossy_direct: vec![DVec3::ZERO; pixels],
             photon_pass,
             grid: None,
             photons_emitted: 0,
@@ -192,14 +210,15 @@ impl ProgressiveState {
             .begin_pass(pass, self.settings.photons_per_pass);
     }
 
-    /// The image so far: per pixel, over its hit points (one, but for PPM's ray tree),
-    /// D / passes + tau / (pi R^2 N_emitted).
+    /// The image so far: per pixel, over its hit points (one, but for PPM's ray trees),
+    /// D / passes + tau / (pi R^2 N_emitted), plus the light sampled at the glossy surfaces
+    /// its chains followed over passes.
     pub fn film(&self, passes: u64) -> Film {
         let cam = self.data.scene.camera;
         let e = &self.estimates;
         let n_emitted = self.photons_emitted.max(1) as f64;
         let mut nonfinite = self.nonfinite;
-        let mut sum = vec![DVec3::ZERO; self.pixels];
+        let mut sum = self.glossy_direct.clone();
         let points = self.camera_walk.points.min(e.capacity());
         for i in 0..points {
             let r = e.radius[i] as f64;
@@ -222,13 +241,15 @@ impl ProgressiveState {
         .expect("one sum and count per pixel")
     }
 
-    /// PPM's hit points' hash (`photons::state::points_hash`); 0 for SPPM, whose visible points
-    /// are found anew every pass.
+    /// PPM's hit points' and glossy points' hash (`photons::state::points_hash`); 0 for SPPM,
+    /// whose visible points are found anew every pass.
     fn hit_points_hash(&self) -> u64 {
+        let walk = &self.camera_walk;
         if self.settings.stochastic {
             0
         } else {
-            state::points_hash(&self.camera_walk.visible, self.camera_walk.points)
+            state::points_hash(&walk.visible, walk.points)
+                ^ state::points_hash(&walk.glossy, walk.glossy_points).rotate_left(1)
         }
     }
 
@@ -242,8 +263,11 @@ impl ProgressiveState {
     /// shadow rays and statistics (the photons of a pass apart).
     pub fn bytes(&self) -> usize {
         let points = self.camera_walk.visible.capacity().max(self.pixels);
+        let glossy = self.camera_walk.glossy.capacity();
         let walk = CameraWalk::bytes_per_slot() - VisiblePoints::bytes_per_item();
-        self.pixels * walk + points * Self::bytes_per_point()
+        self.pixels * (walk + std::mem::size_of::<DVec3>() + 4)
+            + points * Self::bytes_per_point()
+            + glossy * (VisiblePoints::bytes_per_item() + ShadowRays::bytes_per_item())
     }
 
     /// Bytes per visible (or hit) point: the point, its shadow ray and its statistics.
@@ -272,15 +296,13 @@ fn eye_pass() -> Graph<ProgressiveState> {
 
 /// The graph of one pass (PPM's walk starts its trees in waves; see the module's
 /// documentation).
-pub fn graph(stochastic: bool) -> Graph<ProgressiveState> {
+pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
     let walk = if stochastic {
         camera_walk::from_camera("camera_bounces")
     } else {
         camera_walk::from_camera_in_waves("camera_bounces")
     };
-    Graph::new(
-        if stochastic { "sppm" } else { "ppm" },
-        vec![
+    let mut nodes = vec![
             Node::nested(
                 walk,
                 "camera_walk",
@@ -291,17 +313,22 @@ pub fn graph(stochastic: bool) -> Graph<ProgressiveState> {
             Node::system(connect::sample_direct_light::SampleDirectLight),
             Node::system(trace::shadow::TraceShadow),
             Node::system(gather::direct_light::AddDirectLight),
-            Node::nested(
-                crate::photons::graph(),
-                "photon_pass",
-                |s: &mut ProgressiveState| &mut s.photon_pass,
-                crate::photons::INPUTS,
-            ),
-            Node::system(gather::photon_grid::BuildPhotonGrid),
-            Node::system(gather::visible_point_photons::GatherPhotons),
-            Node::system(gather::progressive_update::UpdatePixelEstimates),
-        ],
-    )
+    ];
+    if glossy {
+        nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
+    }
+    nodes.extend([
+        Node::nested(
+            crate::photons::graph(),
+            "photon_pass",
+            |s: &mut ProgressiveState| &mut s.photon_pass,
+            crate::photons::INPUTS,
+        ),
+        Node::system(gather::photon_grid::BuildPhotonGrid),
+        Node::system(gather::visible_point_photons::GatherPhotons),
+        Node::system(gather::progressive_update::UpdatePixelEstimates),
+    ]);
+    Graph::new(if stochastic { "sppm" } else { "ppm" }, nodes)
 }
 
 impl IntegratorState for ProgressiveState {
@@ -314,12 +341,16 @@ impl IntegratorState for ProgressiveState {
         "pass",
         "camera_walk",
         "estimates",
+        "glossy_direct",
         "photon_pass",
         "photons_emitted",
         "nonfinite",
     ];
-    fn graph(_: &SceneData, settings: &ProgressiveSettings) -> Graph<ProgressiveState> {
-        graph(settings.stochastic)
+    fn graph(data: &SceneData, settings: &ProgressiveSettings) -> Graph<ProgressiveState> {
+        graph(
+            settings.stochastic,
+            crate::photons::scene_has_followed_glossy(data, settings.follow_alpha()),
+        )
     }
 }
 
@@ -338,6 +369,9 @@ impl PassState for ProgressiveState {
         w.u64(points as u64);
         w.u64(self.hit_points_hash());
         state::write_estimates(&mut w, &self.estimates, points);
+        for &g in &self.glossy_direct {
+            w.dvec3(g);
+        }
         Some(w.0)
     }
     fn restore(&mut self, bytes: &[u8], _passes: u64) {
@@ -356,6 +390,9 @@ impl PassState for ProgressiveState {
             "the saved statistics belong to other visible points"
         );
         state::read_estimates(&mut r, &mut self.estimates, points);
+        for g in &mut self.glossy_direct {
+            *g = r.dvec3();
+        }
         r.finish();
     }
     fn report(&self) -> Vec<(&'static str, String)> {

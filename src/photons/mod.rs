@@ -59,6 +59,9 @@ pub struct PhotonTracing {
     /// Store photons at the first surface they meet (direct light). Integrators that
     /// sample direct light at their gather points leave them out.
     pub store_direct: bool,
+    /// Conductors smoother than this are followed by the integrator's camera chains
+    /// (`chains_follow`): no photon is stored on them.
+    pub follow_alpha: f32,
     /// Pass number (the sample index of every photon's random numbers).
     pub pass: u64,
     /// Photons this pass emits in all, and the index of the next one to emit.
@@ -90,6 +93,7 @@ impl PhotonTracing {
             sampler,
             max_depth,
             store_direct: true,
+            follow_alpha: FOLLOW_ALPHA,
             rays: Rays::new(wavefront),
             hits: Hits::new(wavefront),
             walkers: PhotonWalkers::new(wavefront),
@@ -226,28 +230,22 @@ impl PhotonMaps {
     }
 }
 
-/// Conductors whose GGX alpha is below this are followed by the photon mappers' camera chains
-/// (sampled, as a path tracer would) instead of gathering photons: on a near-mirror a density
-/// estimate needs the photons of a tiny solid angle, and its error stays 10-100x a path
-/// tracer's. Rougher conductors gather as diffuse surfaces do.
-pub const FOLLOW_ALPHA: f32 = 0.1;
+/// Conductors whose GGX alpha is below this are followed by the camera chains of SPPM and PM
+/// (sampled, with light sampled there under MIS, as a path tracer does) instead of gathering
+/// photons: on a near-mirror a density estimate needs the photons of a tiny solid angle, and
+/// its error stayed 10-100x a path tracer's. Measured at equal time (docs/photons/): following
+/// is better at alpha 0.02, 0.1 and 0.3, gathering at 0.8.
+pub const FOLLOW_ALPHA: f32 = 0.5;
 
-/// The follow threshold in force (`FOLLOW_ALPHA`; STAGELIGHT_FOLLOW_ALPHA overrides it while
-/// it is being measured).
-pub fn follow_alpha() -> f32 {
-    static ALPHA: std::sync::OnceLock<f32> = std::sync::OnceLock::new();
-    *ALPHA.get_or_init(|| {
-        std::env::var("STAGELIGHT_FOLLOW_ALPHA")
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(FOLLOW_ALPHA)
-    })
-}
+/// The same for PPM, whose eye rays are traced once: a followed glossy bounce is one frozen
+/// direction per eye ray (16 a pixel), so only smoother conductors are followed (measured:
+/// following is better at alpha 0.02 and 0.1, gathering at 0.3).
+pub const PPM_FOLLOW_ALPHA: f32 = 0.2;
 
 /// Whether camera chains pass through `material` (sampling it) rather than gather photons on
-/// it: smooth dielectrics, and conductors smoother than `FOLLOW_ALPHA`. Photons are not stored
-/// there (nothing gathers them), and a photon path through them to a diffuse surface is a
-/// caustic (PM's caustic map).
+/// it: smooth dielectrics, and conductors smoother than `follow_alpha` (`FOLLOW_ALPHA` or
+/// `PPM_FOLLOW_ALPHA`). Photons are not stored there (nothing gathers them), and a photon
+/// path through them to a diffuse surface is a caustic (PM's caustic map).
 #[inline]
 pub fn chains_follow(material: &crate::bsdf::Material, follow_alpha: f32) -> bool {
     use crate::bsdf::Material;
@@ -259,13 +257,25 @@ pub fn chains_follow(material: &crate::bsdf::Material, follow_alpha: f32) -> boo
 }
 
 /// Whether a scene has a material camera chains follow (and so caustics for PM's map).
-pub fn scene_has_followed(data: &SceneData) -> bool {
-    let (follow, scene) = (follow_alpha(), &data.scene);
+pub fn scene_has_followed(data: &SceneData, follow_alpha: f32) -> bool {
+    used_materials(data).any(|m| chains_follow(m, follow_alpha))
+}
+
+/// Whether a scene has a glossy surface camera chains follow (where they sample light).
+pub fn scene_has_followed_glossy(data: &SceneData, follow_alpha: f32) -> bool {
+    used_materials(data).any(|m| {
+        !matches!(m, crate::bsdf::Material::Dielectric { .. }) && chains_follow(m, follow_alpha)
+    })
+}
+
+/// The materials some triangle of the scene uses.
+fn used_materials(data: &SceneData) -> impl Iterator<Item = &crate::bsdf::Material> {
+    let scene = &data.scene;
     let mut used = vec![false; scene.materials.len()];
     for &m in &scene.triangles.material {
         used[m as usize] = true;
     }
-    (scene.materials.iter().zip(used)).any(|(m, used)| used && chains_follow(m, follow))
+    scene.materials.iter().zip(used).filter(|(_, u)| *u).map(|(m, _)| m)
 }
 
 /// Least cos between a photon's surface normal (on the side it arrived from) and the query's

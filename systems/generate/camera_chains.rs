@@ -17,7 +17,7 @@ crate::system! {
     GenerateCameraChains = "generate_camera_chains";
     on CameraWalk {
         read camera = data.scene.camera, sampler, jitter, sample_index, starts, tree, trees;
-        write chains, rays, active, points, started;
+        write chains, rays, active, points, started, glossy_points, glossy_rank;
     }
     run {
         let cam = camera.frustum();
@@ -51,14 +51,19 @@ crate::system! {
                     c.key[i] = key;
                     c.beta[i] = beta;
                     c.emitted[i] = Vec3::ZERO;
+                    c.bsdf_pdf[i] = 0.0;
                     c.depth[i] = 0;
                     c.alive[i] = true;
                 }
             });
         *active = n;
-        if tree && first == 0 && n > 0 {
-            // A new forest: its hit points are appended as its chains end.
-            *points = 0;
+        if first == 0 && n > 0 {
+            // A new walk: its glossy points (and a new forest's hit points) are appended.
+            *glossy_points = 0;
+            glossy_rank.fill(0);
+            if tree {
+                *points = 0;
+            }
         }
         *started += n;
         Flow::new(n, n)

@@ -26,7 +26,7 @@ crate::system! {
         let n = t.active;
         let scene = &data.scene;
         let (max_depth, store_direct, sampler) = (t.max_depth, t.store_direct, t.sampler);
-        let follow = crate::photons::follow_alpha();
+        let follow = t.follow_alpha;
         let chunks = n.div_ceil(CHUNK);
         t.chunk_photons.resize_with(chunks, Vec::new);
         let hits = &t.hits;
