@@ -7,6 +7,7 @@ use crate::commands::scene_stem;
 use crate::compare::BudgetUnit;
 use crate::compare::run::CompareOptions;
 use crate::compare::thesis::ThesisOptions;
+use crate::integrators::pt::Kernel;
 use crate::integrators::{Budget, IntegratorKind, RenderSettings};
 use crate::path::MisHeuristic;
 use crate::reference::{DEFAULT_REFERENCE_SEED, ReferenceBudget};
@@ -69,6 +70,12 @@ pub enum Command {
         /// Worker threads (default: all cores).
         #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
         threads: Option<u64>,
+        #[command(flatten)]
+        kernel: KernelArgs,
+        /// Bench every wavefront size from 2^10 to 2^20 paths in flight (2^16 for bdpt) and
+        /// PT's megakernel, and print them side by side.
+        #[arg(long, conflicts_with_all = ["big", "kernel", "wavefront"])]
+        sweep: bool,
     },
     /// Prints an integrator's graph for a scene: its systems in run order, with the columns
     /// each reads and writes.
@@ -219,6 +226,38 @@ pub struct SlurmArgs {
     pub command: Vec<String>,
 }
 
+/// How a sample-based render lays out its work (the image is the same either way).
+#[derive(clap::Args, Debug, Clone, Copy)]
+pub struct KernelArgs {
+    /// PT's kernel: `wavefront` (paths in waves through one system per stage) or
+    /// `megakernel` (each thread carries one path from the camera to its end).
+    #[arg(long, value_enum, default_value_t = KernelName::Wavefront)]
+    pub kernel: KernelName,
+    /// Samples in flight per wave (pt, bdpt; default 262144 for pt, 32768 for bdpt).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
+    pub wavefront: Option<u64>,
+}
+
+#[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
+pub enum KernelName {
+    Wavefront,
+    Megakernel,
+}
+
+impl KernelArgs {
+    /// `settings` with this kernel and wavefront.
+    pub fn apply(&self, settings: RenderSettings) -> RenderSettings {
+        RenderSettings {
+            kernel: match self.kernel {
+                KernelName::Wavefront => Kernel::Wavefront,
+                KernelName::Megakernel => Kernel::Megakernel,
+            },
+            wavefront: self.wavefront.map(|n| n as usize),
+            ..settings
+        }
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
     /// Scene file (RON).
@@ -257,6 +296,8 @@ pub struct RenderArgs {
     /// Output EXR (default render/SCENE_INTEGRATOR.exr); a PNG preview is written beside it.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    #[command(flatten)]
+    pub kernel: KernelArgs,
     #[command(flatten)]
     pub shard: ShardArgs,
     /// No progress bar.
@@ -473,6 +514,8 @@ pub struct ReferenceArgs {
     #[command(flatten)]
     pub photons: PhotonArgs,
     #[command(flatten)]
+    pub kernel: KernelArgs,
+    #[command(flatten)]
     pub shard: ShardArgs,
     /// No progress bar.
     #[arg(long)]
@@ -550,6 +593,9 @@ pub struct CompareArgs {
     pub thesis_photons: Vec<u64>,
     #[command(flatten)]
     pub photons: PhotonArgs,
+    /// The kernel and wavefront of the pt (and bdpt) runs.
+    #[command(flatten)]
+    pub kernel: KernelArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -690,6 +736,8 @@ fn run(cli: Cli) -> Result<i32> {
             spp,
             runs,
             threads,
+            kernel,
+            sweep,
         } => {
             crate::commands::bench::bench(&BenchOptions {
                 scene,
@@ -700,6 +748,8 @@ fn run(cli: Cli) -> Result<i32> {
                 spp,
                 runs,
                 threads: threads.map(|t| t as usize),
+                settings: kernel.apply(RenderSettings::default()),
+                sweep,
             })?;
             Ok(0)
         }
@@ -779,7 +829,7 @@ impl RenderArgs {
             scene: self.scene.clone(),
             integrator: self.integrator,
             budget,
-            settings: RenderSettings {
+            settings: self.kernel.apply(RenderSettings {
                 seed: self.seed,
                 sampler: self.sampler,
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
@@ -787,7 +837,8 @@ impl RenderArgs {
                 strategy_images: self.strategy_images.is_some(),
                 photons: self.photons.settings(),
                 mlt: self.mlt.options(),
-            },
+                ..RenderSettings::default()
+            }),
             strategy_images: self.strategy_images.clone(),
             output,
             shard: self.shard.choice(),
@@ -815,13 +866,13 @@ impl ReferenceArgs {
             scene: self.scene.clone(),
             integrator: self.integrator,
             budget,
-            settings: RenderSettings {
+            settings: self.kernel.apply(RenderSettings {
                 seed: self.seed,
                 sampler: self.sampler,
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
                 photons: self.photons.settings(),
                 ..RenderSettings::default()
-            },
+            }),
             output,
             checkpoint_every: std::time::Duration::try_from_secs_f64(self.checkpoint_every)
                 .unwrap_or(std::time::Duration::from_secs(
@@ -853,13 +904,13 @@ impl CompareArgs {
                 BudgetUnitArg::Spp => BudgetUnit::Spp,
             },
             budgets: self.budgets.clone(),
-            settings: RenderSettings {
+            settings: self.kernel.apply(RenderSettings {
                 seed: self.seed,
                 sampler: self.sampler,
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
                 photons: self.photons.settings(),
                 ..RenderSettings::default()
-            },
+            }),
             reference_spp: self.reference_spp,
             output,
             threads: self.threads.map(|t| t as usize),

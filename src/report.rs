@@ -1,5 +1,6 @@
 //! What the commands print: the end-of-render report, the bench table and the diff lines.
 
+use crate::integrators::pt::Kernel;
 use crate::integrators::{IntegratorKind, RenderOutcome, SceneData};
 use crate::metrics::ErrorMetrics;
 use crate::sysinfo::peak_memory_bytes;
@@ -191,10 +192,11 @@ impl BenchRuns {
 }
 
 /// The bench table (Markdown): median, min and max of each rate over the runs, then the
-/// last run's memory, CPU use and systems.
+/// last run's memory, CPU use and systems. `bench` names the integrator (with its kernel and
+/// wavefront where not the defaults).
 pub fn bench_table(
     scene: &Path,
-    integrator: IntegratorKind,
+    bench: &str,
     spp: u64,
     threads: usize,
     mut runs: BenchRuns,
@@ -206,7 +208,7 @@ pub fn bench_table(
         t,
         "bench {} ({}, {} spp, {} runs after a warm-up, {} threads)",
         scene.display(),
-        integrator.as_str(),
+        bench,
         spp,
         count,
         threads
@@ -278,4 +280,89 @@ pub fn diff_report(image: &Path, reference: &Path, m: &ErrorMetrics) -> String {
         m.mean.x, m.mean.y, m.mean.z, m.reference_mean.x, m.reference_mean.y, m.reference_mean.z
     );
     t
+}
+
+/// `bench --sweep`'s tables (Markdown): for each kernel and wavefront, samples/s over the runs
+/// and the state in flight; then each system's wall nanoseconds per sample (last run), where
+/// the time goes as the wavefront grows.
+pub fn sweep_table(
+    scene: &Path,
+    integrator: IntegratorKind,
+    spp: u64,
+    threads: usize,
+    rows: Vec<(Kernel, BenchRuns)>,
+) -> String {
+    let mut t = String::new();
+    let count = rows.first().map_or(0, |(_, r)| r.samples_per_s.len());
+    let _ = writeln!(
+        t,
+        "sweep {} ({}, {} spp, {} runs after a warm-up each, {} threads)",
+        scene.display(),
+        integrator.as_str(),
+        spp,
+        count,
+        threads
+    );
+    let _ = writeln!(
+        t,
+        "| kernel | paths in flight | samples/s median (min-max) | bytes per path | state MiB | CPU s / wall s |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|---|");
+    let mut systems: Vec<&'static str> = Vec::new();
+    for (_, runs) in &rows {
+        if let Some((o, _)) = &runs.last {
+            for s in &o.stats.systems {
+                if !systems.contains(&s.name) {
+                    systems.push(s.name);
+                }
+            }
+        }
+    }
+    let mut per_system = String::new();
+    let _ = writeln!(
+        per_system,
+        "\nwall ns per sample by system (last run)\n| kernel | paths in flight | {} | total |",
+        systems.join(" | ")
+    );
+    let _ = writeln!(per_system, "|---|---|{}---|", "---|".repeat(systems.len()));
+    for (kernel, runs) in rows {
+        let mut rates = runs.samples_per_s.clone();
+        rates.sort_by(f64::total_cmp);
+        let Some((o, cpu)) = &runs.last else {
+            continue;
+        };
+        let (in_flight, bytes) = match kernel {
+            Kernel::Wavefront => (o.wavefront.to_string(), o.bytes_per_path.to_string()),
+            Kernel::Megakernel => (
+                format!("{threads} (one per thread)"),
+                format!(
+                    "{} per sample of a wave of {}",
+                    o.bytes_per_path, o.wavefront
+                ),
+            ),
+        };
+        let _ = writeln!(
+            t,
+            "| {kernel} | {in_flight} | {} ({}-{}) | {bytes} | {:.1} | {:.2} |",
+            mega(rates[rates.len() / 2]),
+            mega(rates[0]),
+            mega(rates[rates.len() - 1]),
+            (o.wavefront * o.bytes_per_path) as f64 / (1 << 20) as f64,
+            cpu / o.wall.as_secs_f64(),
+        );
+        let samples = o.samples.max(1) as f64;
+        let ns = |name: &str| {
+            o.stats.get(name).map_or("".to_string(), |s| {
+                format!("{:.1}", s.time.as_secs_f64() * 1e9 / samples)
+            })
+        };
+        let cells: Vec<String> = systems.iter().map(|n| ns(n)).collect();
+        let _ = writeln!(
+            per_system,
+            "| {kernel} | {in_flight} | {} | {:.1} |",
+            cells.join(" | "),
+            o.stats.total_time().as_secs_f64() * 1e9 / samples
+        );
+    }
+    t + &per_system
 }

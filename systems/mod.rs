@@ -13,6 +13,7 @@ pub mod generate {
 /// Ray casting against the scene.
 pub mod trace {
     pub mod closest;
+    pub mod paths;
     pub mod shadow;
 }
 
@@ -31,7 +32,7 @@ pub mod shade {
     pub mod scatter_photons;
     pub mod sort_by_material;
     mod surface;
-    pub use surface::Surface;
+    pub use surface::{Scattered, Surface, scatter};
 }
 
 /// Joining paths to lights: light sampling and the shadow rays' contributions.

@@ -4,9 +4,12 @@
 //! and compared with a saved baseline (`--baseline`), as ratios.
 
 use super::big_scenes::{BIG_SCENES, scene_path, write_big_scene};
-use super::{check_outputs, check_render_memory, check_samples, check_threads, print_out};
+use super::{
+    check_kernel, check_outputs, check_render_memory, check_samples, check_threads, print_out,
+};
+use crate::integrators::pt::Kernel;
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, SceneData};
-use crate::report::{BenchRuns, bench_table};
+use crate::report::{BenchRuns, bench_table, sweep_table};
 use crate::sysinfo::cpu_seconds;
 use anyhow::{Context, Result, bail};
 use serde::{Deserialize, Serialize};
@@ -33,6 +36,10 @@ pub struct BenchOptions {
     pub save: Option<PathBuf>,
     /// Compare with the results saved here.
     pub baseline: Option<PathBuf>,
+    /// The kernel and wavefront of the renders (`--kernel`, `--wavefront`).
+    pub settings: RenderSettings,
+    /// Bench every wavefront size of `sweep_settings` (and PT's megakernel) instead.
+    pub sweep: bool,
 }
 
 /// A saved bench: the machine and each scene's measures.
@@ -64,6 +71,38 @@ impl Machine {
             target_features: target_features(),
             avx2_fma_at_run_time: crate::cpu::has_avx2_fma(),
         }
+    }
+
+    /// What differs from `other`, one phrase per field ("threads 2, not 1").
+    pub fn differences(&self, other: &Machine) -> Vec<String> {
+        let mut out = Vec::new();
+        let mut check = |what: &str, a: String, b: String| {
+            if a != b {
+                out.push(format!("{what} {a}, not {b}"));
+            }
+        };
+        check(
+            "stagelight",
+            self.stagelight.clone(),
+            other.stagelight.clone(),
+        );
+        check("CPU", self.cpu.clone(), other.cpu.clone());
+        check(
+            "threads",
+            self.threads.to_string(),
+            other.threads.to_string(),
+        );
+        check(
+            "target features",
+            self.target_features.join(","),
+            other.target_features.join(","),
+        );
+        check(
+            "AVX2+FMA at run time",
+            self.avx2_fma_at_run_time.to_string(),
+            other.avx2_fma_at_run_time.to_string(),
+        );
+        out
     }
 
     /// One line for the report.
@@ -122,9 +161,43 @@ pub struct BenchResult {
     /// The scene's file name (without its folder: results from another checkout compare).
     pub scene: String,
     pub integrator: String,
+    /// PT's kernel (files saved before kernels existed were all `wavefront`).
+    #[serde(default = "wavefront_kernel")]
+    pub kernel: String,
+    /// Samples in flight asked for (`--wavefront`); None: the integrator's default.
+    #[serde(default)]
+    pub wavefront: Option<u64>,
     pub spp: u64,
     pub triangles: u64,
     pub measures: Vec<Measure>,
+}
+
+fn wavefront_kernel() -> String {
+    Kernel::Wavefront.as_str().to_string()
+}
+
+impl BenchResult {
+    /// Whether the two are the same bench (scene, integrator, kernel, wavefront and spp), so
+    /// that their figures compare.
+    fn same_bench(&self, other: &BenchResult) -> bool {
+        self.scene == other.scene
+            && self.integrator == other.integrator
+            && self.kernel == other.kernel
+            && self.wavefront == other.wavefront
+            && self.spp == other.spp
+    }
+
+    /// The integrator with its kernel and wavefront where they are not the defaults.
+    fn label(&self) -> String {
+        let mut label = self.integrator.clone();
+        if self.kernel != Kernel::Wavefront.as_str() {
+            let _ = write!(label, " {}", self.kernel);
+        }
+        if let Some(n) = self.wavefront {
+            let _ = write!(label, " --wavefront {n}");
+        }
+        label
+    }
 }
 
 /// A measure over the runs.
@@ -156,6 +229,8 @@ impl Measure {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Comparison {
     pub scene: String,
+    /// The integrator, with its kernel and wavefront where not the defaults.
+    pub bench: String,
     pub measure: String,
     pub baseline: f64,
     pub current: f64,
@@ -176,17 +251,14 @@ pub enum Verdict {
 /// Medians closer than this share are the same whatever the ranges say.
 pub const NOISE: f64 = 0.03;
 
-/// Each measure of `current` against the same measure of the same scene, integrator and spp
-/// in `baseline`; measures or scenes the baseline lacks are left out. Worse (or better) only
-/// when the two runs' ranges do not overlap and the medians differ by more than `NOISE`.
+/// Each measure of `current` against the same measure of the same scene, integrator, kernel,
+/// wavefront and spp in `baseline`; measures or scenes the baseline lacks are left out. Worse
+/// (or better) only when the two runs' ranges do not overlap and the medians differ by more
+/// than `NOISE`.
 pub fn compare_with_baseline(current: &BenchFile, baseline: &BenchFile) -> Vec<Comparison> {
     let mut out = Vec::new();
     for r in &current.results {
-        let Some(b) = baseline
-            .results
-            .iter()
-            .find(|b| b.scene == r.scene && b.integrator == r.integrator && b.spp == r.spp)
-        else {
+        let Some(b) = baseline.results.iter().find(|b| b.same_bench(r)) else {
             continue;
         };
         for m in &r.measures {
@@ -204,6 +276,7 @@ pub fn compare_with_baseline(current: &BenchFile, baseline: &BenchFile) -> Vec<C
             };
             out.push(Comparison {
                 scene: r.scene.clone(),
+                bench: r.label(),
                 measure: m.name.clone(),
                 baseline: bm.median,
                 current: m.median,
@@ -219,10 +292,12 @@ pub fn compare_with_baseline(current: &BenchFile, baseline: &BenchFile) -> Vec<C
 pub fn comparison_table(current: &BenchFile, baseline: &BenchFile, baseline_file: &Path) -> String {
     let mut t = String::new();
     let _ = writeln!(t, "against the baseline {}", baseline_file.display());
-    if baseline.machine != current.machine {
+    let differences = baseline.machine.differences(&current.machine);
+    if !differences.is_empty() {
         let _ = writeln!(
             t,
-            "note: the baseline ran on another machine or build ({})",
+            "note: the baseline ran on another machine, build or thread count ({}): {}",
+            differences.join("; "),
             baseline.machine.describe()
         );
     }
@@ -230,12 +305,16 @@ pub fn comparison_table(current: &BenchFile, baseline: &BenchFile, baseline_file
     if rows.is_empty() {
         let _ = writeln!(
             t,
-            "no measure to compare: the baseline has no result for these scenes, integrator and spp"
+            "no measure to compare: the baseline has no result for these scenes, integrator, \
+             kernel, wavefront and spp"
         );
         return t;
     }
-    let _ = writeln!(t, "| scene | measure | baseline | now | now / baseline | |");
-    let _ = writeln!(t, "|---|---|---|---|---|---|");
+    let _ = writeln!(
+        t,
+        "| scene | bench | measure | baseline | now | now / baseline | |"
+    );
+    let _ = writeln!(t, "|---|---|---|---|---|---|---|");
     for c in rows {
         let flag = match c.verdict {
             Verdict::Better => "better",
@@ -244,8 +323,9 @@ pub fn comparison_table(current: &BenchFile, baseline: &BenchFile, baseline_file
         };
         let _ = writeln!(
             t,
-            "| {} | {} | {} | {} | {:.3}x | {flag} |",
+            "| {} | {} | {} | {} | {} | {:.3}x | {flag} |",
             c.scene,
+            c.bench,
             c.measure,
             short(c.baseline),
             short(c.current),
@@ -294,6 +374,14 @@ pub fn bench_file_json(file: &BenchFile) -> String {
 /// Benches the scene or the big scenes, prints the tables, saves and compares.
 pub fn bench(o: &BenchOptions) -> Result<()> {
     check_threads(o.threads)?;
+    if o.sweep {
+        if o.big.is_some() {
+            bail!("--sweep benches one scene, not --big");
+        }
+        sweep_settings(o.integrator, &o.settings)?;
+    } else {
+        check_kernel(o.integrator, &o.settings)?;
+    }
     let pool = super::thread_pool(o.threads)?;
     let baseline = o.baseline.as_deref().map(read_bench_file).transpose()?;
     if let Some(save) = &o.save {
@@ -326,8 +414,7 @@ pub fn bench(o: &BenchOptions) -> Result<()> {
         results: Vec::new(),
     };
     for scene in &scenes {
-        let result = bench_scene(o, &pool, scene)?;
-        file.results.push(result);
+        file.results.extend(bench_scene(o, &pool, scene)?);
     }
     if o.big.is_some() {
         print_out(&big_table(&file));
@@ -340,6 +427,37 @@ pub fn bench(o: &BenchOptions) -> Result<()> {
         eprintln!("saved {}", save.display());
     }
     Ok(())
+}
+
+/// Paths in flight that `--sweep` benches: every power of two from 2^10 to 2^20 for pt (and
+/// its megakernel last), to 2^16 for bdpt (a BDPT sample keeps about 4 kB in flight).
+pub fn sweep_settings(
+    integrator: IntegratorKind,
+    settings: &RenderSettings,
+) -> Result<Vec<RenderSettings>> {
+    let largest = match integrator.as_str() {
+        "pt" => 20,
+        "bdpt" => 16,
+        other => bail!("--sweep: only pt and bdpt render in waves of samples, not {other}"),
+    };
+    if settings.wavefront.is_some() || settings.kernel != Kernel::Wavefront {
+        bail!(
+            "--sweep chooses the kernels and wavefronts itself: leave out --kernel and --wavefront"
+        );
+    }
+    let mut out: Vec<RenderSettings> = (10..=largest)
+        .map(|k| RenderSettings {
+            wavefront: Some(1 << k),
+            ..*settings
+        })
+        .collect();
+    if integrator.as_str() == "pt" {
+        out.push(RenderSettings {
+            kernel: Kernel::Megakernel,
+            ..*settings
+        });
+    }
+    Ok(out)
 }
 
 /// The big scenes' figures side by side.
@@ -372,8 +490,13 @@ fn big_table(file: &BenchFile) -> String {
     t
 }
 
-/// Loads, builds and renders one scene: its tables printed, its figures returned.
-fn bench_scene(o: &BenchOptions, pool: &rayon::ThreadPool, path: &Path) -> Result<BenchResult> {
+/// Loads, builds and renders one scene (once per kernel and wavefront with `--sweep`): its
+/// tables printed, its figures returned (the scene's load and build figures with the first).
+fn bench_scene(
+    o: &BenchOptions,
+    pool: &rayon::ThreadPool,
+    path: &Path,
+) -> Result<Vec<BenchResult>> {
     let t = Instant::now();
     let scene = crate::scene::load(path)?;
     let load_s = t.elapsed().as_secs_f64();
@@ -395,12 +518,85 @@ fn bench_scene(o: &BenchOptions, pool: &rayon::ThreadPool, path: &Path) -> Resul
     let triangles = scene.triangles.len() as u64;
     let data = Arc::new(SceneData { scene, accel });
     check_samples("--spp", o.spp, &data)?;
-    check_render_memory(
-        o.integrator,
-        &RenderSettings::default(),
-        &data,
-        pool.current_num_threads(),
-    )?;
+    let configs = if o.sweep {
+        sweep_settings(o.integrator, &o.settings)?
+    } else {
+        vec![o.settings]
+    };
+    for settings in &configs {
+        check_render_memory(o.integrator, settings, &data, pool.current_num_threads())?;
+    }
+    let scene_name = path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into(),
+    );
+    let mut results = Vec::new();
+    let mut sweep_rows = Vec::new();
+    for settings in &configs {
+        let runs = time_renders(o, pool, &data, settings);
+        let mut measures: Vec<Measure> = runs
+            .rates()
+            .into_iter()
+            .map(|(name, values)| Measure::of(name, true, values))
+            .collect();
+        let bytes = (nodes + leaf_triangles + columns) as f64;
+        if results.is_empty() {
+            measures.push(Measure::of("scene load s", false, &[load_s]));
+            measures.push(Measure::of("tree build s", false, &build_s));
+            measures.push(Measure::of("tree + triangles bytes", false, &[bytes]));
+        }
+        results.push(BenchResult {
+            scene: scene_name.clone(),
+            integrator: o.integrator.as_str().to_string(),
+            kernel: settings.kernel.as_str().to_string(),
+            wavefront: settings.wavefront.map(|n| n as u64),
+            spp: o.spp,
+            triangles,
+            measures,
+        });
+        if o.sweep {
+            sweep_rows.push((settings.kernel, runs));
+            continue;
+        }
+        let label = results.last().map(BenchResult::label).unwrap_or_default();
+        let mut table = bench_table(path, &label, o.spp, pool.current_num_threads(), runs);
+        let _ = writeln!(
+            table,
+            "| scene | {triangles} triangles, loaded in {load_s:.2} s (file read and prepared) |\n\
+             | tree build | {} s median of {} (min {:.3}, max {:.3}) |\n\
+             | memory | tree nodes {:.1} MB, triangles in leaf order {:.1} MB, scene's triangle \
+             columns {:.1} MB: {:.1} MB, {:.0} bytes a triangle |\n",
+            short(Measure::of("", false, &build_s).median),
+            build_s.len(),
+            build_s.iter().copied().fold(f64::INFINITY, f64::min),
+            build_s.iter().copied().fold(0.0, f64::max),
+            nodes as f64 / 1e6,
+            leaf_triangles as f64 / 1e6,
+            columns as f64 / 1e6,
+            bytes / 1e6,
+            bytes / triangles.max(1) as f64,
+        );
+        print_out(&table);
+    }
+    if o.sweep {
+        print_out(&sweep_table(
+            path,
+            o.integrator,
+            o.spp,
+            pool.current_num_threads(),
+            sweep_rows,
+        ));
+    }
+    Ok(results)
+}
+
+/// One warm-up render and `o.runs` timed ones of the scene with `settings` (seeds 0, 1, ...).
+fn time_renders(
+    o: &BenchOptions,
+    pool: &rayon::ThreadPool,
+    data: &Arc<SceneData>,
+    settings: &RenderSettings,
+) -> BenchRuns {
     let stop = AtomicBool::new(false);
     let control = Control {
         stop: &stop,
@@ -409,10 +605,7 @@ fn bench_scene(o: &BenchOptions, pool: &rayon::ThreadPool, path: &Path) -> Resul
     let run_once = |seed: u64| {
         let cpu0 = cpu_seconds();
         let t = Instant::now();
-        let settings = RenderSettings {
-            seed,
-            ..RenderSettings::default()
-        };
+        let settings = RenderSettings { seed, ..*settings };
         let outcome = pool.install(|| {
             crate::integrators::render(
                 o.integrator,
@@ -431,43 +624,7 @@ fn bench_scene(o: &BenchOptions, pool: &rayon::ThreadPool, path: &Path) -> Resul
         let (outcome, wall, cpu) = run_once(r as u64);
         runs.add(outcome, wall, cpu);
     }
-    let mut measures: Vec<Measure> = runs
-        .rates()
-        .into_iter()
-        .map(|(name, values)| Measure::of(name, true, values))
-        .collect();
-    measures.push(Measure::of("scene load s", false, &[load_s]));
-    measures.push(Measure::of("tree build s", false, &build_s));
-    let bytes = (nodes + leaf_triangles + columns) as f64;
-    measures.push(Measure::of("tree + triangles bytes", false, &[bytes]));
-    let mut table = bench_table(path, o.integrator, o.spp, pool.current_num_threads(), runs);
-    let _ = writeln!(
-        table,
-        "| scene | {triangles} triangles, loaded in {load_s:.2} s (file read and prepared) |\n\
-         | tree build | {} s median of {} (min {:.3}, max {:.3}) |\n\
-         | memory | tree nodes {:.1} MB, triangles in leaf order {:.1} MB, scene's triangle \
-         columns {:.1} MB: {:.1} MB, {:.0} bytes a triangle |\n",
-        short(Measure::of("", false, &build_s).median),
-        build_s.len(),
-        build_s.iter().copied().fold(f64::INFINITY, f64::min),
-        build_s.iter().copied().fold(0.0, f64::max),
-        nodes as f64 / 1e6,
-        leaf_triangles as f64 / 1e6,
-        columns as f64 / 1e6,
-        bytes / 1e6,
-        bytes / triangles.max(1) as f64,
-    );
-    print_out(&table);
-    Ok(BenchResult {
-        scene: path.file_name().map_or_else(
-            || path.display().to_string(),
-            |n| n.to_string_lossy().into(),
-        ),
-        integrator: o.integrator.as_str().to_string(),
-        spp: o.spp,
-        triangles,
-        measures,
-    })
+    runs
 }
 
 #[cfg(test)]
@@ -487,6 +644,8 @@ mod tests {
             results: vec![BenchResult {
                 scene: "cornell_box.ron".into(),
                 integrator: "pt".into(),
+                kernel: "wavefront".into(),
+                wavefront: None,
                 spp: 32,
                 triangles: 32,
                 measures: vec![
@@ -532,6 +691,13 @@ mod tests {
         other.results[0].spp = 32;
         other.results[0].scene = "door_ajar.ron".into();
         assert!(compare_with_baseline(&other, &base).is_empty());
+        // Nor another kernel or wavefront.
+        let mut other = now.clone();
+        other.results[0].kernel = "megakernel".into();
+        assert!(compare_with_baseline(&other, &base).is_empty());
+        other.results[0].kernel = "wavefront".into();
+        other.results[0].wavefront = Some(1024);
+        assert!(compare_with_baseline(&other, &base).is_empty());
     }
 
     #[test]
@@ -540,15 +706,18 @@ mod tests {
         let now = file([0.6e6, 0.7e6, 0.8e6], [0.10, 0.11, 0.12]);
         let t = comparison_table(&now, &base, Path::new("b.json"));
         assert!(
-            t.contains("| samples/s | 1.000 M | 700.0 k | 0.700x | WORSE |"),
+            t.contains("| cornell_box.ron | pt | samples/s | 1.000 M | 700.0 k | 0.700x | WORSE |"),
             "{t}"
         );
         assert!(!t.contains("another machine"), "{t}");
         let mut elsewhere = base.clone();
         elsewhere.machine.cpu = "a slower CPU".into();
+        elsewhere.machine.threads = 1;
         let t = comparison_table(&now, &elsewhere, Path::new("b.json"));
         assert!(
-            t.contains("another machine") && t.contains("a slower CPU"),
+            t.contains("another machine")
+                && t.contains("CPU a slower CPU, not ")
+                && t.contains("threads 1, not 2"),
             "{t}"
         );
     }
@@ -561,6 +730,13 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("bench.json");
         std::fs::write(&path, bench_file_json(&f)).unwrap();
+        assert_eq!(read_bench_file(&path).unwrap(), f);
+        // A file saved before kernels existed reads as the wavefront's.
+        let old = bench_file_json(&f)
+            .replace("\"kernel\": \"wavefront\",", "")
+            .replace("\"wavefront\": null,", "");
+        assert!(!old.contains("kernel"), "{old}");
+        std::fs::write(&path, old).unwrap();
         assert_eq!(read_bench_file(&path).unwrap(), f);
         std::fs::write(&path, "{\"machine\": 3}").unwrap();
         let e = read_bench_file(&path).unwrap_err().to_string();

@@ -11,7 +11,8 @@ pub mod render;
 pub mod slurm;
 
 use crate::film::Image;
-use crate::integrators::{Budget, IntegratorKind, RenderSettings, SceneData};
+use crate::integrators::pt::{self, Kernel};
+use crate::integrators::{Budget, IntegratorKind, RenderSettings, SceneData, bdpt};
 use anyhow::{Context, Result, bail};
 use std::path::Path;
 use std::sync::Arc;
@@ -143,10 +144,18 @@ pub fn render_memory(
     let pixels = cam.width as u64 * cam.height as u64;
     let film = pixels.saturating_mul(FILM_BYTES_PER_PIXEL);
     let p = &settings.photons;
+    let wavefront = |default: usize| settings.wavefront.unwrap_or(default) as u64;
     let state = match kind.as_str() {
-        // Wavefronts of at most 2^18 (pt) and 2^15 (bdpt) paths; bdpt's film has splats.
-        "pt" => (1u64 << 18) * 300,
-        "bdpt" => (1u64 << 15) * 4200 + pixels.saturating_mul(48),
+        // Wavefronts of at most 2^18 (pt) and 2^15 (bdpt) paths unless --wavefront says
+        // otherwise; the megakernel keeps 12 bytes per sample of a wave; bdpt's film has
+        // splats.
+        "pt" => match settings.kernel {
+            Kernel::Wavefront => wavefront(pt::WAVEFRONT).saturating_mul(300),
+            Kernel::Megakernel => wavefront(pt::WAVEFRONT).saturating_mul(12),
+        },
+        "bdpt" => wavefront(bdpt::WAVEFRONT)
+            .saturating_mul(4200)
+            .saturating_add(pixels.saturating_mul(48)),
         // The photon mappers keep state per pixel, and photons.
         "pm" => pixels
             .saturating_mul(800)
@@ -163,6 +172,18 @@ pub fn render_memory(
             .saturating_add(p.photons_per_pass.saturating_mul(PHOTON_BYTES)),
     };
     film.saturating_add(state)
+}
+
+/// Refuses `--kernel megakernel` for an integrator that has none (only pt has one) and
+/// `--wavefront` for one that does not render in waves of samples (only pt and bdpt do).
+pub fn check_kernel(kind: IntegratorKind, settings: &RenderSettings) -> Result<()> {
+    if settings.kernel == Kernel::Megakernel && kind.as_str() != "pt" {
+        bail!("--kernel megakernel: only pt has a megakernel, not {kind}");
+    }
+    if settings.wavefront.is_some() && !matches!(kind.as_str(), "pt" | "bdpt") {
+        bail!("--wavefront: only pt and bdpt render in waves of samples, not {kind}");
+    }
+    Ok(())
 }
 
 /// Refuses a render whose estimated memory exceeds what this process may use.

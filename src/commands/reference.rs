@@ -52,6 +52,7 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
         bail!("{}: the output must be an .exr file", output.display());
     }
     check_threads(o.threads)?;
+    super::check_kernel(o.integrator, &o.settings)?;
     let data = load_scene(&o.scene)?;
     if let ReferenceBudget::SamplesPerPixel(spp) = o.budget {
         check_samples("--spp", spp, &data)?;

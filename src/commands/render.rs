@@ -1,8 +1,8 @@
 //! `stagelight render`: one image, its PNG preview, and the end-of-render report.
 
 use super::{
-    EXIT_INTERRUPTED, budget_bar, check_outputs, check_render_memory, check_samples, check_threads,
-    exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool,
+    EXIT_INTERRUPTED, budget_bar, check_kernel, check_outputs, check_render_memory, check_samples,
+    check_threads, exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool,
 };
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, Resume};
 use crate::reference::{Checkpoint, CheckpointHeader, checkpoint_path};
@@ -46,6 +46,7 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         bail!("--strategy-images needs --integrator bdpt");
     }
     check_threads(o.threads)?;
+    check_kernel(o.integrator, &o.settings)?;
     let data = load_scene(&o.scene)?;
     if let Budget::SamplesPerPixel(spp) = o.budget {
         check_samples("--spp", spp, &data)?;

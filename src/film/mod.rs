@@ -87,6 +87,13 @@ impl Film {
             .enumerate()
             .map(|(block, (sums, counts))| {
                 let (mut nonfinite, mut out_of_range) = (0, 0);
+                // A wave shorter than a pass covers the pixels offset.. offset + len (mod
+                // pixels): a block outside them has no sample (small waves, `--wavefront`).
+                let first = block * BLOCK;
+                let covered = |p: usize| (p + pixels - offset) % pixels < values.len();
+                if !covered(first) && !(first..first + sums.len()).contains(&offset) {
+                    return (0, 0);
+                }
                 for (j, (sum, count)) in sums.iter_mut().zip(counts).enumerate() {
                     let pixel = block * BLOCK + j;
                     let mut i = (pixel + pixels - offset) % pixels;
@@ -578,10 +585,21 @@ mod tests {
                 k => Vec3::new(k as f32 * 0.37, 1.0 / k as f32, -(k as f32)),
             })
             .collect();
-        for (first, len) in [(0u64, 5000usize), (1234, 700), (2999, 4001), (7, 1)] {
-            let (mut one_by_one, mut wave) = (Film::new(37, 41), Film::new(37, 41));
+        // On the second film (six blocks of pixels) short waves leave blocks without a
+        // sample, wrapping past the last pixel or not.
+        for (width, first, len) in [
+            (37, 0u64, 5000usize),
+            (37, 1234, 700),
+            (37, 2999, 4001),
+            (37, 7, 1),
+            (97, 1500, 300),
+            (97, 5000, 400),
+            (97, 2048, 1024),
+            (97, 3977 * 3 + 3976, 2),
+        ] {
+            let (mut one_by_one, mut wave) = (Film::new(width, 41), Film::new(width, 41));
             for (i, &v) in values[..len].iter().enumerate() {
-                one_by_one.add_sample(((first + i as u64) % (37 * 41)) as usize, v);
+                one_by_one.add_sample(((first + i as u64) % (width as u64 * 41)) as usize, v);
             }
             wave.add_wave(first, &values[..len]);
             assert_eq!(wave.fixed_sums(), one_by_one.fixed_sums());

@@ -37,6 +37,15 @@ pub trait WaveState: IntegratorState {
     /// The film and any further images (`new_passes` rendered by this run), and the bytes of
     /// wavefront state per sample.
     fn finish(self, new_passes: u64) -> (Film, Vec<(String, Image)>, usize);
+    /// Closest-hit and shadow rays traced, for a state whose graph has no trace systems to
+    /// count them (the megakernel); None: the trace systems' stats count them.
+    fn counted_rays(&self) -> Option<(u64, u64)> {
+        None
+    }
+    /// Lines the integrator adds to the render report (label, value).
+    fn notes(&self) -> Vec<(&'static str, String)> {
+        Vec::new()
+    }
 }
 
 /// A pass-based integrator: the graph runs once per pass.
@@ -75,7 +84,8 @@ pub struct Wave {
 /// Renders with a sample-based integrator until the budget is spent or a stop is asked for,
 /// continuing from `from` when given: a sample budget counts the passes already done
 /// (`SamplesPerPixel(n)` ends at pass n), a time budget counts from now. The outcome's film,
-/// passes and samples are totals, resumed passes included.
+/// passes and samples are totals, resumed passes included. Waves of up to the state's
+/// `WAVEFRONT` samples.
 pub fn render_waves<S: WaveState>(
     data: Arc<SceneData>,
     settings: S::Settings,
@@ -83,11 +93,26 @@ pub fn render_waves<S: WaveState>(
     control: &Control,
     from: Option<Resume>,
 ) -> RenderOutcome {
+    render_waves_of::<S>(data, settings, budget, control, from, S::WAVEFRONT)
+}
+
+/// `render_waves` in waves of up to `wavefront` samples (at least 1; `--wavefront N`): the
+/// paths in flight. Samples are pure functions of their ids and the film's sums exact, so the
+/// image is the same for every `wavefront`.
+pub fn render_waves_of<S: WaveState>(
+    data: Arc<SceneData>,
+    settings: S::Settings,
+    budget: Budget,
+    control: &Control,
+    from: Option<Resume>,
+    wavefront: usize,
+) -> RenderOutcome {
+    assert!(wavefront > 0, "a wave holds at least one sample");
     let cam = data.scene.camera;
     let pixels = cam.width as u64 * cam.height as u64;
     let graph = S::graph(&data, &settings);
     let first_pass = from.as_ref().map_or(0, |r| r.passes);
-    let mut plan = WavePlan::starting_at(pixels, budget, S::WAVEFRONT, first_pass);
+    let mut plan = WavePlan::starting_at(pixels, budget, wavefront, first_pass);
     let mut state = S::new(data, settings, plan.capacity());
     if let Some(from) = from {
         assert!(
@@ -108,6 +133,8 @@ pub fn render_waves<S: WaveState>(
     // A stop that arrives after the last wave interrupts nothing.
     let interrupted = control.stopped() && !plan.budget_spent();
     let new_passes = plan.passes_done() - first_pass;
+    let counted_rays = state.counted_rays();
+    let notes = state.notes();
     let (film, layers, bytes_per_path) = state.finish(new_passes);
     RenderOutcome {
         samples: plan.next,
@@ -120,7 +147,8 @@ pub fn render_waves<S: WaveState>(
         bytes_per_path,
         wavefront: plan.capacity(),
         layers,
-        notes: Vec::new(),
+        notes,
+        counted_rays,
         state: None,
     }
 }
@@ -194,6 +222,7 @@ pub fn resume_passes<S: PassState>(
         wavefront,
         layers: Vec::new(),
         notes,
+        counted_rays: None,
         state: saved,
     }
 }

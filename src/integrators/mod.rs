@@ -5,6 +5,7 @@ pub mod mlt;
 pub mod path_mlt;
 pub mod pm;
 pub mod pt;
+pub mod pt_megakernel;
 pub mod sppm;
 
 pub mod camera_walk;
@@ -75,16 +76,13 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         unbiased: true,
         resumes: true,
         options: &[],
-        render: |data, s, budget, control, from| {
-            driver::render_waves::<pt::PtState>(
-                data,
-                pt::PtSettings::from(s),
-                budget,
-                control,
-                from,
-            )
+        render: |data, s, budget, control, from| pt::render_with(data, s, budget, control, from),
+        graph: |data, s| match s.kernel {
+            pt::Kernel::Wavefront => graph_report::<pt::PtState>(data, &pt::PtSettings::from(s)),
+            pt::Kernel::Megakernel => {
+                graph_report::<pt_megakernel::MegakernelState>(data, &pt::PtSettings::from(s))
+            }
         },
-        graph: |data, s| graph_report::<pt::PtState>(data, &pt::PtSettings::from(s)),
     },
     IntegratorInfo {
         name: "bdpt",
@@ -94,7 +92,10 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         options: &["--mis", "--strategy-images"],
         render: |data, s, budget, control, from| {
             let settings = bdpt::BdptSettings::from(s);
-            driver::render_waves::<bdpt::BdptState>(data, settings, budget, control, from)
+            let wavefront = s.wavefront.unwrap_or(bdpt::WAVEFRONT);
+            driver::render_waves_of::<bdpt::BdptState>(
+                data, settings, budget, control, from, wavefront,
+            )
         },
         graph: |data, s| graph_report::<bdpt::BdptState>(data, &bdpt::BdptSettings::from(s)),
     },
@@ -362,6 +363,12 @@ pub struct RenderSettings {
     pub strategy_images: bool,
     pub photons: PhotonSettings,
     pub mlt: MltOptions,
+    /// How PT's work is laid out: wavefront systems or one path per thread (`--kernel`).
+    /// The image is the same.
+    pub kernel: pt::Kernel,
+    /// Samples in flight of the sample-based integrators (pt, bdpt; `--wavefront N`); None:
+    /// the integrator's default. The image is the same.
+    pub wavefront: Option<usize>,
 }
 
 /// Options of the Metropolis integrators (pssmlt, mmlt); None: the integrator's default.
@@ -394,6 +401,8 @@ impl Default for RenderSettings {
             strategy_images: false,
             photons: PhotonSettings::default(),
             mlt: MltOptions::default(),
+            kernel: pt::Kernel::Wavefront,
+            wavefront: None,
         }
     }
 }
@@ -495,14 +504,22 @@ pub struct RenderOutcome {
     pub notes: Vec<(&'static str, String)>,
     /// What a later run continues from (the photon mappers' saved state; `PassState::save`).
     pub state: Option<Vec<u8>>,
+    /// Closest-hit and shadow rays, where no trace system counted them (the megakernel).
+    pub counted_rays: Option<(u64, u64)>,
 }
 
 impl RenderOutcome {
     pub fn closest_rays(&self) -> u64 {
-        self.stats.get("trace_closest").map_or(0, |s| s.taken)
+        match self.counted_rays {
+            Some((closest, _)) => closest,
+            None => self.stats.get("trace_closest").map_or(0, |s| s.taken),
+        }
     }
     pub fn shadow_rays(&self) -> u64 {
-        self.stats.get("trace_shadow").map_or(0, |s| s.taken)
+        match self.counted_rays {
+            Some((_, shadow)) => shadow,
+            None => self.stats.get("trace_shadow").map_or(0, |s| s.taken),
+        }
     }
 }
 

@@ -8,9 +8,10 @@
 use crate::bsdf::MaterialKind;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};
 use crate::film::{Film, Image};
-use crate::integrators::driver::render_waves;
+use crate::integrators::driver::{render_waves, render_waves_of};
 use crate::integrators::{
-    Budget, Control, IntegratorState, RenderOutcome, RenderSettings, SceneData, Wave, WaveState,
+    Budget, Control, IntegratorState, RenderOutcome, RenderSettings, Resume, SceneData, Wave,
+    WaveState,
 };
 use crate::pipeline::{Graph, Node};
 use crate::sampling::{Sampler, SamplerKind};
@@ -34,8 +35,8 @@ pub fn bounce_dim(depth: u32) -> u32 {
     2 + depth * DIMS_PER_BOUNCE
 }
 
-/// Paths in flight at once: large enough to keep both cores busy between stage barriers,
-/// small enough to stay in a few tens of megabytes.
+/// Paths in flight at once by default (`--wavefront N` sets another): large enough to keep
+/// both cores busy between stage barriers, small enough to stay in a few tens of megabytes.
 pub const WAVEFRONT: usize = 1 << 18;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -251,6 +252,54 @@ impl WaveState for PtState {
     }
     fn finish(self, _: u64) -> (Film, Vec<(String, Image)>, usize) {
         (self.film, Vec::new(), PtState::bytes_per_path())
+    }
+}
+
+/// How the path tracer lays out its work (`--kernel`); both render the same image, bit for
+/// bit.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum Kernel {
+    /// Waves of paths through the graph's systems, a queue per stage (`graph` above).
+    #[default]
+    Wavefront,
+    /// One path per thread from the camera to its end (`pt_megakernel`).
+    Megakernel,
+}
+
+impl Kernel {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Kernel::Wavefront => "wavefront",
+            Kernel::Megakernel => "megakernel",
+        }
+    }
+}
+
+impl std::fmt::Display for Kernel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// PT as a render asks for it: its kernel and paths in flight (`--kernel`, `--wavefront`).
+pub fn render_with(
+    data: Arc<SceneData>,
+    s: &RenderSettings,
+    budget: Budget,
+    control: &Control,
+    from: Option<Resume>,
+) -> RenderOutcome {
+    let settings = PtSettings::from(s);
+    let wavefront = s.wavefront.unwrap_or(WAVEFRONT);
+    match s.kernel {
+        Kernel::Wavefront => {
+            render_waves_of::<PtState>(data, settings, budget, control, from, wavefront)
+        }
+        Kernel::Megakernel => {
+            render_waves_of::<crate::integrators::pt_megakernel::MegakernelState>(
+                data, settings, budget, control, from, wavefront,
+            )
+        }
     }
 }
 

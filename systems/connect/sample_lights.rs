@@ -6,7 +6,7 @@ use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
 use crate::pipeline::Flow;
-use crate::sampling::{Sampler, power_heuristic};
+use crate::sampling::{SampleKey, Sampler, power_heuristic};
 use crate::systems::shade::Surface;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -75,30 +75,66 @@ fn sample_chunk(
     for i in 0..c.len() {
         c.t_max[i] = 0.0;
         let surf = Surface::at(data, &surfaces, hits.triangle[i], i, rays.dir[i]);
-        let key = paths.key[i];
-        let dim = bounce_dim(paths.depth[i]);
-        let Some(light) = data.scene.sample_light_from(
-            surf.p,
-            surf.p_error,
-            surf.ng,
-            surf.wo,
-            sampler.get(key, dim + DIM_LIGHT_PICK),
-            sampler.get2(key, dim + DIM_LIGHT_POINT),
-        ) else {
-            continue;
-        };
-        let wi_local = surf.frame.to_local(light.wi);
-        let f = surf.material.eval(surf.wo_local, wi_local);
-        if f == Vec3::ZERO {
-            continue;
+        if let Some(light) = light_sample(
+            data,
+            sampler,
+            &surf,
+            paths.key[i],
+            paths.depth[i],
+            paths.throughput[i],
+        ) {
+            c.origin[i] = light.origin;
+            c.dir[i] = light.dir;
+            c.t_max[i] = light.t_max;
+            c.contribution[i] = light.contribution;
+            cast += 1;
         }
-        let weight = power_heuristic(light.pdf, surf.material.pdf(surf.wo_local, wi_local));
-        c.origin[i] = light.origin;
-        c.dir[i] = light.dir;
-        c.t_max[i] = light.t_max;
-        c.contribution[i] =
-            paths.throughput[i] * f * (wi_local.z.abs() * weight / light.pdf) * light.radiance;
-        cast += 1;
     }
     cast
+}
+
+/// A shadow ray toward a light sample and what it brings if unoccluded.
+#[derive(Clone, Copy, Debug)]
+pub struct LightConnection {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub t_max: f32,
+    /// Radiance the path receives if the ray is unoccluded (MIS weight included).
+    pub contribution: Vec3,
+}
+
+/// Next-event estimation at a path's surface (bounce `depth`, random numbers from `key`,
+/// `throughput` so far): an emitter point and the shadow ray to it, or None when the sample
+/// brings nothing. The one per-path step of this system, shared with the megakernel
+/// (`systems/trace/paths.rs`). The scene must have an emitter.
+#[inline(always)]
+pub fn light_sample(
+    data: &SceneData,
+    sampler: &Sampler,
+    surf: &Surface,
+    key: SampleKey,
+    depth: u32,
+    throughput: Vec3,
+) -> Option<LightConnection> {
+    let dim = bounce_dim(depth);
+    let light = data.scene.sample_light_from(
+        surf.p,
+        surf.p_error,
+        surf.ng,
+        surf.wo,
+        sampler.get(key, dim + DIM_LIGHT_PICK),
+        sampler.get2(key, dim + DIM_LIGHT_POINT),
+    )?;
+    let wi_local = surf.frame.to_local(light.wi);
+    let f = surf.material.eval(surf.wo_local, wi_local);
+    if f == Vec3::ZERO {
+        return None;
+    }
+    let weight = power_heuristic(light.pdf, surf.material.pdf(surf.wo_local, wi_local));
+    Some(LightConnection {
+        origin: light.origin,
+        dir: light.dir,
+        t_max: light.t_max,
+        contribution: throughput * f * (wi_local.z.abs() * weight / light.pdf) * light.radiance,
+    })
 }

@@ -2,6 +2,7 @@
 //! depends on how the work was split between threads.
 
 use crate::integrators::pt::PtState;
+use crate::integrators::pt_megakernel::MegakernelState;
 use crate::pipeline::Flow;
 
 pub struct AccumulateFilm;
@@ -9,6 +10,10 @@ pub struct AccumulateFilm;
 crate::system! {
     AccumulateFilm = "accumulate_film";
     on PtState {
+        read sample_radiance, wave, pixels;
+        write film;
+    }
+    on MegakernelState {
         read sample_radiance, wave, pixels;
         write film;
     }

@@ -4,7 +4,8 @@
 use crate::components::{Path, PathFlags};
 use crate::integrators::pt::{DIM_PIXEL, PtState};
 use crate::pipeline::Flow;
-use crate::sampling::Stream;
+use crate::sampling::{SampleKey, Sampler, Stream};
+use crate::scene::Frustum;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -19,7 +20,6 @@ crate::system! {
     run {
         let n = wave.len;
         let cam = camera.frustum();
-        let w = cam.width as u64;
         let (first, pixels) = (wave.first, *pixels);
         sample_radiance[..n].fill(Vec3::ZERO);
         let rays = rays.chunks_mut(0..n);
@@ -27,18 +27,14 @@ crate::system! {
         rays.into_par_iter().zip(paths).for_each(|(r, mut p)| {
             for i in 0..r.len() {
                 let slot = r.start + i;
-                let g = first + slot as u64;
-                let pixel = g % pixels;
-                let key = sampler.key(Stream::Camera, pixel, g / pixels);
-                let jitter = sampler.get2(key, DIM_PIXEL);
-                let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
-                r.origin[i] = cam.position;
-                r.dir[i] = cam.direction(raster);
+                let ray = camera_ray(sampler, &cam, pixels, first + slot as u64);
+                r.origin[i] = ray.origin;
+                r.dir[i] = ray.dir;
                 p.set(
                     i,
                     Path {
                         sample: slot as u32,
-                        key,
+                        key: ray.key,
                         throughput: Vec3::ONE,
                         radiance: Vec3::ZERO,
                         depth: 0,
@@ -50,5 +46,29 @@ crate::system! {
         });
         *active = n;
         Flow::new(n, n)
+    }
+}
+
+/// The camera ray of one sample and the key of its random numbers.
+#[derive(Clone, Copy, Debug)]
+pub struct CameraRay {
+    pub key: SampleKey,
+    pub origin: Vec3,
+    pub dir: Vec3,
+}
+
+/// The camera ray of global sample `g` (pixel `g % pixels`, sample index `g / pixels`): the
+/// one per-sample step of this system, shared with the megakernel (`systems/trace/paths.rs`).
+#[inline(always)]
+pub fn camera_ray(sampler: &Sampler, cam: &Frustum, pixels: u64, g: u64) -> CameraRay {
+    let w = cam.width as u64;
+    let pixel = g % pixels;
+    let key = sampler.key(Stream::Camera, pixel, g / pixels);
+    let jitter = sampler.get2(key, DIM_PIXEL);
+    let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
+    CameraRay {
+        key,
+        origin: cam.position,
+        dir: cam.direction(raster),
     }
 }

@@ -1,12 +1,15 @@
 //! Adds the light of emitters that paths hit, weighted by multiple importance sampling against
 //! the light sampling that could also have found them.
 
+use crate::accel::Hit;
 use crate::components::{MISS, PathFlags};
 use crate::geometry::surface_point;
+use crate::integrators::SceneData;
 use crate::integrators::pt::PtState;
 use crate::pipeline::Flow;
 use crate::sampling::power_heuristic;
 use crate::scene::NO_EMITTER;
+use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct AddEmittedLight;
@@ -18,8 +21,6 @@ crate::system! {
         write paths;
     }
     run {
-        let emitters = &data.scene.emitters;
-        let tris = &data.scene.triangles;
         let found: usize = paths
             .chunks_mut(0..*live)
             .into_par_iter()
@@ -28,35 +29,62 @@ crate::system! {
                 let range = p.start..p.start + p.len();
                 let (hits, rays) = (hits.view(range.clone()), rays.view(range));
                 for i in 0..p.len() {
-                    let tri = hits.triangle[i];
-                    if tri == MISS {
+                    let triangle = hits.triangle[i];
+                    if triangle == MISS {
                         continue;
                     }
-                    let e = tris.emitter[tri as usize];
-                    if e == NO_EMITTER {
-                        continue;
+                    let hit = Hit { t: hits.t[i], triangle, b1: hits.b1[i], b2: hits.b2[i] };
+                    if let Some(light) = emitted_light(
+                        data,
+                        &hit,
+                        rays.dir[i],
+                        p.throughput[i],
+                        p.flags[i],
+                        p.bsdf_pdf[i],
+                    ) {
+                        p.radiance[i] += light;
+                        found += 1;
                     }
-                    let sp = surface_point(tris, tri, hits.b1[i], hits.b2[i]);
-                    let cos_light = -rays.dir[i].dot(sp.ng);
-                    if cos_light <= 0.0 {
-                        continue; // emitters are one-sided
-                    }
-                    found += 1;
-                    let le = emitters.radiance[e as usize];
-                    let weight = if p.flags[i].has(PathFlags::SPECULAR) {
-                        1.0
-                    } else {
-                        let t = hits.t[i];
-                        let light_pdf =
-                            emitters.pmf[e as usize] / emitters.area[e as usize] * t * t
-                                / cos_light;
-                        power_heuristic(p.bsdf_pdf[i], light_pdf)
-                    };
-                    p.radiance[i] += p.throughput[i] * le * weight;
                 }
                 found
             })
             .sum();
         Flow::new(*live, found)
     }
+}
+
+/// What a path of `throughput` that found `hit` along `dir` receives from it if it is an
+/// emitter seen from its front (emitters are one-sided), MIS-weighted against light sampling
+/// unless the path's last scattering was specular (`flags`) and light sampling could not have
+/// found it; `bsdf_pdf` is the density of the BSDF sample that made the ray. The one
+/// per-path step of this system, shared with the megakernel (`systems/trace/paths.rs`).
+#[inline(always)]
+pub fn emitted_light(
+    data: &SceneData,
+    hit: &Hit,
+    dir: Vec3,
+    throughput: Vec3,
+    flags: PathFlags,
+    bsdf_pdf: f32,
+) -> Option<Vec3> {
+    let emitters = &data.scene.emitters;
+    let tris = &data.scene.triangles;
+    let e = tris.emitter[hit.triangle as usize];
+    if e == NO_EMITTER {
+        return None;
+    }
+    let sp = surface_point(tris, hit.triangle, hit.b1, hit.b2);
+    let cos_light = -dir.dot(sp.ng);
+    if cos_light <= 0.0 {
+        return None;
+    }
+    let le = emitters.radiance[e as usize];
+    let weight = if flags.has(PathFlags::SPECULAR) {
+        1.0
+    } else {
+        let t = hit.t;
+        let light_pdf = emitters.pmf[e as usize] / emitters.area[e as usize] * t * t / cos_light;
+        power_heuristic(bsdf_pdf, light_pdf)
+    };
+    Some(throughput * le * weight)
 }

@@ -6,6 +6,7 @@ use crate::components::PathFlags;
 use crate::integrators::pt::{DIM_ROULETTE, PtState, bounce_dim};
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
+use crate::sampling::{SampleKey, Sampler};
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -27,14 +28,10 @@ crate::system! {
             .map(|(p, r)| {
                 let mut survivors = 0;
                 for i in 0..p.len() {
-                    if !p.flags[i].has(PathFlags::DEAD) && p.depth[i] >= ROULETTE_DEPTH {
-                        let q = survival(p.throughput[i], 1.0);
-                        let u = sampler.get(p.key[i], bounce_dim(p.depth[i] - 1) + DIM_ROULETTE);
-                        if survives(q, u) {
-                            p.throughput[i] /= q;
-                        } else {
-                            p.flags[i].set(PathFlags::DEAD, true);
-                        }
+                    if !p.flags[i].has(PathFlags::DEAD)
+                        && !roulette(sampler, p.key[i], p.depth[i], &mut p.throughput[i])
+                    {
+                        p.flags[i].set(PathFlags::DEAD, true);
                     }
                     if p.flags[i].has(PathFlags::DEAD) {
                         r.dir[i] = Vec3::ZERO;
@@ -46,5 +43,24 @@ crate::system! {
             })
             .sum();
         Flow::new(taken, survivors)
+    }
+}
+
+/// Russian roulette for a path that has scattered `depth` times (random numbers from `key`):
+/// whether it goes on, its throughput divided by its survival probability if so. Paths play
+/// from `ROULETTE_DEPTH` bounces on. The one per-path step of this system, shared with the
+/// megakernel (`systems/trace/paths.rs`).
+#[inline(always)]
+pub fn roulette(sampler: &Sampler, key: SampleKey, depth: u32, throughput: &mut Vec3) -> bool {
+    if depth < ROULETTE_DEPTH {
+        return true;
+    }
+    let q = survival(*throughput, 1.0);
+    let u = sampler.get(key, bounce_dim(depth - 1) + DIM_ROULETTE);
+    if survives(q, u) {
+        *throughput /= q;
+        true
+    } else {
+        false
     }
 }

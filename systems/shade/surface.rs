@@ -5,12 +5,12 @@ use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::{
     Hits, PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView,
 };
-use crate::geometry::offset_ray_origin;
+use crate::geometry::{SurfacePoint, offset_ray_origin};
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_BSDF, bounce_dim};
 use crate::math::Frame;
 use crate::pipeline::Flow;
-use crate::sampling::Sampler;
+use crate::sampling::{SampleKey, Sampler};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::ops::Range;
@@ -39,10 +39,24 @@ impl Surface {
         i: usize,
         dir: Vec3,
     ) -> Surface {
+        let point = SurfacePoint {
+            p: surfaces.p[i],
+            p_error: surfaces.p_error[i],
+            ng: surfaces.ng[i],
+            ns: surfaces.ns[i],
+        };
+        Surface::new(data, triangle, &point, dir)
+    }
+
+    /// The shading point at `point` on `triangle` (its shading normal in the hemisphere of
+    /// its geometric one, as `interpolate_surfaces::shading_point` makes it), seen along
+    /// `dir`.
+    #[inline(always)]
+    pub fn new(data: &SceneData, triangle: u32, point: &SurfacePoint, dir: Vec3) -> Surface {
         let tris = &data.scene.triangles;
         let material = data.scene.materials[tris.material[triangle as usize] as usize];
-        let mut ng = surfaces.ng[i];
-        let mut ns = surfaces.ns[i];
+        let mut ng = point.ng;
+        let mut ns = point.ns;
         let wo = -dir;
         // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
         if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
@@ -51,8 +65,8 @@ impl Surface {
         }
         let frame = Frame::from_normal(ns);
         Surface {
-            p: surfaces.p[i],
-            p_error: surfaces.p_error[i],
+            p: point.p,
+            p_error: point.p_error,
             ng,
             frame,
             wo,
@@ -141,32 +155,55 @@ fn scatter_chunk<const KIND: u8>(
             p.flags[i].set(PathFlags::DEAD, true);
             continue;
         }
-        let u = sampler.get2(p.key[i], bounce_dim(p.depth[i]) + DIM_BSDF);
-        let next = sample_direction(
-            &surf.material,
-            &surf.frame,
-            surf.ng,
-            surf.wo,
-            surf.wo_local,
-            u,
-            TransportMode::Radiance,
-        )
-        .and_then(|(bs, wi)| {
-            let weight = bs.value * bs.wi.z.abs() / bs.pdf;
-            (weight.max_element() > 0.0).then_some((bs, wi, weight))
-        });
-        match next {
-            Some((bs, wi, weight)) => {
-                p.throughput[i] *= weight;
-                p.bsdf_pdf[i] = bs.pdf;
-                p.flags[i].set(PathFlags::SPECULAR, bs.delta);
+        match scatter(sampler, &surf, p.key[i], p.depth[i]) {
+            Some(next) => {
+                p.throughput[i] *= next.weight;
+                p.bsdf_pdf[i] = next.pdf;
+                p.flags[i].set(PathFlags::SPECULAR, next.delta);
                 p.depth[i] += 1;
-                r.origin[i] = surf.spawn(wi);
-                r.dir[i] = wi;
+                r.origin[i] = next.origin;
+                r.dir[i] = next.dir;
                 scattered += 1;
             }
             None => p.flags[i].set(PathFlags::DEAD, true),
         }
     }
     scattered
+}
+
+/// Where a path goes on from a surface: what its throughput is multiplied by, the density
+/// and kind of the BSDF sample (for MIS at the emitter it may find next), and its next ray.
+#[derive(Clone, Copy, Debug)]
+pub struct Scattered {
+    pub weight: Vec3,
+    pub pdf: f32,
+    pub delta: bool,
+    pub origin: Vec3,
+    pub dir: Vec3,
+}
+
+/// The BSDF sample of a path at bounce `depth` (its random numbers from `key`), or None when
+/// the sample carries nothing or leaks through the surface and the path ends: the one
+/// per-path step of the shading systems, shared with the megakernel
+/// (`systems/trace/paths.rs`).
+#[inline(always)]
+pub fn scatter(sampler: &Sampler, surf: &Surface, key: SampleKey, depth: u32) -> Option<Scattered> {
+    let u = sampler.get2(key, bounce_dim(depth) + DIM_BSDF);
+    let (bs, wi) = sample_direction(
+        &surf.material,
+        &surf.frame,
+        surf.ng,
+        surf.wo,
+        surf.wo_local,
+        u,
+        TransportMode::Radiance,
+    )?;
+    let weight = bs.value * bs.wi.z.abs() / bs.pdf;
+    (weight.max_element() > 0.0).then(|| Scattered {
+        weight,
+        pdf: bs.pdf,
+        delta: bs.delta,
+        origin: surf.spawn(wi),
+        dir: wi,
+    })
 }

@@ -16,6 +16,7 @@ mod fuzz;
 mod fuzz_targets;
 mod graph;
 mod hostile;
+mod kernels;
 mod mlt;
 mod path_mlt;
 mod photon_checkpoint;

@@ -202,3 +202,23 @@ fn mlt_same_image_for_any_thread_count() {
         assert!(images[0] == images[1] && images[1] == images[2], "{name}");
     }
 }
+
+/// The bootstrap may evaluate in waves wider than the chains (path-space MLT's seeding does):
+/// with its size fixed, the wave width changes neither the seeds nor the image.
+#[test]
+fn mlt_bootstrap_wave_width_changes_nothing() {
+    for (multiplexed, name) in BOTH {
+        let render = |wave: usize| {
+            let mut s = settings(multiplexed, 11, 6, 4);
+            s.bootstrap = Some(3000);
+            s.bootstrap_wave = wave;
+            let state = run("door_ajar.ron", 16, s);
+            (image(&state).pixels, state.normalisation())
+        };
+        let narrow = render(0);
+        let wide = render(8192);
+        assert!(narrow.1 > 0.0, "{name}: no light found");
+        assert_eq!(narrow.1, wide.1, "{name}: b");
+        assert!(narrow.0 == wide.0, "{name}: images differ");
+    }
+}
