@@ -397,8 +397,8 @@ pub struct PhotonArgs {
     /// Fraction of each pass's photons a pixel keeps, in (0, 1) (ppm, sppm).
     #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_ALPHA, value_parser = parse_alpha)]
     pub alpha: f32,
-    /// Initial gather radius in scene units (ppm, sppm; default: 0.5% of the scene's
-    /// bounding-box diagonal).
+    /// Initial gather radius in scene units (default: 1% of the scene's bounding-box diagonal
+    /// for sppm, 0.5% for ppm).
     #[arg(long, value_parser = parse_radius)]
     pub radius: Option<f32>,
     /// Eye-ray trees per pixel, jittered over it as a stratified net (ppm: its hit points are

@@ -60,8 +60,6 @@ pub struct CameraWalk {
     pub tree: bool,
     /// Per chunk of chains, the branches it split off this bounce (started in chunk order).
     pub spawned: Vec<Vec<Branch>>,
-    /// Conductors smoother than this are followed (`photons::chains_follow`).
-    pub follow_alpha: f32,
     /// Sample light at the followed glossy surfaces (camera walks; not PM's gather walk,
     /// whose emission the caustic map covers).
     pub direct_light: bool,
@@ -113,7 +111,6 @@ pub const INPUTS: &[&str] = &[
     "tree",
     "spawned",
     "direct_light",
-    "follow_alpha",
     "glossy",
     "glossy_points",
     "glossy_rank",
@@ -145,7 +142,6 @@ impl CameraWalk {
             tree: false,
             spawned: Vec::new(),
             direct_light: true,
-            follow_alpha: crate::photons::FOLLOW_ALPHA,
             glossy: VisiblePoints::new(0),
             glossy_points: 0,
             glossy_rank: vec![0; slots],
@@ -153,12 +149,10 @@ impl CameraWalk {
         }
     }
 
-    /// Makes the walk PPM's: `trees` ray trees per pixel, their hit points appended, following
-    /// conductors smoother than `photons::PPM_FOLLOW_ALPHA`.
+    /// Makes the walk PPM's: `trees` ray trees per pixel, their hit points appended.
     pub fn trace_trees(&mut self, trees: u32, seed: u64) {
         let cam = self.data.scene.camera;
         self.tree = true;
-        self.follow_alpha = crate::photons::PPM_FOLLOW_ALPHA;
         self.points = 0;
         self.trees = trees.max(1);
         self.jitter = Sampler::new(SamplerKind::Sobol, seed, cam.width, cam.height)

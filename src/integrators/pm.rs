@@ -222,7 +222,7 @@ impl IntegratorState for PmState {
         graph(
             settings,
             has_caustics(data),
-            crate::photons::scene_has_followed_glossy(data, crate::photons::FOLLOW_ALPHA),
+            crate::photons::scene_has_followed_glossy(data),
         )
     }
 }
@@ -261,7 +261,7 @@ impl PassState for PmState {
 /// Whether the scene has surfaces camera chains follow (specular, or nearly: see
 /// `photons::chains_follow`), and so a caustic map.
 fn has_caustics(data: &SceneData) -> bool {
-    crate::photons::scene_has_followed(data, crate::photons::FOLLOW_ALPHA)
+    crate::photons::scene_has_followed(data)
 }
 
 /// Renders with PM: the photon maps once, then passes of one camera sample per pixel until

@@ -48,8 +48,14 @@ use std::sync::Arc;
 pub const DEFAULT_PHOTONS_PER_PASS: u64 = 250_000;
 /// Default alpha: the fraction of new photons a pass keeps.
 pub const DEFAULT_ALPHA: f32 = 0.7;
-/// Default initial radius, as a fraction of the scene's bounding-box diagonal.
-pub const DEFAULT_RADIUS_FRACTION: f32 = 0.005;
+/// SPPM's default initial radius, as a fraction of the scene's bounding-box diagonal: of
+/// 0.25%, 0.5%, 1% and 2%, 1% has the least relMSE over cornell_box, torus_glass and door_ajar
+/// at 10 s (the geometric mean of each scene's relMSE, less its reference's own noise, over
+/// the scene's best: 1.12 against 1.50 for 0.5%; docs/photons/README.md).
+pub const SPPM_RADIUS_FRACTION: f32 = 0.01;
+/// PPM's default initial radius, as a fraction of the scene's diagonal (not re-measured: its
+/// torus_glass curves in docs/photons/README.md are at 0.5%).
+pub const PPM_RADIUS_FRACTION: f32 = 0.005;
 /// Default eye-ray trees per pixel of PPM.
 pub const DEFAULT_EYE_RAYS: u32 = 16;
 
@@ -63,8 +69,8 @@ pub struct ProgressiveSettings {
     pub max_depth: u32,
     pub photons_per_pass: u64,
     pub alpha: f32,
-    /// Initial gather radius in scene units (`None`: `DEFAULT_RADIUS_FRACTION` of the scene
-    /// diagonal).
+    /// Initial gather radius in scene units (`None`: `SPPM_RADIUS_FRACTION` or
+    /// `PPM_RADIUS_FRACTION` of the scene diagonal).
     pub initial_radius: Option<f32>,
     /// SPPM (true): new visible points every pass. PPM (false): pass 0's, kept.
     pub stochastic: bool,
@@ -115,21 +121,16 @@ impl ProgressiveSettings {
             .saturating_add(points.saturating_mul(ProgressiveState::bytes_per_point() as u64))
     }
 
-    /// Conductors smoother than this are followed by the camera chains
-    /// (`photons::chains_follow`): PPM's eye rays, traced once, follow fewer.
-    pub fn follow_alpha(&self) -> f32 {
-        if self.stochastic {
-            crate::photons::FOLLOW_ALPHA
-        } else {
-            crate::photons::PPM_FOLLOW_ALPHA
-        }
-    }
-
     /// The initial radius in `scene`.
     pub fn radius_in(&self, data: &SceneData) -> f32 {
         self.initial_radius.unwrap_or_else(|| {
             let s = &data.scene;
-            DEFAULT_RADIUS_FRACTION * (s.bounds_max - s.bounds_min).length()
+            let fraction = if self.stochastic {
+                SPPM_RADIUS_FRACTION
+            } else {
+                PPM_RADIUS_FRACTION
+            };
+            fraction * (s.bounds_max - s.bounds_min).length()
         })
     }
 }
@@ -170,7 +171,6 @@ impl ProgressiveState {
         let mut photon_pass = PhotonPass::new(data.clone(), sampler, settings.max_depth);
         // Direct light comes from light sampling at the visible points.
         photon_pass.tracing.store_direct = false;
-        photon_pass.tracing.follow_alpha = settings.follow_alpha();
         let mut camera_walk = CameraWalk::new(data.clone(), sampler, settings.max_depth);
         if !settings.stochastic {
             // PPM: the ray trees, whose hit points the first pass appends.
@@ -303,16 +303,16 @@ pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
         camera_walk::from_camera_in_waves("camera_bounces")
     };
     let mut nodes = vec![
-            Node::nested(
-                walk,
-                "camera_walk",
-                |s: &mut ProgressiveState| &mut s.camera_walk,
-                camera_walk::INPUTS,
-            ),
-            Node::system(shade::order_hit_points::OrderHitPoints),
-            Node::system(connect::sample_direct_light::SampleDirectLight),
-            Node::system(trace::shadow::TraceShadow),
-            Node::system(gather::direct_light::AddDirectLight),
+        Node::nested(
+            walk,
+            "camera_walk",
+            |s: &mut ProgressiveState| &mut s.camera_walk,
+            camera_walk::INPUTS,
+        ),
+        Node::system(shade::order_hit_points::OrderHitPoints),
+        Node::system(connect::sample_direct_light::SampleDirectLight),
+        Node::system(trace::shadow::TraceShadow),
+        Node::system(gather::direct_light::AddDirectLight),
     ];
     if glossy {
         nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
@@ -349,7 +349,7 @@ impl IntegratorState for ProgressiveState {
     fn graph(data: &SceneData, settings: &ProgressiveSettings) -> Graph<ProgressiveState> {
         graph(
             settings.stochastic,
-            crate::photons::scene_has_followed_glossy(data, settings.follow_alpha()),
+            crate::photons::scene_has_followed_glossy(data),
         )
     }
 }
@@ -411,7 +411,14 @@ impl PassState for ProgressiveState {
                 self.camera_walk.trees
             )
         };
-        vec![("state", line)]
+        let s = &self.data.scene;
+        let diagonal = (s.bounds_max - s.bounds_min).length();
+        let radius = self.settings.radius_in(&self.data);
+        let radius = format!(
+            "initial {radius:.4e} ({:.3}% of the scene's diagonal {diagonal:.4e})",
+            100.0 * radius / diagonal
+        );
+        vec![("state", line), ("radius", radius)]
     }
     fn finish(self, passes: u64) -> (Film, usize, usize) {
         (self.film(passes), self.bytes_per_pixel(), self.pixels)

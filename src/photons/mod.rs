@@ -59,9 +59,6 @@ pub struct PhotonTracing {
     /// Store photons at the first surface they meet (direct light). Integrators that
     /// sample direct light at their gather points leave them out.
     pub store_direct: bool,
-    /// Conductors smoother than this are followed by the integrator's camera chains
-    /// (`chains_follow`): no photon is stored on them.
-    pub follow_alpha: f32,
     /// Pass number (the sample index of every photon's random numbers).
     pub pass: u64,
     /// Photons this pass emits in all, and the index of the next one to emit.
@@ -93,7 +90,6 @@ impl PhotonTracing {
             sampler,
             max_depth,
             store_direct: true,
-            follow_alpha: FOLLOW_ALPHA,
             rays: Rays::new(wavefront),
             hits: Hits::new(wavefront),
             walkers: PhotonWalkers::new(wavefront),
@@ -230,42 +226,37 @@ impl PhotonMaps {
     }
 }
 
-/// Conductors whose GGX alpha is below this are followed by the camera chains of SPPM and PM
+/// Conductors whose GGX alpha is below this are followed by the photon mappers' camera chains
 /// (sampled, with light sampled there under MIS, as a path tracer does) instead of gathering
-/// photons: on a near-mirror a density estimate needs the photons of a tiny solid angle, and
-/// its error stayed 10-100x a path tracer's. Measured at equal time (docs/photons/): following
-/// is better at alpha 0.02, 0.1 and 0.3, gathering at 0.8.
-pub const FOLLOW_ALPHA: f32 = 0.5;
-
-/// The same for PPM, whose eye rays are traced once: a followed glossy bounce is one frozen
-/// direction per eye ray (16 a pixel), so only smoother conductors are followed (measured:
-/// following is better at alpha 0.02 and 0.1, gathering at 0.3).
-pub const PPM_FOLLOW_ALPHA: f32 = 0.2;
+/// photons: on a near-mirror a density estimate needs the photons of a tiny solid angle.
+/// Measured at 20 s on docs/mlt/mirror_box.ron (docs/photons/README.md): on its mirror (alpha
+/// 0.02) following cut SPPM's and PPM's relMSE 23x; on its rough block (alpha 0.3) gathering
+/// was better (SPPM 2.5e-3 against 8.3e-3 following).
+pub const FOLLOW_ALPHA: f32 = 0.2;
 
 /// Whether camera chains pass through `material` (sampling it) rather than gather photons on
-/// it: smooth dielectrics, and conductors smoother than `follow_alpha` (`FOLLOW_ALPHA` or
-/// `PPM_FOLLOW_ALPHA`). Photons are not stored there (nothing gathers them), and a photon
-/// path through them to a diffuse surface is a caustic (PM's caustic map).
+/// it: smooth dielectrics, and conductors smoother than `FOLLOW_ALPHA`. Photons are not stored
+/// there (nothing gathers them), and a photon path through them to a diffuse surface is a
+/// caustic (PM's caustic map).
 #[inline]
-pub fn chains_follow(material: &crate::bsdf::Material, follow_alpha: f32) -> bool {
+pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     use crate::bsdf::Material;
     match *material {
         Material::Dielectric { .. } => true,
-        Material::Conductor { alpha, .. } => alpha < follow_alpha,
+        Material::Conductor { alpha, .. } => alpha < FOLLOW_ALPHA,
         Material::Diffuse { .. } => false,
     }
 }
 
 /// Whether a scene has a material camera chains follow (and so caustics for PM's map).
-pub fn scene_has_followed(data: &SceneData, follow_alpha: f32) -> bool {
-    used_materials(data).any(|m| chains_follow(m, follow_alpha))
+pub fn scene_has_followed(data: &SceneData) -> bool {
+    used_materials(data).any(chains_follow)
 }
 
 /// Whether a scene has a glossy surface camera chains follow (where they sample light).
-pub fn scene_has_followed_glossy(data: &SceneData, follow_alpha: f32) -> bool {
-    used_materials(data).any(|m| {
-        !matches!(m, crate::bsdf::Material::Dielectric { .. }) && chains_follow(m, follow_alpha)
-    })
+pub fn scene_has_followed_glossy(data: &SceneData) -> bool {
+    used_materials(data)
+        .any(|m| !matches!(m, crate::bsdf::Material::Dielectric { .. }) && chains_follow(m))
 }
 
 /// The materials some triangle of the scene uses.
@@ -275,7 +266,12 @@ fn used_materials(data: &SceneData) -> impl Iterator<Item = &crate::bsdf::Materi
     for &m in &scene.triangles.material {
         used[m as usize] = true;
     }
-    scene.materials.iter().zip(used).filter(|(_, u)| *u).map(|(m, _)| m)
+    scene
+        .materials
+        .iter()
+        .zip(used)
+        .filter(|(_, u)| *u)
+        .map(|(m, _)| m)
 }
 
 /// Least cos between a photon's surface normal (on the side it arrived from) and the query's

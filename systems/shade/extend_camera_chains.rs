@@ -1,8 +1,9 @@
 //! Camera chains of the photon mappers: at each hit, adds the emission seen, then either
 //! follows a specular surface or a conductor smoother than `photons::FOLLOW_ALPHA` by
-//! sampling it, or ends on any other surface, which becomes the chain's gather point. Chains that leave the scene, reach the
-//! depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by throughput) end with no
-//! gather point. In a ray tree (PPM) a chain at a dielectric follows both branches instead,
+//! sampling it (keeping the glossy ones in `met_glossy`, where the integrator samples light),
+//! or ends on any other surface, which becomes the chain's gather point. Chains that leave the
+//! scene, reach the depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by
+//! throughput) end with no gather point. In a ray tree (PPM) a chain at a dielectric follows both branches instead,
 //! the second as a new chain, and at a followed conductor one sampled direction, with no
 //! roulette (see `camera_walk`).
 
@@ -13,9 +14,9 @@ use crate::integrators::camera_walk::{Branch, CameraWalk, MIN_BRANCH_WEIGHT, TRE
 use crate::math::Frame;
 use crate::photons::chains_follow;
 use crate::pipeline::Flow;
+use crate::sampling::power_heuristic;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::scene::NO_EMITTER;
-use crate::sampling::power_heuristic;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -34,12 +35,11 @@ pub struct ExtendCameraChains;
 crate::system! {
     ExtendCameraChains = "extend_camera_chains";
     on CameraWalk {
-        read scene = data.scene, sampler, max_depth, tree, direct_light, follow_alpha, hits, live = active;
+        read scene = data.scene, sampler, max_depth, tree, direct_light, hits, live = active;
         write chains, rays, spawned, met_glossy;
     }
     run {
         let (n, max_depth, tree, direct_light) = (*live, *max_depth, *tree, *direct_light);
-        let follow = *follow_alpha;
         let rays = rays.chunks_mut(0..n);
         let chunks = n.div_ceil(CHUNK);
         spawned.resize_with(chunks, Vec::new);
@@ -88,7 +88,7 @@ crate::system! {
                     if ns.dot(ng) < 0.0 {
                         ns = -ns;
                     }
-                    if !chains_follow(&material, follow) {
+                    if !chains_follow(&material) {
                         c.p[i] = sp.p;
                         c.p_error[i] = sp.p_error;
                         c.ng[i] = ng;

@@ -26,7 +26,6 @@ crate::system! {
         let n = t.active;
         let scene = &data.scene;
         let (max_depth, store_direct, sampler) = (t.max_depth, t.store_direct, t.sampler);
-        let follow = t.follow_alpha;
         let chunks = n.div_ceil(CHUNK);
         t.chunk_photons.resize_with(chunks, Vec::new);
         let hits = &t.hits;
@@ -58,7 +57,7 @@ crate::system! {
                     let wo = -r.dir[i].normalize();
                     let depth = w.depth[i];
                     // Nothing gathers on surfaces camera chains follow.
-                    let followed = chains_follow(&material, follow);
+                    let followed = chains_follow(&material);
                     if !followed && (depth > 0 || store_direct) {
                         let mut flags = 0;
                         if depth == 0 {
