@@ -209,9 +209,10 @@ impl CheckpointHeader {
                 crate::scene::echo(&self.integrator)
             ));
         };
+        // A biased integrator's film is a render's shard, or a resumable photon reference's.
         let render_shard = self.shard.is_some() && self.made_by == "render";
-        if !kind.is_unbiased() && !render_shard && !(kind.resumes() && self.made_by == "reference")
-        {
+        let photon_reference = kind.resumes() && self.made_by == "reference";
+        if !(kind.is_unbiased() || render_shard || photon_reference) {
             return Err(format!(
                 "integrator {kind} is biased and does not resume: its films are only the \
                  shards of a render"
