@@ -126,6 +126,11 @@ pub struct CheckpointHeader {
     /// as text (`integrators::film_settings`; empty when all are defaults).
     #[serde(default)]
     pub settings: String,
+    /// The film's sums are in units of 2^(unit_exponent - 64) (`film::fixed`: the power of
+    /// two of the scene's brightest emission); 0 in files from before units followed the
+    /// scene, which were all in units of 2^-64.
+    #[serde(default)]
+    pub unit_exponent: i32,
     /// Bytes of the integrator's saved state after the pixels (the photon mappers'
     /// references: `PassState::save`); 0, and not written, for the others.
     #[serde(default, skip_serializing_if = "is_zero")]
@@ -184,6 +189,7 @@ impl CheckpointHeader {
             made_by: reference_command(),
             settings: crate::integrators::film_settings(integrator, settings),
             state: 0,
+            unit_exponent: Film::scene_unit_exponent(&data.scene),
         }
     }
 
@@ -262,6 +268,12 @@ impl CheckpointHeader {
             return Err(format!(
                 "made by \"{}\", not render or reference",
                 crate::scene::echo(&self.made_by)
+            ));
+        }
+        if !(-1000..=1000).contains(&self.unit_exponent) {
+            return Err(format!(
+                "film unit 2^({} - 64), beyond what a film uses",
+                self.unit_exponent
             ));
         }
         let samples =
@@ -368,8 +380,10 @@ impl Checkpoint {
     /// how many bytes).
     pub fn to_bytes_with_state(&self, state: &[u8]) -> Result<Vec<u8>, String> {
         let splats = self.film.fixed_splats();
+        // The header says the film's unit, whatever it was given, and the state's length.
         let header = CheckpointHeader {
             state: state.len() as u64,
+            unit_exponent: self.film.unit_exponent(),
             ..self.header.clone()
         };
         let header = ron::to_string(&header).map_err(|e| e.to_string())?;
@@ -512,7 +526,7 @@ impl Checkpoint {
             }
         } else {
             let fixed = |v: DVec3| {
-                FixedRgb::from_dvec3(v)
+                FixedRgb::from_dvec3(v, header.unit_exponent)
                     .ok_or_else(|| damaged("a pixel sum beyond the film's range (+-2^63)"))
             };
             for chunk in data.chunks_exact(PIXEL_BYTES_V3) {
@@ -536,6 +550,7 @@ impl Checkpoint {
         let mut film = Film::from_fixed_parts(
             header.width,
             header.height,
+            header.unit_exponent,
             sum,
             samples,
             splat,
@@ -674,7 +689,8 @@ impl PassRange {
         }
         if count > total {
             return Err(format!(
-                "--shard {index}/{count}: {count} shards of {total} passes would leave some                  empty (at most one shard per pass)"
+                "--shard {index}/{count}: {count} shards of {total} passes would leave some \
+                 empty (at most one shard per pass)"
             ));
         }
         let at = |i: u64| (total as u128 * i as u128 / count as u128) as u64;
@@ -779,7 +795,7 @@ pub fn render_reference(
                 ),
             ));
         }
-        Film::new(width, height)
+        Film::for_scene(&job.data)
     };
     let passes_before = header.passes;
     // A shard's budget is its range's end.

@@ -137,7 +137,7 @@ impl PmState {
             photon_pass,
             maps: None,
             caustics,
-            film: Film::new(cam.width as usize, cam.height as usize),
+            film: Film::for_scene(&data),
             nonfinite: 0,
             data,
         }

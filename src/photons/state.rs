@@ -136,8 +136,9 @@ pub fn read_estimates(r: &mut StateReader, e: &mut PixelEstimates, points: usize
     }
 }
 
-/// Writes a film's sums, counts and rejected counts (PM; no splats).
+/// Writes a film's unit, sums, counts and rejected counts (PM; no splats).
 pub fn write_film(w: &mut StateWriter, film: &Film) {
+    w.u64(film.unit_exponent() as i64 as u64);
     for (sum, &count) in film.fixed_sums().iter().zip(film.sample_counts()) {
         w.0.extend_from_slice(&sum.to_le_bytes());
         w.u64(count);
@@ -148,6 +149,7 @@ pub fn write_film(w: &mut StateWriter, film: &Film) {
 
 /// Reads what `write_film` wrote, for a `width` x `height` film.
 pub fn read_film(r: &mut StateReader, width: usize, height: usize) -> Film {
+    let unit_exponent = r.u64() as i64 as i32;
     let pixels = width * height;
     let (mut sums, mut counts) = (Vec::with_capacity(pixels), Vec::with_capacity(pixels));
     for _ in 0..pixels {
@@ -155,8 +157,16 @@ pub fn read_film(r: &mut StateReader, width: usize, height: usize) -> Film {
         counts.push(r.u64());
     }
     let nonfinite = r.u64();
-    let mut film = Film::from_fixed_parts(width, height, sums, counts, Vec::new(), nonfinite)
-        .expect("one sum and count per pixel");
+    let mut film = Film::from_fixed_parts(
+        width,
+        height,
+        unit_exponent,
+        sums,
+        counts,
+        Vec::new(),
+        nonfinite,
+    )
+    .expect("one sum and count per pixel");
     film.out_of_range = r.u64();
     film
 }
