@@ -398,10 +398,14 @@ pub struct PhotonArgs {
     /// Fraction of each pass's photons a pixel keeps, in (0, 1) (ppm, sppm).
     #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_ALPHA, value_parser = parse_alpha)]
     pub alpha: f32,
-    /// Initial gather radius in scene units (ppm, sppm; default: 0.5% of the scene's
-    /// bounding-box diagonal).
+    /// Initial gather radius in scene units (default: 1% of the scene's bounding-box diagonal
+    /// for sppm, 0.5% for ppm).
     #[arg(long, value_parser = parse_radius)]
     pub radius: Option<f32>,
+    /// Eye-ray trees per pixel, jittered over it as a stratified net (ppm: its hit points are
+    /// fixed, so only they average the pixel's area; memory grows with them).
+    #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_EYE_RAYS, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub eye_rays: u32,
     /// Photons traced for the photon maps (pm).
     #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_PHOTONS, value_parser = clap::value_parser!(u64).range(1..))]
     pub photons: u64,
@@ -425,6 +429,7 @@ impl PhotonArgs {
             photons_per_pass: self.photons_per_pass,
             alpha: self.alpha,
             radius: self.radius,
+            eye_rays: self.eye_rays,
             photons: self.photons,
             k: self.k as usize,
             max_radius: self.max_radius,
@@ -477,7 +482,8 @@ pub const DEFAULT_REFERENCE_SPP: u64 = 4096;
 pub struct ReferenceArgs {
     /// Scene file (RON).
     pub scene: PathBuf,
-    /// An unbiased integrator: pt or bdpt.
+    /// An integrator that resumes from a checkpoint: pt, bdpt, or the photon mappers (pm,
+    /// ppm, sppm: --spp counts passes).
     #[arg(long, default_value = "pt", value_parser = IntegratorParser)]
     pub integrator: IntegratorKind,
     /// Total samples per pixel, over all runs (default 4096 unless --time is given).
@@ -506,6 +512,8 @@ pub struct ReferenceArgs {
     /// Seconds between checkpoints (at most 1e9).
     #[arg(long, default_value = "30", value_parser = parse_checkpoint_seconds)]
     pub checkpoint_every: f64,
+    #[command(flatten)]
+    pub photons: PhotonArgs,
     #[command(flatten)]
     pub kernel: KernelArgs,
     #[command(flatten)]
@@ -928,6 +936,7 @@ impl ReferenceArgs {
                 seed: self.seed,
                 sampler: self.sampler,
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
+                photons: self.photons.settings(),
                 ..RenderSettings::default()
             }),
             output,

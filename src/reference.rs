@@ -131,6 +131,14 @@ pub struct CheckpointHeader {
     /// scene, which were all in units of 2^-64.
     #[serde(default)]
     pub unit_exponent: i32,
+    /// Bytes of the integrator's saved state after the pixels (the photon mappers'
+    /// references: `PassState::save`); 0, and not written, for the others.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub state: u64,
+}
+
+fn is_zero(n: &u64) -> bool {
+    *n == 0
 }
 
 /// What part of a render a shard makes.
@@ -180,6 +188,7 @@ impl CheckpointHeader {
             }),
             made_by: reference_command(),
             settings: crate::integrators::film_settings(integrator, settings),
+            state: 0,
             unit_exponent: Film::scene_unit_exponent(&data.scene),
         }
     }
@@ -206,10 +215,17 @@ impl CheckpointHeader {
                 crate::scene::echo(&self.integrator)
             ));
         };
-        if !kind.is_unbiased() && (self.shard.is_none() || self.made_by != "render") {
+        // A biased integrator's film is a render's shard, or a resumable photon reference's.
+        let render_shard = self.shard.is_some() && self.made_by == "render";
+        let photon_reference = kind.resumes() && self.made_by == "reference";
+        if !(kind.is_unbiased() || render_shard || photon_reference) {
             return Err(format!(
-                "integrator {kind} is biased: its films are only the shards of a render"
+                "integrator {kind} is biased and does not resume: its films are only the \
+                 shards of a render"
             ));
+        }
+        if self.state > 0 && (kind.is_unbiased() || !kind.resumes()) {
+            return Err(format!("a saved state for {kind}, which keeps none"));
         }
         let max = crate::scene::format::MAX_IMAGE_SIZE as usize;
         if !(1..=max).contains(&self.width) || !(1..=max).contains(&self.height) {
@@ -346,11 +362,27 @@ impl Checkpoint {
         crate::film::output::write_bytes(path, &bytes).map_err(|e| error(path, e.message))
     }
 
+    /// Writes the checkpoint with an integrator's saved state after its pixels (see
+    /// `CheckpointHeader::state`), as `write` does.
+    pub fn write_with_state(&self, path: &Path, state: &[u8]) -> Result<(), ReferenceError> {
+        let bytes = self
+            .to_bytes_with_state(state)
+            .map_err(|e| error(path, e))?;
+        crate::film::output::write_bytes(path, &bytes).map_err(|e| error(path, e.message))
+    }
+
     /// The checkpoint file's bytes.
     pub fn to_bytes(&self) -> Result<Vec<u8>, String> {
+        self.to_bytes_with_state(&[])
+    }
+
+    /// The checkpoint file's bytes with `state` after the pixels (the header's `state` says
+    /// how many bytes).
+    pub fn to_bytes_with_state(&self, state: &[u8]) -> Result<Vec<u8>, String> {
         let splats = self.film.fixed_splats();
-        // The header says the film's unit, whatever it was given.
+        // The header says the film's unit, whatever it was given, and the state's length.
         let header = CheckpointHeader {
+            state: state.len() as u64,
             unit_exponent: self.film.unit_exponent(),
             ..self.header.clone()
         };
@@ -375,6 +407,7 @@ impl Checkpoint {
                 put(&mut bytes, splat);
             }
         }
+        bytes.extend_from_slice(state);
         let mut hash = Fnv1a::new();
         hash.update(&bytes);
         bytes.extend_from_slice(&hash.0.to_le_bytes());
@@ -383,12 +416,22 @@ impl Checkpoint {
 
     /// Reads a checkpoint; a damaged or foreign file is an error naming what is wrong.
     pub fn read(path: &Path) -> Result<Checkpoint, ReferenceError> {
+        Ok(Checkpoint::read_with_state(path)?.0)
+    }
+
+    /// Reads a checkpoint and the integrator's saved state in it (empty when it has none).
+    pub fn read_with_state(path: &Path) -> Result<(Checkpoint, Vec<u8>), ReferenceError> {
         let bytes = std::fs::read(path).map_err(|e| error(path, e))?;
-        Checkpoint::from_bytes(&bytes).map_err(|message| error(path, message))
+        Checkpoint::from_bytes_with_state(&bytes).map_err(|message| error(path, message))
     }
 
     /// Reads a checkpoint from its bytes; the message does not name the file.
     pub fn from_bytes(bytes: &[u8]) -> Result<Checkpoint, String> {
+        Ok(Checkpoint::from_bytes_with_state(bytes)?.0)
+    }
+
+    /// Reads a checkpoint and its saved state from its bytes.
+    pub fn from_bytes_with_state(bytes: &[u8]) -> Result<(Checkpoint, Vec<u8>), String> {
         let damaged = |what: &str| {
             format!("damaged checkpoint ({what}); delete it to start the reference over")
         };
@@ -413,7 +456,7 @@ impl Checkpoint {
                 crate::scene::clip(&e.to_string(), 200)
             ))
         })?;
-        if version < 4 && (header.first_pass != 0 || header.shard.is_some()) {
+        if version < 4 && (header.first_pass != 0 || header.shard.is_some() || header.state > 0) {
             return Err(damaged("a version 4 header in an older file"));
         }
         let payload = &rest[newline + 1..];
@@ -427,10 +470,12 @@ impl Checkpoint {
         } else {
             &[PIXEL_BYTES_V3]
         };
+        let state_len = usize::try_from(header.state).map_err(|_| damaged("state size"))?;
         let data_len_of = |pixel_bytes: usize| {
             pixels
                 .checked_mul(pixel_bytes)
                 .and_then(|n| n.checked_add(8))
+                .and_then(|n| n.checked_add(state_len))
                 .ok_or_else(|| damaged("image size"))
         };
         let Some(&pixel_bytes) = sizes
@@ -448,6 +493,7 @@ impl Checkpoint {
         let has_splats = pixel_bytes == 2 * FIXED_RGB_BYTES + 8;
         let data_len = payload.len() - 8;
         let (data, checksum) = payload.split_at(data_len);
+        let (data, state) = data.split_at(data_len - state_len);
         let mut hash = Fnv1a::new();
         // Versions 3 and 4 cover the whole file; version 2 covered the pixel data only.
         hash.update(if version >= 3 {
@@ -513,7 +559,7 @@ impl Checkpoint {
         .ok_or_else(|| damaged("image size"))?;
         film.nonfinite_splats = header.nonfinite_splats;
         film.out_of_range = header.out_of_range;
-        Ok(Checkpoint { header, film })
+        Ok((Checkpoint { header, film }, state.to_vec()))
     }
 }
 
@@ -704,10 +750,39 @@ pub fn render_reference(
         &job.settings,
         job.shard,
     );
+    // The photon mappers (the biased integrators `reference` accepts) continue from their
+    // saved state; their film is their image weighted by their passes x pixels, as a
+    // `render --shard`'s, so that `merge` averages shards alike. Their shard is an
+    // independent run of its passes with its own seed (`PassRange::independent_seed`), which
+    // counts its passes from 0.
+    let keeps_state = !job.integrator.is_unbiased();
+    let (settings, offset) = match job.shard {
+        Some(range) if keeps_state => (
+            RenderSettings {
+                seed: range.independent_seed(job.settings.seed),
+                ..job.settings
+            },
+            range.first,
+        ),
+        _ => (job.settings, 0),
+    };
+    let mut state = Vec::new();
     let mut film = if checkpoint_file.exists() {
-        let checkpoint = Checkpoint::read(&checkpoint_file)?;
+        let (checkpoint, saved) = Checkpoint::read_with_state(&checkpoint_file)?;
         check_compatible(&checkpoint.header, &header, &checkpoint_file)?;
         header = checkpoint.header;
+        if keeps_state && header.passes > header.first_pass && saved.is_empty() {
+            return Err(error(
+                &checkpoint_file,
+                format!(
+                    "holds the image of {} passes of {} but not its state (a merge of shards?), \
+                     so it cannot be continued: choose another output",
+                    header.passes - header.first_pass,
+                    job.integrator
+                ),
+            ));
+        }
+        state = saved;
         checkpoint.film
     } else {
         if job.output.exists() {
@@ -754,14 +829,26 @@ pub fn render_reference(
             }
             ReferenceBudget::Seconds(s) => passes_in((s - header.seconds).min(every)).max(1),
         };
-        let from = Resume {
-            film,
-            first_pass: header.first_pass,
-            passes: header.passes,
+        // The run's own passes (a biased shard counts from its first pass).
+        let run_passes = header.passes - offset;
+        let from = if !keeps_state {
+            Some(Resume {
+                film,
+                first_pass: header.first_pass,
+                passes: header.passes,
+                state: None,
+            })
+        } else {
+            (run_passes > 0).then(|| Resume {
+                film,
+                first_pass: 0,
+                passes: run_passes,
+                state: Some(std::mem::take(&mut state)),
+            })
         };
         let (chunk_start, seconds_before) = (Instant::now(), header.seconds);
         let on_wave = |passes: u64, _: Option<u64>| match job.budget {
-            ReferenceBudget::SamplesPerPixel(spp) => progress(passes as f64, spp as f64),
+            ReferenceBudget::SamplesPerPixel(spp) => progress((passes + offset) as f64, spp as f64),
             ReferenceBudget::Seconds(s) => {
                 progress(seconds_before + chunk_start.elapsed().as_secs_f64(), s)
             }
@@ -770,21 +857,38 @@ pub fn render_reference(
             stop,
             progress: &on_wave,
         };
-        let outcome = resume(
-            job.integrator,
-            job.data.clone(),
-            &job.settings,
-            Budget::SamplesPerPixel(header.passes + chunk),
-            &control,
-            from,
-        );
+        let budget = Budget::SamplesPerPixel(run_passes + chunk);
+        let outcome = match from {
+            Some(from) => resume(
+                job.integrator,
+                job.data.clone(),
+                &settings,
+                budget,
+                &control,
+                from,
+            ),
+            None => crate::integrators::render(
+                job.integrator,
+                job.data.clone(),
+                &settings,
+                budget,
+                &control,
+            ),
+        };
         let wall = outcome.wall.as_secs_f64();
-        let new_passes = outcome.passes - header.passes;
+        let new_passes = outcome.passes - run_passes;
         if new_passes > 0 {
             seconds_per_pass = Some(wall / new_passes as f64);
         }
-        film = outcome.film;
-        header.passes = outcome.passes;
+        film = if keeps_state {
+            state = outcome
+                .state
+                .expect("the integrators that keep a state save it");
+            weighted_film(&outcome.film.image(), outcome.samples, &outcome.film)
+        } else {
+            outcome.film
+        };
+        header.passes = outcome.passes + offset;
         header.seconds += wall;
         header.nonfinite = film.nonfinite;
         header.nonfinite_splats = film.nonfinite_splats;
@@ -795,7 +899,7 @@ pub fn render_reference(
                 header: header.clone(),
                 film: film.clone(),
             }
-            .write(&checkpoint_file)?;
+            .write_with_state(&checkpoint_file, &state)?;
             write_images(job, &header, &film)?;
         }
         if outcome.interrupted {
@@ -814,6 +918,30 @@ pub fn render_reference(
         width,
         height,
     })
+}
+
+/// A biased integrator's film for a shard or a reference: `image` times `weight` in every
+/// pixel, with `weight` as every pixel's count (see `CheckpointHeader::is_unbiased`), and
+/// `film`'s rejected counts.
+pub fn weighted_film(image: &Image, weight: u64, film: &Film) -> Film {
+    let n = image.pixels.len();
+    let sums = image
+        .pixels
+        .iter()
+        .map(|p| p.as_dvec3() * weight as f64)
+        .collect();
+    let mut weighted = Film::from_parts(
+        image.width,
+        image.height,
+        sums,
+        vec![weight; n],
+        Vec::new(),
+        film.nonfinite,
+    )
+    .expect("one sum and count per pixel");
+    weighted.nonfinite_splats = film.nonfinite_splats;
+    weighted.out_of_range += film.out_of_range;
+    weighted
 }
 
 /// A checkpoint continues only the render that made it.

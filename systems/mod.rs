@@ -67,6 +67,7 @@ pub mod gather {
     pub mod direct_light;
     pub mod film;
     pub mod global_photons;
+    pub mod glossy_light;
     pub mod pass_film;
     pub mod photon_grid;
     pub mod photon_maps;

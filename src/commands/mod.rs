@@ -161,6 +161,12 @@ pub fn render_memory(
             .saturating_mul(800)
             .saturating_add(p.photons.saturating_mul(PHOTON_BYTES))
             .saturating_add((p.k as u64).saturating_mul(16 * threads as u64)),
+        "ppm" | "sppm" => crate::integrators::sppm::ProgressiveSettings::from_render(
+            settings,
+            kind.as_str() == "sppm",
+        )
+        .expected_bytes(pixels)
+        .saturating_add(p.photons_per_pass.saturating_mul(PHOTON_BYTES)),
         _ => pixels
             .saturating_mul(500)
             .saturating_add(p.photons_per_pass.saturating_mul(PHOTON_BYTES)),

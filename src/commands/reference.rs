@@ -18,7 +18,7 @@ use std::time::Duration;
 pub struct ReferenceOptions {
     /// Scene file (RON).
     pub scene: PathBuf,
-    /// An unbiased integrator (pt or bdpt); others are refused.
+    /// An integrator that resumes (pt, bdpt, pm, ppm, sppm); MLT's are refused.
     pub integrator: IntegratorKind,
     /// Total budget over all runs.
     pub budget: ReferenceBudget,
@@ -37,9 +37,10 @@ pub struct ReferenceOptions {
 /// Makes, resumes or extends a reference and prints what it did. Returns the exit code: 0,
 /// or `EXIT_INTERRUPTED` when Ctrl-C stopped it (the checkpoint holds the passes done).
 pub fn reference(o: &ReferenceOptions) -> Result<i32> {
-    if !o.integrator.is_unbiased() {
+    if !o.integrator.resumes() {
         bail!(
-            "--integrator {}: a reference needs an unbiased integrator (pt or bdpt)",
+            "--integrator {}: a reference needs an integrator that resumes from a checkpoint \
+             (pt, bdpt, pm, ppm or sppm)",
             o.integrator
         );
     }
@@ -66,6 +67,7 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
     check_reference_outputs(output, &[&o.scene])?;
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
+    super::check_render_memory(o.integrator, &o.settings, &data, pool.current_num_threads())?;
     let job = ReferenceJob {
         scene_path: &o.scene,
         data,

@@ -4,7 +4,6 @@ use super::{
     EXIT_INTERRUPTED, budget_bar, check_kernel, check_outputs, check_render_memory, check_samples,
     check_threads, exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool,
 };
-use crate::film::Film;
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, Resume};
 use crate::reference::{Checkpoint, CheckpointHeader, checkpoint_path};
 use crate::sysinfo::cpu_seconds;
@@ -137,7 +136,11 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
             } else {
                 range.end - range.first
             };
-            let film = weighted_film(&outcome.film.image(), outcome.samples, &outcome.film);
+            let film = crate::reference::weighted_film(
+                &outcome.film.image(),
+                outcome.samples,
+                &outcome.film,
+            );
             (film, range.first + done)
         };
         shard_end = passes;
@@ -200,27 +203,4 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         eprintln!("warning: {warning}");
     }
     Ok(exit_code(outcome.interrupted))
-}
-
-/// A biased integrator's shard film: `image` times `weight` in every pixel, with `weight` as
-/// every pixel's count (see `CheckpointHeader::is_unbiased`), and `film`'s rejected counts.
-fn weighted_film(image: &crate::film::Image, weight: u64, film: &Film) -> Film {
-    let n = image.pixels.len();
-    let sums = image
-        .pixels
-        .iter()
-        .map(|p| p.as_dvec3() * weight as f64)
-        .collect();
-    let mut weighted = Film::from_parts(
-        image.width,
-        image.height,
-        sums,
-        vec![weight; n],
-        Vec::new(),
-        film.nonfinite,
-    )
-    .expect("one sum and count per pixel");
-    weighted.nonfinite_splats = film.nonfinite_splats;
-    weighted.out_of_range += film.out_of_range;
-    weighted
 }

@@ -13,8 +13,12 @@ crate::soa! {
         key: SampleKey,
         /// Product of the specular weights since the camera.
         beta: Vec3,
-        /// Emission met along the chain, weighted by `beta` at the time.
+        /// Emission met along the chain, weighted by `beta` at the time (and, after a
+        /// glossy bounce, by its MIS weight against the light sample taken there).
         emitted: Vec3,
+        /// Solid-angle density of the last bounce's direction: 0 after the camera or a
+        /// specular bounce (whose emission no light sample could find).
+        bsdf_pdf: f32,
         depth: u32,
         alive: bool,
         /// Where the chain ended (`triangle == NO_VISIBLE_POINT`: nowhere to gather).
@@ -31,10 +35,12 @@ crate::soa! {
 
 crate::soa! {
     /// Where camera chains met a surface that is not specular, and what they carried there:
-    /// one per pixel (slot = pixel), or for PPM's ray tree a list of a pixel's hit points.
+    /// one per pixel (slot = pixel), or for PPM's ray tree a list of a pixel's hit points; or
+    /// the glossy surfaces chains followed (`CameraWalk::glossy`), where only light is sampled.
     pub struct VisiblePoints, VisiblePointsChunk, VisiblePointsView, VisiblePoint {
         pixel: u32,
-        /// The point's rank among its pixel's (0 where a pixel has one).
+        /// The point's rank among its pixel's (0 where a pixel has one; its light sample's
+        /// dimensions).
         branch: u32,
         p: Vec3,
         p_error: Vec3,

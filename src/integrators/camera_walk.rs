@@ -8,12 +8,17 @@
 //! chain follows both the reflection and the refraction, each weighted by its Fresnel term,
 //! so a pixel owns a hit point at every non-specular surface its tree reaches. Branches
 //! lighter than `MIN_BRANCH_WEIGHT` or deeper than `TREE_DEPTH` end (nothing is chosen at
-//! random, so the hit points, kept for the whole render, carry no frozen choice).
+//! random, so the hit points, kept for the whole render, carry no frozen choice). A pixel
+//! traces `trees` such trees, their eye rays jittered over the pixel as the points of a
+//! stratified net (Hachisuka et al. shoot several eye rays per pixel: PPM's hit points stay
+//! where the first pass put them, so only they can average the pixel's area). The trees start
+//! in waves of one chain per pixel, so the walk's stores never hold more than a pixel's worth
+//! of chains and branches at a time.
 
-use crate::components::{CameraChains, Hits, Rays, VisiblePoints};
+use crate::components::{CameraChains, Hits, Rays, VisiblePoint, VisiblePoints};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::SampleKey;
-use crate::sampling::Sampler;
+use crate::sampling::{Sampler, SamplerKind};
 use crate::scene::SceneData;
 use crate::systems::{generate, shade, trace};
 use glam::Vec3;
@@ -29,9 +34,17 @@ pub struct CameraWalk {
     pub max_depth: u32,
     /// Sample index of the chains `generate_camera_chains` starts (the pass).
     pub sample_index: u64,
-    /// Chains `generate_camera_chains` starts: one per pixel, or none (PPM after its first
-    /// pass keeps its gather points).
+    /// Chains the walk starts: one per pixel, `trees` per pixel (PPM's first pass), or none
+    /// (PPM after its first pass keeps its gather points).
     pub starts: usize,
+    /// Chains started so far: `generate_camera_chains` starts at most one per pixel at a time.
+    pub started: usize,
+    /// Eye-ray trees per pixel (PPM); chain c of a walk is tree c / pixels of pixel
+    /// c % pixels.
+    pub trees: u32,
+    /// Where the trees' eye rays go in their pixel: ZSobol with `trees` samples per pixel, so
+    /// a pixel's jitters are a stratified net whatever the render's sampler.
+    pub jitter: Sampler<'static>,
     pub chains: CameraChains,
     pub rays: Rays,
     pub hits: Hits,
@@ -47,6 +60,18 @@ pub struct CameraWalk {
     pub tree: bool,
     /// Per chunk of chains, the branches it split off this bounce (started in chunk order).
     pub spawned: Vec<Vec<Branch>>,
+    /// Sample light at the followed glossy surfaces (camera walks; not PM's gather walk,
+    /// whose emission the caustic map covers).
+    pub direct_light: bool,
+    /// The followed glossy surfaces the chains met (`glossy_points` of them), each with the
+    /// chain's weight there: the integrator samples light at them, with MIS against the
+    /// chain's own bounce, and adds it to their pixel.
+    pub glossy: VisiblePoints,
+    pub glossy_points: usize,
+    /// Glossy points so far per pixel (their `branch`).
+    pub glossy_rank: Vec<u32>,
+    /// Per chunk of chains, the glossy points it met this bounce (kept in chunk order).
+    pub met_glossy: Vec<Vec<VisiblePoint>>,
 }
 
 /// A branch of the ray tree split off at a dielectric, to start as a chain of its own.
@@ -75,6 +100,9 @@ pub const INPUTS: &[&str] = &[
     "max_depth",
     "sample_index",
     "starts",
+    "started",
+    "trees",
+    "jitter",
     "scratch_chains",
     "scratch_rays",
     "order",
@@ -82,6 +110,11 @@ pub const INPUTS: &[&str] = &[
     "points",
     "tree",
     "spawned",
+    "direct_light",
+    "glossy",
+    "glossy_points",
+    "glossy_rank",
+    "met_glossy",
 ];
 
 impl CameraWalk {
@@ -94,6 +127,9 @@ impl CameraWalk {
             max_depth,
             sample_index: 0,
             starts: 0,
+            started: 0,
+            trees: 1,
+            jitter: sampler,
             chains: CameraChains::new(slots),
             rays: Rays::new(slots),
             hits: Hits::new(slots),
@@ -105,7 +141,29 @@ impl CameraWalk {
             points: slots,
             tree: false,
             spawned: Vec::new(),
+            direct_light: true,
+            glossy: VisiblePoints::new(0),
+            glossy_points: 0,
+            glossy_rank: vec![0; slots],
+            met_glossy: Vec::new(),
         }
+    }
+
+    /// Makes the walk PPM's: `trees` ray trees per pixel, their hit points appended.
+    pub fn trace_trees(&mut self, trees: u32, seed: u64) {
+        let cam = self.data.scene.camera;
+        self.tree = true;
+        self.points = 0;
+        self.trees = trees.max(1);
+        self.jitter = Sampler::new(SamplerKind::Sobol, seed, cam.width, cam.height)
+            .with_samples_per_pixel(self.trees as u64);
+    }
+
+    /// Chains of the next wave: at most one per pixel.
+    pub fn next_wave(&self) -> usize {
+        let cam = self.data.scene.camera;
+        let pixels = cam.width as usize * cam.height as usize;
+        (self.starts - self.started).min(pixels)
     }
 
     /// Bytes per slot: chains and rays (double buffered), hits, compaction order and the
@@ -127,6 +185,22 @@ pub fn from_camera(loop_name: &'static str) -> Graph<CameraWalk> {
             Node::system(generate::camera_chains::GenerateCameraChains),
             bounces(loop_name),
         ],
+    )
+}
+
+/// PPM's walk: `loop camera_waves` of one chain per pixel (a tree each) until `starts` have
+/// started, each wave followed by `loop NAME` until its chains and branches have ended.
+pub fn from_camera_in_waves(loop_name: &'static str) -> Graph<CameraWalk> {
+    Graph::new(
+        "camera_walk",
+        vec![Node::Loop {
+            name: "camera_waves",
+            queue_len: CameraWalk::next_wave,
+            body: vec![
+                Node::system(generate::camera_chains::GenerateCameraChains),
+                bounces(loop_name),
+            ],
+        }],
     )
 }
 

@@ -60,6 +60,17 @@ pub trait PassState: IntegratorState {
     /// The image of `passes` finished passes, the bytes of state per pixel and the slots in
     /// flight.
     fn finish(self, passes: u64) -> (Film, usize, usize);
+    /// What a later run needs to continue after the passes done (`restore`), as bytes; None
+    /// for an integrator that does not resume.
+    fn save(&self) -> Option<Vec<u8>> {
+        None
+    }
+    /// Continues from `save`'s bytes, taken after `passes` passes with the same scene, seed
+    /// and settings (the checkpoint's header vouches for them), so that the next passes give
+    /// what an uninterrupted run's would, bit for bit.
+    fn restore(&mut self, _bytes: &[u8], _passes: u64) {
+        unreachable!("only integrators that save their state are resumed")
+    }
 }
 
 /// The samples a wave renders: global sample ids `first..first + len`, where global sample id
@@ -138,6 +149,7 @@ pub fn render_waves_of<S: WaveState>(
         layers,
         notes,
         counted_rays,
+        state: None,
     }
 }
 
@@ -150,6 +162,19 @@ pub fn render_passes<S: PassState>(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
+    resume_passes::<S>(data, settings, budget, control, None)
+}
+
+/// `render_passes`, continuing from `from` when given (its `state`, saved after `from.passes`
+/// passes): a sample budget counts the passes already done, a time budget counts from now.
+/// The outcome's passes are totals, and its `state` what a later run continues from.
+pub fn resume_passes<S: PassState>(
+    data: Arc<SceneData>,
+    settings: S::Settings,
+    budget: Budget,
+    control: &Control,
+    from: Option<Resume>,
+) -> RenderOutcome {
     let start = Instant::now();
     let graph = S::graph(&data, &settings);
     let mut state = S::new(data, settings);
@@ -159,10 +184,18 @@ pub fn render_passes<S: PassState>(
         Budget::Seconds(_) => None,
     };
     let mut passes = 0;
+    if let Some(from) = from {
+        let bytes = from
+            .state
+            .expect("a pass-based integrator resumes from its saved state");
+        state.restore(&bytes, from.passes);
+        passes = from.passes;
+    }
+    let first_pass = passes;
     loop {
         let over = match budget {
             Budget::SamplesPerPixel(n) => passes >= n,
-            Budget::Seconds(s) => passes > 0 && start.elapsed().as_secs_f64() >= s,
+            Budget::Seconds(s) => passes > first_pass && start.elapsed().as_secs_f64() >= s,
         };
         if over || control.stopped() {
             break;
@@ -174,6 +207,7 @@ pub fn render_passes<S: PassState>(
     }
     let interrupted = control.stopped() && total.is_some_and(|t| passes < t);
     let notes = state.report();
+    let saved = state.save();
     let (film, bytes_per_path, wavefront) = state.finish(passes);
     let pixels = film.width as u64 * film.height as u64;
     RenderOutcome {
@@ -189,6 +223,7 @@ pub fn render_passes<S: PassState>(
         layers: Vec::new(),
         notes,
         counted_rays: None,
+        state: saved,
     }
 }
 

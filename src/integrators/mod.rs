@@ -26,12 +26,15 @@ use std::time::Duration;
 pub struct IntegratorInfo {
     pub name: &'static str,
     pub description: &'static str,
-    /// Unbiased integrators can make references and resume from a checkpoint; the photon
-    /// mappers are consistent but biased.
+    /// Unbiased integrators' films add up over shards and runs; the photon mappers and MLT
+    /// are consistent but biased.
     pub unbiased: bool,
+    /// Whether a render continues from a checkpoint (`reference`): the unbiased ones from
+    /// their film, the photon mappers from their saved state (`PassState::save`).
+    pub resumes: bool,
     /// The `render` options that concern it, besides the common ones.
     pub options: &'static [&'static str],
-    /// Renders (from `Resume` when given: only unbiased integrators are asked to).
+    /// Renders (from `Resume` when given: only integrators that `resumes` are asked to).
     pub render:
         fn(Arc<SceneData>, &RenderSettings, Budget, &Control, Option<Resume>) -> RenderOutcome,
     /// Its graph for a scene, described (`stagelight graph`), and the graph's data-flow check.
@@ -54,6 +57,8 @@ fn graph_report<S: IntegratorState>(data: &SceneData, settings: &S::Settings) ->
 
 /// The `render` options of PPM and SPPM.
 const PROGRESSIVE_OPTIONS: &[&str] = &["--photons-per-pass", "--alpha", "--radius"];
+/// The `render` options of PPM.
+const PPM_OPTIONS: &[&str] = &["--photons-per-pass", "--alpha", "--radius", "--eye-rays"];
 /// The `render` options of the Metropolis integrators.
 const MLT_OPTIONS: &[&str] = &[
     "--large-step",
@@ -69,6 +74,7 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         name: "pt",
         description: "path tracing with next-event estimation and MIS",
         unbiased: true,
+        resumes: true,
         options: &[],
         render: |data, s, budget, control, from| pt::render_with(data, s, budget, control, from),
         graph: |data, s| match s.kernel {
@@ -82,6 +88,7 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         name: "bdpt",
         description: "bidirectional path tracing, every strategy MIS-weighted",
         unbiased: true,
+        resumes: true,
         options: &["--mis", "--strategy-images"],
         render: |data, s, budget, control, from| {
             let settings = bdpt::BdptSettings::from(s);
@@ -96,9 +103,11 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         name: "pm",
         description: "photon mapping: global and caustic maps, final gathering",
         unbiased: false,
+        resumes: true,
         options: &["--photons", "--k", "--max-radius", "--no-final-gather"],
-        render: |data, s, budget, control, _| {
-            driver::render_passes::<pm::PmState>(data, pm::PmSettings::from(s), budget, control)
+        render: |data, s, budget, control, from| {
+            let settings = pm::PmSettings::from(s);
+            driver::resume_passes::<pm::PmState>(data, settings, budget, control, from)
         },
         graph: |data, s| graph_report::<pm::PmState>(data, &pm::PmSettings::from(s)),
     },
@@ -106,10 +115,11 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         name: "ppm",
         description: "progressive photon mapping (visible points found once)",
         unbiased: false,
-        options: PROGRESSIVE_OPTIONS,
-        render: |data, s, budget, control, _| {
+        resumes: true,
+        options: PPM_OPTIONS,
+        render: |data, s, budget, control, from| {
             let settings = sppm::ProgressiveSettings::from_render(s, false);
-            driver::render_passes::<sppm::ProgressiveState>(data, settings, budget, control)
+            driver::resume_passes::<sppm::ProgressiveState>(data, settings, budget, control, from)
         },
         graph: |data, s| {
             let settings = sppm::ProgressiveSettings::from_render(s, false);
@@ -120,10 +130,11 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         name: "sppm",
         description: "stochastic progressive photon mapping",
         unbiased: false,
+        resumes: true,
         options: PROGRESSIVE_OPTIONS,
-        render: |data, s, budget, control, _| {
+        render: |data, s, budget, control, from| {
             let settings = sppm::ProgressiveSettings::from_render(s, true);
-            driver::render_passes::<sppm::ProgressiveState>(data, settings, budget, control)
+            driver::resume_passes::<sppm::ProgressiveState>(data, settings, budget, control, from)
         },
         graph: |data, s| {
             let settings = sppm::ProgressiveSettings::from_render(s, true);
@@ -135,6 +146,7 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         description: "Kelemen primary-sample-space MLT over full BDPT",
         // Consistent: b is estimated by the bootstrap, and a render does not resume.
         unbiased: false,
+        resumes: false,
         options: MLT_OPTIONS,
         render: |data, s, budget, control, _| {
             mlt::render(
@@ -152,6 +164,7 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         name: "mmlt",
         description: "multiplexed MLT: one BDPT strategy per evaluation (pbrt-v4's mlt)",
         unbiased: false,
+        resumes: false,
         options: MLT_OPTIONS,
         render: |data, s, budget, control, _| {
             mlt::render(
@@ -169,6 +182,7 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         name: "mlt",
         description: "Veach's path-space MLT: bidirectional mutation, lens, caustic and multi-chain perturbations",
         unbiased: false,
+        resumes: false,
         options: &[
             "--bootstrap",
             "--chains",
@@ -263,10 +277,15 @@ impl IntegratorKind {
         self.0.description
     }
 
-    /// Whether the integrator is unbiased (its renders can serve as references and resume
-    /// from a checkpoint); the photon mappers are consistent but biased.
+    /// Whether the integrator is unbiased (its films add up over shards and runs); the
+    /// photon mappers and MLT are consistent but biased.
     pub fn is_unbiased(self) -> bool {
         self.0.unbiased
+    }
+
+    /// Whether its renders continue from a checkpoint (`reference`): all but MLT's.
+    pub fn resumes(self) -> bool {
+        self.0.resumes
     }
 
     /// Parses an integrator name (case-insensitive).
@@ -302,6 +321,8 @@ pub struct PhotonSettings {
     pub alpha: f32,
     /// Initial gather radius in scene units (default: a fraction of the scene diagonal).
     pub radius: Option<f32>,
+    /// Eye-ray trees per pixel (ppm).
+    pub eye_rays: u32,
     /// Photons traced for the photon maps (pm).
     pub photons: u64,
     /// Photons per density estimate (pm).
@@ -319,6 +340,7 @@ impl Default for PhotonSettings {
             photons_per_pass: sppm::DEFAULT_PHOTONS_PER_PASS,
             alpha: sppm::DEFAULT_ALPHA,
             radius: None,
+            eye_rays: sppm::DEFAULT_EYE_RAYS,
             photons: pm::DEFAULT_PHOTONS,
             k: pm::DEFAULT_K,
             max_radius: None,
@@ -394,6 +416,9 @@ pub struct Resume {
     /// The first pass in `film` (0 unless the render is a shard).
     pub first_pass: u64,
     pub passes: u64,
+    /// A pass-based integrator's saved state (`RenderOutcome::state`); the film is then
+    /// only its image and not read.
+    pub state: Option<Vec<u8>>,
 }
 
 impl Resume {
@@ -404,6 +429,7 @@ impl Resume {
             film: Film::for_scene(data),
             first_pass,
             passes: first_pass,
+            state: None,
         }
     }
 }
@@ -436,8 +462,8 @@ pub fn render(
     (kind.0.render)(data, settings, budget, control, None)
 }
 
-/// Continues a render from its finished passes (see `driver::render_waves`). Only unbiased
-/// integrators resume: callers check `is_unbiased` first (`reference` refuses the others).
+/// Continues a render from its finished passes (see `driver::render_waves` and
+/// `driver::resume_passes`). Callers check `resumes` first (`reference` refuses MLT).
 pub fn resume(
     kind: IntegratorKind,
     data: Arc<SceneData>,
@@ -447,8 +473,8 @@ pub fn resume(
     from: Resume,
 ) -> RenderOutcome {
     assert!(
-        kind.is_unbiased(),
-        "{kind} is biased and does not resume (callers check is_unbiased)"
+        kind.resumes(),
+        "{kind} does not resume (callers check resumes)"
     );
     (kind.0.render)(data, settings, budget, control, Some(from))
 }
@@ -477,6 +503,8 @@ pub struct RenderOutcome {
     pub layers: Vec<(String, crate::film::Image)>,
     /// Lines the integrator adds to the report and the bench table (label, value).
     pub notes: Vec<(&'static str, String)>,
+    /// What a later run continues from (the photon mappers' saved state; `PassState::save`).
+    pub state: Option<Vec<u8>>,
     /// Closest-hit and shadow rays, where no trace system counted them (the megakernel).
     pub counted_rays: Option<(u64, u64)>,
 }

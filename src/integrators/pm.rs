@@ -18,7 +18,6 @@
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator pm` prints it with
 //! each system's columns, and the README shows it for `door_ajar`.
 
-use crate::bsdf::MaterialKind;
 use crate::components::ShadowRays;
 use crate::film::Film;
 use crate::integrators::camera_walk::{self, CameraWalk};
@@ -26,6 +25,7 @@ use crate::integrators::driver::render_passes;
 use crate::integrators::{
     Budget, Control, IntegratorState, PassState, RenderOutcome, RenderSettings, SceneData,
 };
+use crate::photons::state::{self, StateReader, StateWriter};
 use crate::photons::{PhotonMaps, PhotonPass};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::{Sampler, SamplerKind};
@@ -101,6 +101,8 @@ pub struct PmState {
     /// Chains from the visible points to where their final-gather rays land.
     pub gather_walk: CameraWalk,
     pub shadow: ShadowRays,
+    /// Shadow rays in use: the visible points', then the followed glossy surfaces'.
+    pub shadow_len: usize,
     /// This pass's radiance per pixel.
     pub pass_radiance: Vec<DVec3>,
     pub photon_pass: PhotonPass,
@@ -124,8 +126,13 @@ impl PmState {
             pixels,
             pass: 0,
             camera_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
-            gather_walk: CameraWalk::new(data.clone(), sampler, settings.max_depth),
+            gather_walk: CameraWalk {
+                // Light reached through the gather walk is the caustic map's.
+                direct_light: false,
+                ..CameraWalk::new(data.clone(), sampler, settings.max_depth)
+            },
             shadow: ShadowRays::new(pixels),
+            shadow_len: 0,
             pass_radiance: vec![DVec3::ZERO; pixels],
             photon_pass,
             maps: None,
@@ -145,8 +152,9 @@ impl PmState {
     }
 }
 
-/// The graph of one pass, for a scene with (`caustics`) or without specular surfaces.
-pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
+/// The graph of one pass, for a scene with (`caustics`) or without surfaces camera chains
+/// follow, and with (`glossy`) or without glossy ones among them.
+pub fn graph(settings: &PmSettings, caustics: bool, glossy: bool) -> Graph<PmState> {
     let mut nodes = vec![
         Node::Once {
             name: "photon_maps",
@@ -171,6 +179,9 @@ pub fn graph(settings: &PmSettings, caustics: bool) -> Graph<PmState> {
         Node::system(trace::shadow::TraceShadow),
         Node::system(gather::direct_light::AddDirectLight),
     ];
+    if glossy {
+        nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
+    }
     if caustics {
         nodes.push(Node::system(gather::caustic_photons::GatherCaustics));
     }
@@ -208,7 +219,11 @@ impl IntegratorState for PmState {
         "gather_walk",
     ];
     fn graph(data: &SceneData, settings: &PmSettings) -> Graph<PmState> {
-        graph(settings, has_caustics(data))
+        graph(
+            settings,
+            has_caustics(data),
+            crate::photons::scene_has_followed_glossy(data),
+        )
     }
 }
 
@@ -221,6 +236,20 @@ impl PassState for PmState {
         self.pass = pass;
         self.camera_walk.sample_index = pass;
         self.camera_walk.starts = self.pixels;
+        self.camera_walk.started = 0;
+    }
+    fn save(&self) -> Option<Vec<u8>> {
+        let mut w = StateWriter::new(state::PM_TAG);
+        w.u64(self.nonfinite);
+        state::write_film(&mut w, &self.film);
+        Some(w.0)
+    }
+    fn restore(&mut self, bytes: &[u8], _passes: u64) {
+        // The maps are traced again (from the seed) by the first pass run.
+        let mut r = StateReader::new(bytes, state::PM_TAG);
+        self.nonfinite = r.u64();
+        self.film = state::read_film(&mut r, self.film.width, self.film.height);
+        r.finish();
     }
     fn finish(mut self, _: u64) -> (Film, usize, usize) {
         self.film.nonfinite += self.nonfinite;
@@ -229,9 +258,10 @@ impl PassState for PmState {
     }
 }
 
-/// Whether the scene has specular surfaces, and so a caustic map.
+/// Whether the scene has surfaces camera chains follow (specular, or nearly: see
+/// `photons::chains_follow`), and so a caustic map.
 fn has_caustics(data: &SceneData) -> bool {
-    crate::integrators::pt::used_kinds(data).contains(&MaterialKind::Dielectric)
+    crate::photons::scene_has_followed(data)
 }
 
 /// Renders with PM: the photon maps once, then passes of one camera sample per pixel until

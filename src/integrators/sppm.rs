@@ -29,13 +29,14 @@
 //! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
 //! nothing grows with the number of passes.
 
-use crate::components::{PixelEstimates, ShadowRays};
+use crate::components::{PixelEstimates, ShadowRays, VisiblePoints};
 use crate::film::Film;
 use crate::integrators::camera_walk::{self, CameraWalk};
 use crate::integrators::driver::render_passes;
 use crate::integrators::{
     Budget, Control, IntegratorState, PassState, RenderOutcome, RenderSettings, SceneData,
 };
+use crate::photons::state::{self, StateReader, StateWriter};
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::{Sampler, SamplerKind};
@@ -47,8 +48,16 @@ use std::sync::Arc;
 pub const DEFAULT_PHOTONS_PER_PASS: u64 = 250_000;
 /// Default alpha: the fraction of new photons a pass keeps.
 pub const DEFAULT_ALPHA: f32 = 0.7;
-/// Default initial radius, as a fraction of the scene's bounding-box diagonal.
-pub const DEFAULT_RADIUS_FRACTION: f32 = 0.005;
+/// SPPM's default initial radius, as a fraction of the scene's bounding-box diagonal: of
+/// 0.25%, 0.5%, 1% and 2%, 1% has the least relMSE over cornell_box, torus_glass and door_ajar
+/// at 10 s (the geometric mean of each scene's relMSE, less its reference's own noise, over
+/// the scene's best: 1.12 against 1.50 for 0.5%; docs/photons/README.md).
+pub const SPPM_RADIUS_FRACTION: f32 = 0.01;
+/// PPM's default initial radius, as a fraction of the scene's diagonal (not re-measured: its
+/// torus_glass curves in docs/photons/README.md are at 0.5%).
+pub const PPM_RADIUS_FRACTION: f32 = 0.005;
+/// Default eye-ray trees per pixel of PPM.
+pub const DEFAULT_EYE_RAYS: u32 = 16;
 
 /// The settings of PPM and SPPM.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -60,11 +69,13 @@ pub struct ProgressiveSettings {
     pub max_depth: u32,
     pub photons_per_pass: u64,
     pub alpha: f32,
-    /// Initial gather radius in scene units (`None`: `DEFAULT_RADIUS_FRACTION` of the scene
-    /// diagonal).
+    /// Initial gather radius in scene units (`None`: `SPPM_RADIUS_FRACTION` or
+    /// `PPM_RADIUS_FRACTION` of the scene diagonal).
     pub initial_radius: Option<f32>,
     /// SPPM (true): new visible points every pass. PPM (false): pass 0's, kept.
     pub stochastic: bool,
+    /// PPM: eye-ray trees per pixel, jittered over it (stratified).
+    pub eye_rays: u32,
 }
 
 impl ProgressiveSettings {
@@ -76,6 +87,7 @@ impl ProgressiveSettings {
             photons_per_pass: p.photons_per_pass,
             alpha: p.alpha,
             initial_radius: p.radius,
+            eye_rays: p.eye_rays,
             sampler: s.sampler,
             ..ProgressiveSettings::new(s.seed, stochastic)
         }
@@ -90,14 +102,35 @@ impl ProgressiveSettings {
             alpha: DEFAULT_ALPHA,
             initial_radius: None,
             stochastic,
+            eye_rays: DEFAULT_EYE_RAYS,
         }
+    }
+
+    /// Bytes of state a render of `pixels` pixels is expected to need (photons apart): PPM's
+    /// grow with its eye rays, about two hit points each where a scene has glass (the torus:
+    /// 0.93 per eye ray; `ProgressiveState::bytes` counts what a render holds).
+    pub fn expected_bytes(&self, pixels: u64) -> u64 {
+        let points = if self.stochastic {
+            pixels
+        } else {
+            pixels.saturating_mul(2 * self.eye_rays as u64)
+        };
+        let walk = CameraWalk::bytes_per_slot() - VisiblePoints::bytes_per_item();
+        pixels
+            .saturating_mul(walk as u64)
+            .saturating_add(points.saturating_mul(ProgressiveState::bytes_per_point() as u64))
     }
 
     /// The initial radius in `scene`.
     pub fn radius_in(&self, data: &SceneData) -> f32 {
         self.initial_radius.unwrap_or_else(|| {
             let s = &data.scene;
-            DEFAULT_RADIUS_FRACTION * (s.bounds_max - s.bounds_min).length()
+            let fraction = if self.stochastic {
+                SPPM_RADIUS_FRACTION
+            } else {
+                PPM_RADIUS_FRACTION
+            };
+            fraction * (s.bounds_max - s.bounds_min).length()
         })
     }
 }
@@ -113,7 +146,12 @@ pub struct ProgressiveState {
     /// pass only by PPM).
     pub camera_walk: CameraWalk,
     pub shadow: ShadowRays,
+    /// Shadow rays in use: the visible points', then the followed glossy surfaces'.
+    pub shadow_len: usize,
     pub estimates: PixelEstimates,
+    /// Per pixel, the sum over passes of the light sampled at the glossy surfaces its chains
+    /// followed.
+    pub glossy_direct: Vec<DVec3>,
     pub photon_pass: PhotonPass,
     /// Grid over this pass's photons (built by `build_photon_grid`).
     pub grid: Option<HashGrid>,
@@ -135,9 +173,8 @@ impl ProgressiveState {
         photon_pass.tracing.store_direct = false;
         let mut camera_walk = CameraWalk::new(data.clone(), sampler, settings.max_depth);
         if !settings.stochastic {
-            // PPM: the ray tree, whose hit points the first pass appends.
-            camera_walk.tree = true;
-            camera_walk.points = 0;
+            // PPM: the ray trees, whose hit points the first pass appends.
+            camera_walk.trace_trees(settings.eye_rays, settings.seed);
         }
         ProgressiveState {
             camera_walk,
@@ -146,7 +183,9 @@ impl ProgressiveState {
             pixels,
             pass: 0,
             shadow: ShadowRays::new(pixels),
+            shadow_len: 0,
             estimates,
+            glossy_direct: vec![DVec3::ZERO; pixels],
             photon_pass,
             grid: None,
             photons_emitted: 0,
@@ -159,20 +198,27 @@ impl ProgressiveState {
         self.pass = pass;
         let find_visible_points = self.settings.stochastic || pass == 0;
         self.camera_walk.sample_index = pass;
-        self.camera_walk.starts = if find_visible_points { self.pixels } else { 0 };
+        let chains = if self.settings.stochastic {
+            self.pixels
+        } else {
+            self.pixels * self.camera_walk.trees as usize
+        };
+        self.camera_walk.starts = if find_visible_points { chains } else { 0 };
+        self.camera_walk.started = 0;
         self.photon_pass
             .tracing
             .begin_pass(pass, self.settings.photons_per_pass);
     }
 
-    /// The image so far: per pixel, over its hit points (one, but for PPM's ray tree),
-    /// D / passes + tau / (pi R^2 N_emitted).
+    /// The image so far: per pixel, over its hit points (one, but for PPM's ray trees),
+    /// D / passes + tau / (pi R^2 N_emitted), plus the light sampled at the glossy surfaces
+    /// its chains followed over passes.
     pub fn film(&self, passes: u64) -> Film {
         let cam = self.data.scene.camera;
         let e = &self.estimates;
         let n_emitted = self.photons_emitted.max(1) as f64;
         let mut nonfinite = self.nonfinite;
-        let mut sum = vec![DVec3::ZERO; self.pixels];
+        let mut sum = self.glossy_direct.clone();
         let points = self.camera_walk.points.min(e.capacity());
         for i in 0..points {
             let r = e.radius[i] as f64;
@@ -195,41 +241,94 @@ impl ProgressiveState {
         .expect("one sum and count per pixel")
     }
 
-    /// Bytes of state per pixel: chains and rays (double buffered), hits, visible point,
-    /// shadow ray and statistics.
+    /// PPM's hit points' and glossy points' hash (`photons::state::points_hash`); 0 for SPPM,
+    /// whose visible points are found anew every pass.
+    fn hit_points_hash(&self) -> u64 {
+        let walk = &self.camera_walk;
+        if self.settings.stochastic {
+            0
+        } else {
+            state::points_hash(&walk.visible, walk.points)
+                ^ state::points_hash(&walk.glossy, walk.glossy_points).rotate_left(1)
+        }
+    }
+
+    /// Bytes of state per pixel: the walk's chains and rays (double buffered) and hits, and
+    /// per visible point (PPM: per hit point) the point, its shadow ray and its statistics.
     pub fn bytes_per_pixel(&self) -> usize {
-        CameraWalk::bytes_per_slot()
-            + ShadowRays::bytes_per_item()
+        self.bytes().div_ceil(self.pixels.max(1))
+    }
+
+    /// Bytes of state: the walk's per-pixel stores, and the visible or hit points with their
+    /// shadow rays and statistics (the photons of a pass apart).
+    pub fn bytes(&self) -> usize {
+        let points = self.camera_walk.visible.capacity().max(self.pixels);
+        let glossy = self.camera_walk.glossy.capacity();
+        let walk = CameraWalk::bytes_per_slot() - VisiblePoints::bytes_per_item();
+        self.pixels * (walk + std::mem::size_of::<DVec3>() + 4)
+            + points * Self::bytes_per_point()
+            + glossy * (VisiblePoints::bytes_per_item() + ShadowRays::bytes_per_item())
+    }
+
+    /// Bytes per visible (or hit) point: the point, its shadow ray and its statistics.
+    pub fn bytes_per_point() -> usize {
+        ShadowRays::bytes_per_item()
             + PixelEstimates::bytes_per_item()
+            + VisiblePoints::bytes_per_item()
     }
 }
 
-/// The graph of one pass (the same for PPM and SPPM; see the module's documentation).
-pub fn graph() -> Graph<ProgressiveState> {
+/// PPM's eye pass alone: pass 0's trees and their hit points ordered (a resumed run's).
+fn eye_pass() -> Graph<ProgressiveState> {
     Graph::new(
-        "sppm",
+        "ppm_eye_pass",
         vec![
             Node::nested(
-                camera_walk::from_camera("camera_bounces"),
+                camera_walk::from_camera_in_waves("camera_bounces"),
                 "camera_walk",
                 |s: &mut ProgressiveState| &mut s.camera_walk,
                 camera_walk::INPUTS,
             ),
             Node::system(shade::order_hit_points::OrderHitPoints),
-            Node::system(connect::sample_direct_light::SampleDirectLight),
-            Node::system(trace::shadow::TraceShadow),
-            Node::system(gather::direct_light::AddDirectLight),
-            Node::nested(
-                crate::photons::graph(),
-                "photon_pass",
-                |s: &mut ProgressiveState| &mut s.photon_pass,
-                crate::photons::INPUTS,
-            ),
-            Node::system(gather::photon_grid::BuildPhotonGrid),
-            Node::system(gather::visible_point_photons::GatherPhotons),
-            Node::system(gather::progressive_update::UpdatePixelEstimates),
         ],
     )
+}
+
+/// The graph of one pass (PPM's walk starts its trees in waves; see the module's
+/// documentation).
+pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
+    let walk = if stochastic {
+        camera_walk::from_camera("camera_bounces")
+    } else {
+        camera_walk::from_camera_in_waves("camera_bounces")
+    };
+    let mut nodes = vec![
+        Node::nested(
+            walk,
+            "camera_walk",
+            |s: &mut ProgressiveState| &mut s.camera_walk,
+            camera_walk::INPUTS,
+        ),
+        Node::system(shade::order_hit_points::OrderHitPoints),
+        Node::system(connect::sample_direct_light::SampleDirectLight),
+        Node::system(trace::shadow::TraceShadow),
+        Node::system(gather::direct_light::AddDirectLight),
+    ];
+    if glossy {
+        nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
+    }
+    nodes.extend([
+        Node::nested(
+            crate::photons::graph(),
+            "photon_pass",
+            |s: &mut ProgressiveState| &mut s.photon_pass,
+            crate::photons::INPUTS,
+        ),
+        Node::system(gather::photon_grid::BuildPhotonGrid),
+        Node::system(gather::visible_point_photons::GatherPhotons),
+        Node::system(gather::progressive_update::UpdatePixelEstimates),
+    ]);
+    Graph::new(if stochastic { "sppm" } else { "ppm" }, nodes)
 }
 
 impl IntegratorState for ProgressiveState {
@@ -242,12 +341,16 @@ impl IntegratorState for ProgressiveState {
         "pass",
         "camera_walk",
         "estimates",
+        "glossy_direct",
         "photon_pass",
         "photons_emitted",
         "nonfinite",
     ];
-    fn graph(_: &SceneData, _: &ProgressiveSettings) -> Graph<ProgressiveState> {
-        graph()
+    fn graph(data: &SceneData, settings: &ProgressiveSettings) -> Graph<ProgressiveState> {
+        graph(
+            settings.stochastic,
+            crate::photons::scene_has_followed_glossy(data),
+        )
     }
 }
 
@@ -257,6 +360,65 @@ impl PassState for ProgressiveState {
     }
     fn begin_pass(&mut self, pass: u64) {
         ProgressiveState::begin_pass(self, pass)
+    }
+    fn save(&self) -> Option<Vec<u8>> {
+        let points = self.camera_walk.points;
+        let mut w = StateWriter::new(state::PROGRESSIVE_TAG);
+        w.u64(self.photons_emitted);
+        w.u64(self.nonfinite);
+        w.u64(points as u64);
+        w.u64(self.hit_points_hash());
+        state::write_estimates(&mut w, &self.estimates, points);
+        for &g in &self.glossy_direct {
+            w.dvec3(g);
+        }
+        Some(w.0)
+    }
+    fn restore(&mut self, bytes: &[u8], _passes: u64) {
+        if !self.settings.stochastic {
+            // PPM's hit points: pass 0's eye rays, traced again from the seed.
+            self.begin_pass(0);
+            eye_pass().run(self, &mut crate::pipeline::Stats::default());
+        }
+        let mut r = StateReader::new(bytes, state::PROGRESSIVE_TAG);
+        self.photons_emitted = r.u64();
+        self.nonfinite = r.u64();
+        let (points, hash) = (r.u64() as usize, r.u64());
+        assert_eq!(
+            (points, hash),
+            (self.camera_walk.points, self.hit_points_hash()),
+            "the saved statistics belong to other visible points"
+        );
+        state::read_estimates(&mut r, &mut self.estimates, points);
+        for g in &mut self.glossy_direct {
+            *g = r.dvec3();
+        }
+        r.finish();
+    }
+    fn report(&self) -> Vec<(&'static str, String)> {
+        let mib = self.bytes() as f64 / (1 << 20) as f64;
+        let line = if self.settings.stochastic {
+            format!(
+                "{} visible points, one per pixel, {mib:.1} MiB with the walk",
+                self.pixels
+            )
+        } else {
+            let points = self.camera_walk.points;
+            format!(
+                "{points} hit points ({:.2} per pixel, of {} eye-ray trees each), {mib:.1} MiB \
+                 with the walk",
+                points as f64 / self.pixels.max(1) as f64,
+                self.camera_walk.trees
+            )
+        };
+        let s = &self.data.scene;
+        let diagonal = (s.bounds_max - s.bounds_min).length();
+        let radius = self.settings.radius_in(&self.data);
+        let radius = format!(
+            "initial {radius:.4e} ({:.3}% of the scene's diagonal {diagonal:.4e})",
+            100.0 * radius / diagonal
+        );
+        vec![("state", line), ("radius", radius)]
     }
     fn finish(self, passes: u64) -> (Film, usize, usize) {
         (self.film(passes), self.bytes_per_pixel(), self.pixels)

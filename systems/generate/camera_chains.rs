@@ -1,5 +1,8 @@
-//! Starts the photon mappers' camera chains: one camera ray per pixel, uniform inside it
-//! (a one-pixel box filter), keyed by (seed, pixel, pass) so every pass jitters anew.
+//! Starts the photon mappers' camera chains, at most one per pixel at a time: one camera ray
+//! per pixel, uniform inside it (a one-pixel box filter), keyed by (seed, pixel, pass) so every
+//! pass jitters anew; or, for PPM's trees, chain c is tree t = c / pixels of pixel c % pixels,
+//! jittered to point t of the pixel's stratified net (`CameraWalk::jitter`) and weighing
+//! 1 / trees.
 
 use crate::integrators::camera_walk::CameraWalk;
 use crate::pipeline::Flow;
@@ -13,13 +16,16 @@ pub struct GenerateCameraChains;
 crate::system! {
     GenerateCameraChains = "generate_camera_chains";
     on CameraWalk {
-        read camera = data.scene.camera, sampler, sample_index, starts, tree;
-        write chains, rays, active, points;
+        read camera = data.scene.camera, sampler, jitter, sample_index, starts, tree, trees;
+        write chains, rays, active, points, started, glossy_points, glossy_rank;
     }
     run {
-        let (sample_index, n) = (*sample_index, *starts);
         let cam = camera.frustum();
-        let w = cam.width as u64;
+        let (w, pixels) = (cam.width as u64, cam.width as u64 * cam.height as u64);
+        let first = *started as u64;
+        let n = (*starts - *started).min(pixels as usize);
+        let (tree, trees, sample_index) = (*tree, *trees, *sample_index);
+        let weight = Vec3::splat(1.0 / trees as f32);
         let rays = rays.chunks_mut(0..n);
         chains
             .chunks_mut(0..n)
@@ -27,25 +33,39 @@ crate::system! {
             .zip(rays)
             .for_each(|(c, r)| {
                 for i in 0..c.len() {
-                    let pixel = (c.start + i) as u64;
-                    let key = sampler.key(Stream::Camera, pixel, sample_index);
-                    let raster =
-                        Vec2::new((pixel % w) as f32, (pixel / w) as f32) + sampler.get2(key, DIM_PIXEL);
+                    let chain = first + (c.start + i) as u64;
+                    let pixel = chain % pixels;
+                    let (key, offset, beta) = if tree {
+                        let t = chain / pixels;
+                        let key = sampler.key(Stream::Camera, pixel, t);
+                        let at = jitter.get2(jitter.key(Stream::Camera, pixel, t), DIM_PIXEL);
+                        (key, at, weight)
+                    } else {
+                        let key = sampler.key(Stream::Camera, pixel, sample_index);
+                        (key, sampler.get2(key, DIM_PIXEL), Vec3::ONE)
+                    };
+                    let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + offset;
                     r.origin[i] = cam.position;
                     r.dir[i] = cam.direction(raster);
                     c.pixel[i] = pixel as u32;
                     c.key[i] = key;
-                    c.beta[i] = Vec3::ONE;
+                    c.beta[i] = beta;
                     c.emitted[i] = Vec3::ZERO;
+                    c.bsdf_pdf[i] = 0.0;
                     c.depth[i] = 0;
                     c.alive[i] = true;
                 }
             });
         *active = n;
-        if *tree && n > 0 {
-            // A new tree: its hit points are appended as its chains end.
-            *points = 0;
+        if first == 0 && n > 0 {
+            // A new walk: its glossy points (and a new forest's hit points) are appended.
+            *glossy_points = 0;
+            glossy_rank.fill(0);
+            if tree {
+                *points = 0;
+            }
         }
+        *started += n;
         Flow::new(n, n)
     }
 }

@@ -35,6 +35,7 @@ crate::system! {
                     c.alive[i] = false;
                     c.triangle[i] = NO_VISIBLE_POINT;
                     c.emitted[i] = Vec3::ZERO;
+                    c.bsdf_pdf[i] = 0.0;
                     c.depth[i] = 0;
                     let tri = visible.triangle[pixel];
                     if tri == NO_VISIBLE_POINT {

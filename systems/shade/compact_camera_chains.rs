@@ -1,7 +1,8 @@
 //! Ends the camera chains that stopped this bounce: each writes its gather point (or none)
 //! and the emission it met to its pixel's slot of `visible` (in a ray tree, appends them,
-//! when it has either); the live chains move to the front, in slot order, and the branches
-//! split off this bounce start after them, in chunk order.
+//! when it has either); keeps the glossy points met this bounce, in chunk order, each
+//! numbered among its pixel's; the live chains move to the front, in slot order, and the
+//! branches split off this bounce start after them, in chunk order.
 
 use crate::components::{CameraChain, NO_VISIBLE_POINT, VisiblePoint, gather_column, live_slots};
 use crate::integrators::camera_walk::CameraWalk;
@@ -14,7 +15,7 @@ crate::system! {
     CompactCameraChains = "compact_camera_chains";
     on CameraWalk {
         read tree;
-        write chains, rays, hits, active, visible, points, spawned, order, scratch_chains, scratch_rays;
+        write chains, rays, hits, active, visible, points, spawned, order, scratch_chains, scratch_rays, glossy, glossy_points, glossy_rank, met_glossy;
     }
     run {
         use std::mem::swap;
@@ -48,6 +49,14 @@ crate::system! {
                 },
             );
         }
+        for mut g in met_glossy.iter_mut().flat_map(|m| m.drain(..)) {
+            let rank = &mut glossy_rank[g.pixel as usize];
+            g.branch = *rank;
+            *rank += 1;
+            glossy.reserve_slots(*glossy_points + 1);
+            glossy.set(*glossy_points, g);
+            *glossy_points += 1;
+        }
         live_slots(&c.alive[..n], order);
         scratch_chains.gather_from(chains, order);
         gather_column(&mut scratch_rays.origin, &rays.origin, order);
@@ -74,6 +83,7 @@ crate::system! {
                     key: b.key,
                     beta: b.beta,
                     emitted: Vec3::ZERO,
+                    bsdf_pdf: 0.0,
                     depth: b.depth,
                     alive: true,
                     p: Vec3::ZERO,

@@ -1,19 +1,23 @@
 //! Camera chains of the photon mappers: at each hit, adds the emission seen, then either
-//! follows a specular (delta) surface by sampling it, or ends on a surface that is not
-//! specular, which becomes the chain's gather point. Chains that leave the scene, reach the
-//! depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by throughput) end with no
-//! gather point. In a ray tree (PPM) a chain at a dielectric follows both branches instead,
-//! the second as a new chain, with no roulette (see `camera_walk`).
+//! follows a specular surface or a conductor smoother than `photons::FOLLOW_ALPHA` by
+//! sampling it (keeping the glossy ones in `met_glossy`, where the integrator samples light),
+//! or ends on any other surface, which becomes the chain's gather point. Chains that leave the
+//! scene, reach the depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by
+//! throughput) end with no gather point. In a ray tree (PPM) a chain at a dielectric follows both branches instead,
+//! the second as a new chain, and at a followed conductor one sampled direction, with no
+//! roulette (see `camera_walk`).
 
 use crate::bsdf::{Material, TransportMode, sample_direction};
-use crate::components::{CHUNK, MISS, NO_VISIBLE_POINT};
+use crate::components::{CHUNK, MISS, NO_VISIBLE_POINT, VisiblePoint};
 use crate::geometry::{offset_ray_origin, surface_point};
 use crate::integrators::camera_walk::{Branch, CameraWalk, MIN_BRANCH_WEIGHT, TREE_DEPTH};
 use crate::math::Frame;
+use crate::photons::chains_follow;
 use crate::pipeline::Flow;
+use crate::sampling::power_heuristic;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::scene::NO_EMITTER;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 /// Random-number dimensions of a camera chain: the pixel jitter (2), then per bounce a BSDF
@@ -31,21 +35,23 @@ pub struct ExtendCameraChains;
 crate::system! {
     ExtendCameraChains = "extend_camera_chains";
     on CameraWalk {
-        read scene = data.scene, sampler, max_depth, tree, hits, live = active;
-        write chains, rays, spawned;
+        read scene = data.scene, sampler, max_depth, tree, direct_light, hits, live = active;
+        write chains, rays, spawned, met_glossy;
     }
     run {
-        let (n, max_depth, tree) = (*live, *max_depth, *tree);
+        let (n, max_depth, tree, direct_light) = (*live, *max_depth, *tree, *direct_light);
         let rays = rays.chunks_mut(0..n);
         let chunks = n.div_ceil(CHUNK);
         spawned.resize_with(chunks, Vec::new);
+        met_glossy.resize_with(chunks, Vec::new);
         let live: usize = chains
             .chunks_mut(0..n)
             .into_par_iter()
             .zip(rays)
-            .zip(&mut spawned[..chunks])
-            .map(|((c, r), out)| {
+            .zip(spawned[..chunks].par_iter_mut().zip(&mut met_glossy[..chunks]))
+            .map(|((c, r), (out, glossy))| {
                 out.clear();
+                glossy.clear();
                 let mut live = 0;
                 let hits = hits.view(c.start..c.start + c.len());
                 for i in 0..c.len() {
@@ -57,9 +63,20 @@ crate::system! {
                     }
                     let sp = surface_point(&scene.triangles, tri, hits.b1[i], hits.b2[i]);
                     let wo = -r.dir[i];
-                    let e = scene.triangles.emitter[tri as usize];
-                    if e != NO_EMITTER && wo.dot(sp.ng) > 0.0 {
-                        c.emitted[i] += c.beta[i] * scene.emitters.radiance[e as usize];
+                    let e = scene.triangles.emitter[tri as usize] as usize;
+                    let cos_light = wo.dot(sp.ng);
+                    if e != NO_EMITTER as usize && cos_light > 0.0 {
+                        // After a glossy bounce the light sample there could have found this
+                        // emitter too: weigh both by the power heuristic, as a path tracer.
+                        let em = &scene.emitters;
+                        let weight = if c.bsdf_pdf[i] > 0.0 {
+                            let t = hits.t[i];
+                            let light_pdf = em.pmf[e] / em.area[e] * t * t / cos_light;
+                            power_heuristic(c.bsdf_pdf[i], light_pdf)
+                        } else {
+                            1.0
+                        };
+                        c.emitted[i] += c.beta[i] * em.radiance[e] * weight;
                     }
                     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let (mut ng, mut ns) = (sp.ng, sp.ns);
@@ -71,7 +88,7 @@ crate::system! {
                     if ns.dot(ng) < 0.0 {
                         ns = -ns;
                     }
-                    if !matches!(material, Material::Dielectric { .. }) {
+                    if !chains_follow(&material) {
                         c.p[i] = sp.p;
                         c.p_error[i] = sp.p_error;
                         c.ng[i] = ng;
@@ -81,15 +98,12 @@ crate::system! {
                         continue;
                     }
                     let depth = c.depth[i];
-                    if depth >= max_depth {
+                    if depth >= max_depth || (tree && depth >= TREE_DEPTH) {
                         continue;
                     }
                     let frame = Frame::from_normal(ns);
                     let wo_local = frame.to_local(wo);
-                    if tree {
-                        if depth >= TREE_DEPTH {
-                            continue;
-                        }
+                    if tree && matches!(material, Material::Dielectric { .. }) {
                         // Refraction (u = 1 is never below F), then reflection (u = 0 is
                         // below F unless F = 0); each weighs its Fresnel term: f cos, not
                         // divided by the probability of choosing it.
@@ -132,12 +146,28 @@ crate::system! {
                             continue;
                         };
                         c.beta[i] = beta;
+                        c.bsdf_pdf[i] = 0.0;
                         c.depth[i] = depth + 1;
                         c.alive[i] = true;
                         r.origin[i] = origin;
                         r.dir[i] = wi;
                         live += 1;
                         continue;
+                    }
+                    if direct_light {
+                        // A followed glossy surface: the integrator samples light here.
+                        glossy.push(VisiblePoint {
+                            pixel: c.pixel[i],
+                            branch: 0,
+                            p: sp.p,
+                            p_error: sp.p_error,
+                            ng,
+                            ns,
+                            wo,
+                            triangle: tri,
+                            beta: c.beta[i],
+                            emitted: Vec3::ZERO,
+                        });
                     }
                     let dim = bounce_dim(depth);
                     let Some((bs, wi)) = sample_direction(
@@ -152,7 +182,14 @@ crate::system! {
                         continue;
                     };
                     let mut beta = c.beta[i] * bs.value * (bs.wi.z.abs() / bs.pdf);
-                    if depth + 1 >= ROULETTE_DEPTH {
+                    if tree {
+                        // A tree's glossy bounce is one sampled direction, kept with its
+                        // hit points; a branch too light to matter ends, as at glass.
+                        let weight = beta.max_element();
+                        if weight.is_nan() || weight < MIN_BRANCH_WEIGHT {
+                            continue;
+                        }
+                    } else if depth + 1 >= ROULETTE_DEPTH {
                         let q = survival(beta, 1.0);
                         if !survives(q, sampler.get(c.key[i], dim + 2)) {
                             continue;
@@ -160,6 +197,7 @@ crate::system! {
                         beta /= q;
                     }
                     c.beta[i] = beta;
+                    c.bsdf_pdf[i] = if bs.delta { 0.0 } else { bs.pdf };
                     c.depth[i] = depth + 1;
                     c.alive[i] = true;
                     r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, wi);

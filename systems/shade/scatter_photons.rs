@@ -1,12 +1,13 @@
-//! Where each photon landed: stores it if the surface is not specular, then scatters it on by
+//! Where each photon landed: stores it unless camera chains follow the surface (specular or
+//! nearly, `photons::chains_follow`), then scatters it on by
 //! sampling the BSDF (importance transport), with Russian roulette by the sampled weight so
 //! that its power stays constant in expectation. Stored photons join the pass in photon order.
 
-use crate::bsdf::{Material, TransportMode, sample_direction};
+use crate::bsdf::{TransportMode, sample_direction};
 use crate::components::{CHUNK, MISS, PhotonFlags};
 use crate::geometry::{offset_ray_origin, surface_point};
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction};
-use crate::photons::{DIM_BSDF, DIM_ROULETTE, PhotonPass, StoredPhoton, bounce_dim};
+use crate::photons::{DIM_BSDF, DIM_ROULETTE, PhotonPass, StoredPhoton, bounce_dim, chains_follow};
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{survival, survives};
 use crate::scene::SceneData;
@@ -55,9 +56,9 @@ crate::system! {
                     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let wo = -r.dir[i].normalize();
                     let depth = w.depth[i];
-                    if !matches!(material, Material::Dielectric { .. })
-                        && (depth > 0 || store_direct)
-                    {
+                    // Nothing gathers on surfaces camera chains follow.
+                    let followed = chains_follow(&material);
+                    if !followed && (depth > 0 || store_direct) {
                         let mut flags = 0;
                         if depth == 0 {
                             flags |= PhotonFlags::DIRECT;
@@ -120,7 +121,7 @@ crate::system! {
                     }
                     w.power[i] *= weight / q;
                     w.depth[i] = depth + 1;
-                    w.specular_chain[i] &= bs.delta;
+                    w.specular_chain[i] &= followed;
                     w.alive[i] = true;
                     r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, wi);
                     r.dir[i] = wi;

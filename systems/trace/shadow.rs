@@ -21,11 +21,11 @@ crate::system! {
         write shadow;
     }
     on PmState {
-        read accel = data.accel, len = pixels;
+        read accel = data.accel, len = shadow_len;
         write shadow;
     }
     on ProgressiveState {
-        read accel = data.accel, len = pixels;
+        read accel = data.accel, len = shadow_len;
         write shadow;
     }
     run {

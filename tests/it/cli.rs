@@ -277,11 +277,11 @@ fn photon_mapper_options_are_checked() {
         "reference",
         "scenes/cornell_box.ron",
         "--integrator",
-        "sppm",
+        "pssmlt",
     ]);
     assert_eq!(o.status.code(), Some(1));
     assert!(
-        stderr(&o).contains("needs an unbiased integrator"),
+        stderr(&o).contains("needs an integrator that resumes"),
         "{}",
         stderr(&o)
     );

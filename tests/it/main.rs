@@ -19,6 +19,7 @@ mod hostile;
 mod kernels;
 mod mlt;
 mod path_mlt;
+mod photon_checkpoint;
 mod photon_mapping;
 mod photons;
 mod properties;

@@ -61,6 +61,7 @@ fn header(width: usize, height: usize, passes: u64) -> impl Strategy<Value = Che
                     shard: None,
                     made_by: "reference".into(),
                     settings: String::new(),
+                    state: 0,
                     unit_exponent: unit,
                 }
             },
@@ -223,6 +224,7 @@ proptest! {
                 shard: None,
                 made_by: "reference".into(),
                 settings: String::new(),
+                state: 0,
                 unit_exponent: part.film.unit_exponent(),
             },
             film: part.film,
@@ -234,7 +236,7 @@ proptest! {
             &settings,
             Budget::SamplesPerPixel(first + more),
             &control,
-            Resume { film, first_pass: 0, passes: first },
+            Resume { film, first_pass: 0, passes: first, state: None },
         );
         prop_assert_eq!(resumed.film.sums(), whole.film.sums());
         prop_assert_eq!(resumed.film.image(), whole.film.image());
