@@ -10,7 +10,7 @@ use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, power_heuristic, sample_cdf};
 use crate::systems::shade::Surface;
 use crate::systems::shade::lanes::{
-    DiffuseLanes, F, LANES, M, V3, draw, draw2, offset_origin,
+    DiffuseLanes, F, LANES, M, V3, draw, draw2, lanes_of, offset_origin,
     power_heuristic as power_heuristic_lanes, same_side,
 };
 use glam::Vec3;
@@ -153,14 +153,21 @@ pub fn light_sample_lanes(
 ) -> LightLanes {
     let scene = &data.scene;
     let emitters = &scene.emitters;
-    let dims = depths.map(bounce_dim);
-    let u_pick = draw(sampler, keys, &dims.map(|d| d + DIM_LIGHT_PICK));
-    let (ux, uy) = draw2(sampler, keys, &dims.map(|d| d + DIM_LIGHT_POINT));
+    let u_pick = draw(
+        sampler,
+        keys,
+        &lanes_of(|l| bounce_dim(depths[l]) + DIM_LIGHT_PICK),
+    );
+    let (ux, uy) = draw2(
+        sampler,
+        keys,
+        &lanes_of(|l| bounce_dim(depths[l]) + DIM_LIGHT_POINT),
+    );
     // sample_emitter: an emitter by the cdf, a point uniform on it.
-    let e: [usize; LANES] = std::array::from_fn(|l| sample_cdf(&emitters.cdf, u_pick.0[l]));
+    let e: [usize; LANES] = lanes_of(|l| sample_cdf(&emitters.cdf, u_pick.0[l]));
     let su = ux.sqrt();
     let (b1, b2) = (1.0 - su, uy * su);
-    let tri = e.map(|e| emitters.triangle[e] as usize);
+    let tri: [usize; LANES] = lanes_of(|l| emitters.triangle[e[l]] as usize);
     let tris = &scene.triangles;
     let (p0, p1, p2) = (
         V3::from_fn(|l| tris.p0[tri[l]]),

@@ -10,7 +10,7 @@
 use crate::math::Frame;
 use crate::sampling::{SampleKey, Sampler};
 use glam::{Vec2, Vec3};
-use std::ops::{Add, BitAnd, BitOr, Div, Mul, Neg, Not, Sub};
+use std::ops::{Add, BitAnd, BitOr, BitXor, Div, Mul, Neg, Not, Sub};
 
 /// Paths shaded together.
 pub const LANES: usize = 8;
@@ -37,8 +37,12 @@ impl F {
         F([v; LANES])
     }
     #[inline(always)]
-    pub fn from_fn(f: impl FnMut(usize) -> f32) -> F {
-        F(std::array::from_fn(f))
+    pub fn from_fn(mut f: impl FnMut(usize) -> f32) -> F {
+        let mut out = [0.0; LANES];
+        for (l, v) in out.iter_mut().enumerate() {
+            *v = f(l);
+        }
+        F(out)
     }
     #[inline(always)]
     fn map(self, f: impl Fn(f32) -> f32) -> F {
@@ -158,6 +162,7 @@ macro_rules! mask_op {
     };
 }
 mask_op!(BitAnd, bitand, &);
+mask_op!(BitXor, bitxor, ^);
 mask_op!(BitOr, bitor, |);
 
 macro_rules! float_op {
@@ -355,6 +360,16 @@ impl Frames {
     }
 }
 
+/// `[f(0), .., f(LANES - 1)]` (a plain loop: `std::array::from_fn` was left out of line).
+#[inline(always)]
+pub fn lanes_of<T: Copy + Default>(mut f: impl FnMut(usize) -> T) -> [T; LANES] {
+    let mut out = [T::default(); LANES];
+    for (l, v) in out.iter_mut().enumerate() {
+        *v = f(l);
+    }
+    out
+}
+
 /// Number `dims[l]` of `keys[l]` in every lane (`Sampler::get`): the independent sampler's
 /// hash runs in vector lanes, the other samplers lane by lane.
 #[inline(always)]
@@ -370,14 +385,14 @@ pub fn draw(sampler: &Sampler, keys: &[SampleKey; LANES], dims: &[u32; LANES]) -
 pub fn draw2(sampler: &Sampler, keys: &[SampleKey; LANES], dims: &[u32; LANES]) -> (F, F) {
     match sampler {
         Sampler::Independent { .. } => {
-            let next = dims.map(|d| d + 1);
+            let next = lanes_of(|l| dims[l] + 1);
             (
                 F(SampleKey::get_lanes(keys, dims)),
                 F(SampleKey::get_lanes(keys, &next)),
             )
         }
         _ => {
-            let u: [Vec2; LANES] = std::array::from_fn(|l| sampler.get2(keys[l], dims[l]));
+            let u: [Vec2; LANES] = lanes_of(|l| sampler.get2(keys[l], dims[l]));
             (F::from_fn(|l| u[l].x), F::from_fn(|l| u[l].y))
         }
     }
