@@ -35,6 +35,10 @@ crate::system! {
             .into_par_iter()
             .map(|c| {
                 #[cfg(target_arch = "x86_64")]
+                if crate::cpu::has_avx512() {
+                    // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+                    return unsafe { sample_chunk_avx512(data, sampler, hits, rays, paths, surfaces, c) };
+                }
                 if crate::cpu::has_avx2_fma() {
                     // SAFETY: the CPU has AVX2 and FMA (checked just above).
                     return unsafe { sample_chunk_avx2(data, sampler, hits, rays, paths, surfaces, c) };
@@ -50,6 +54,21 @@ crate::system! {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn sample_chunk_avx2(
+    data: &SceneData,
+    sampler: &Sampler,
+    hits: &Hits,
+    rays: &Rays,
+    paths: &Paths,
+    surfaces: &Surfaces,
+    c: ShadowRaysChunk,
+) -> usize {
+    sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
+}
+
+/// `sample_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+fn sample_chunk_avx512(
     data: &SceneData,
     sampler: &Sampler,
     hits: &Hits,

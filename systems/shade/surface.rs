@@ -51,7 +51,7 @@ impl Surface {
     }
 
     /// The shading point at `point` on `triangle` (its shading normal in the hemisphere of
-    /// its geometric one, as `interpolate_surfaces::shading_point` makes it), seen along
+    /// its geometric one, as `sort_by_material::shading_point` makes it), seen along
     /// `dir`.
     #[inline(always)]
     pub fn new(data: &SceneData, triangle: u32, point: &SurfacePoint, dir: Vec3) -> Surface {
@@ -108,6 +108,12 @@ pub fn scatter_paths<const KIND: u8>(
         .zip(paths)
         .map(|(r, p)| {
             #[cfg(target_arch = "x86_64")]
+            if crate::cpu::has_avx512() {
+                // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+                return unsafe {
+                    scatter_chunk_avx512::<KIND>(data, sampler, hits, surfaces, r, p)
+                };
+            }
             if crate::cpu::has_avx2_fma() {
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
                 return unsafe { scatter_chunk_avx2::<KIND>(data, sampler, hits, surfaces, r, p) };
@@ -122,6 +128,20 @@ pub fn scatter_paths<const KIND: u8>(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn scatter_chunk_avx2<const KIND: u8>(
+    data: &SceneData,
+    sampler: &Sampler,
+    hits: &Hits,
+    surfaces: &Surfaces,
+    r: RaysChunk,
+    p: PathsChunk,
+) -> usize {
+    scatter_chunk::<KIND>(data, sampler, hits, surfaces, r, p)
+}
+
+/// `scatter_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+fn scatter_chunk_avx512<const KIND: u8>(
     data: &SceneData,
     sampler: &Sampler,
     hits: &Hits,
