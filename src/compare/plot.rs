@@ -376,7 +376,13 @@ pub fn write_grid(c: &Comparison, path: &Path) -> Result<(), ReportError> {
                 error_colour(errors[y * iw + x])
             });
             labels.push((
-                format!("{} s, {} spp", secs(run.wall), run.passes),
+                // Samples per pixel from the samples counted: an MLT pass is not one
+                // mutation per pixel, so its pass count would understate the budget.
+                format!(
+                    "{} s, {} spp",
+                    secs(run.wall),
+                    (run.samples as f64 / (iw * ih) as f64).round()
+                ),
                 (x0, y_img + ch + 4),
                 12,
             ));

@@ -11,21 +11,28 @@ use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
 use crate::mlt::path_space::{Path, PathSpace, StepNumbers, dir};
 use crate::path::{VertexKind, to_area};
 
+/// The unnormalised weight 2^-|k - center| of a two-tailed geometric distribution (exact: a
+/// power of two; paths are far shorter than 64 vertices).
+fn two_tailed_weight(center: usize, k: usize) -> f64 {
+    1.0 / (1u64 << k.abs_diff(center).min(63)) as f64
+}
+
 /// P(k) of a two-tailed geometric distribution about `center` (ratio 1/2), on [lo, hi].
 pub fn two_tailed(center: usize, lo: usize, hi: usize, k: usize) -> f64 {
     if k < lo || k > hi {
         return 0.0;
     }
-    let w = |j: usize| 0.5f64.powi((j as i64 - center as i64).unsigned_abs() as i32);
-    w(k) / (lo..=hi).map(w).sum::<f64>()
+    let norm: f64 = (lo..=hi).map(|j| two_tailed_weight(center, j)).sum();
+    two_tailed_weight(center, k) / norm
 }
 
-/// A draw from `two_tailed(center, lo, hi, .)` (lo <= hi).
+/// A draw from `two_tailed(center, lo, hi, .)` (lo <= hi); the normaliser summed once.
 pub fn sample_two_tailed(center: usize, lo: usize, hi: usize, u: f32) -> usize {
+    let norm: f64 = (lo..=hi).map(|j| two_tailed_weight(center, j)).sum();
     let mut acc = 0.0;
     let u = f64::from(u);
     for k in lo..hi {
-        acc += two_tailed(center, lo, hi, k);
+        acc += two_tailed_weight(center, k) / norm;
         if u < acc {
             return k;
         }
