@@ -63,8 +63,8 @@ impl F {
     #[inline(always)]
     fn test(self, o: F, f: impl Fn(f32, f32) -> bool) -> M {
         let mut out = [false; LANES];
-        for l in 0..LANES {
-            out[l] = f(self.0[l], o.0[l]);
+        for ((m, a), b) in out.iter_mut().zip(self.0).zip(o.0) {
+            *m = f(a, b);
         }
         M(out)
     }
@@ -117,9 +117,9 @@ impl M {
     #[inline(always)]
     pub fn select(self, a: F, b: F) -> F {
         let mut out = b.0;
-        for l in 0..LANES {
-            if self.0[l] {
-                out[l] = a.0[l];
+        for ((v, m), a) in out.iter_mut().zip(self.0).zip(a.0) {
+            if m {
+                *v = a;
             }
         }
         F(out)
@@ -153,17 +153,17 @@ macro_rules! mask_op {
             #[inline(always)]
             fn $f(self, o: M) -> M {
                 let mut out = self.0;
-                for l in 0..LANES {
-                    out[l] = out[l] $op o.0[l];
+                for (v, w) in out.iter_mut().zip(o.0) {
+                    *v $op w;
                 }
                 M(out)
             }
         }
     };
 }
-mask_op!(BitAnd, bitand, &);
-mask_op!(BitXor, bitxor, ^);
-mask_op!(BitOr, bitor, |);
+mask_op!(BitAnd, bitand, &=);
+mask_op!(BitXor, bitxor, ^=);
+mask_op!(BitOr, bitor, |=);
 
 macro_rules! float_op {
     ($tr:ident, $f:ident, $op:tt) => {

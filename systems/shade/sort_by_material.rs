@@ -109,9 +109,9 @@ crate::system! {
         }
         order.truncate(kept);
         // Moves the kept paths to slots 0..kept and interpolates each one's surface point, in
-        // one parallel pass over the destination (a pass per column and a system of its own
-        // for the surfaces cost a rayon dispatch each, per bounce). Only what later systems
-        // of the bounce read moves: the path state, the ray direction (wo) and the hit's
+        // one parallel pass over the destination, where the hit is being read anyway (it was
+        // a pass per column plus a system for the surfaces). Only what later systems of the
+        // bounce read moves: the path state, the ray direction (wo) and the hit's
         // triangle. The ray origins, hit distances and barycentrics left behind are stale
         // until shading and tracing write them again.
         {
