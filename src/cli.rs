@@ -39,9 +39,9 @@ pub enum Command {
     /// Adds the partial films of shards (`render` or `reference` with --shard) into the
     /// image one machine would have made; each PART.exr's film is PART.exr.checkpoint.
     Merge(MergeArgs),
-    /// Writes Slurm batch scripts that run a render or reference as a job array of shards
-    /// and a merge job after them, e.g. `stagelight slurm --shards 16 -o job -- reference
-    /// scenes/door_ajar.ron --spp 4096 -o ref.exr`, then `sh job/submit.sh`.
+    /// Writes Slurm batch scripts that run a render, reference or comparison as a job array of
+    /// shards and a merge job after them, e.g. `stagelight slurm --shards 16 -o job --
+    /// reference scenes/door_ajar.ron --spp 4096 -o ref.exr`, then `sh job/submit.sh`.
     Slurm(SlurmArgs),
     /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
     Diff { image: PathBuf, reference: PathBuf },
@@ -221,7 +221,8 @@ pub struct SlurmArgs {
     #[arg(long)]
     pub stagelight: Option<PathBuf>,
     /// The command to shard, after `--`: `render ...` or `reference ...` with `--spp N` and
-    /// `-o OUT.exr` (where the merge job writes the merged image).
+    /// `-o OUT.exr` (where the merge job writes the merged image), or `compare ...` with
+    /// `--budget-unit spp` or `--preset thesis` (a plan, plan.ron, that the tasks read).
     #[arg(last = true, required = true, value_name = "COMMAND")]
     pub command: Vec<String>,
 }
@@ -533,7 +534,7 @@ pub enum Preset {
 #[derive(clap::Args, Debug)]
 pub struct CompareArgs {
     /// Scene file (RON); not with --preset.
-    #[arg(required_unless_present = "preset", conflicts_with = "preset")]
+    #[arg(required_unless_present_any = ["preset", "plan"], conflicts_with = "preset")]
     pub scene: Option<PathBuf>,
     /// Reference EXR of the scene (default: made with `reference` in the output folder, or
     /// resumed from there, at --reference-spp).
@@ -585,12 +586,52 @@ pub struct CompareArgs {
     pub thesis_photons: Vec<u64>,
     #[command(flatten)]
     pub photons: PhotonArgs,
+    /// A plan written by `stagelight slurm ... -- compare ...`: with --shard I/N, render task
+    /// I's shards of it; alone, merge every task's shards and write the report.
+    #[arg(long, value_name = "PLAN.ron",
+          conflicts_with_all = ["scene", "preset", "reference", "integrators", "references",
+                                "budgets", "budget_unit", "seed", "sampler", "max_depth",
+                                "reference_spp", "scenes_dir", "thesis_photons", "output",
+                                "kernel", "wavefront"])]
+    pub plan: Option<PathBuf>,
+    /// With --plan: the task to render, I of N.
+    #[arg(long, value_name = "I/N", value_parser = parse_shard, requires = "plan")]
+    pub shard: Option<(u64, u64)>,
     /// The kernel and wavefront of the pt (and bdpt) runs.
     #[command(flatten)]
     pub kernel: KernelArgs,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
+}
+
+/// What a `compare ...` command line (a plan's, or the one `stagelight slurm` shards) asks
+/// for, parsed as `stagelight` parses it.
+pub fn compare_request(command: &[String]) -> Result<crate::compare::shards::CompareRequest> {
+    use crate::compare::shards::CompareRequest;
+    let line = ["stagelight"]
+        .into_iter()
+        .chain(command.iter().map(String::as_str));
+    let parsed = Cli::try_parse_from(line).map_err(|e| {
+        let text = e.render().to_string();
+        anyhow::anyhow!(
+            "the compare command: {}",
+            text.lines()
+                .next()
+                .unwrap_or_default()
+                .trim_start_matches("error: ")
+        )
+    })?;
+    match parsed.command {
+        Command::Compare(a) if a.plan.is_some() => {
+            anyhow::bail!("the compare command to shard cannot have a --plan of its own")
+        }
+        Command::Compare(a) if a.preset == Some(Preset::Thesis) => {
+            Ok(CompareRequest::Thesis(a.thesis_options()))
+        }
+        Command::Compare(a) => Ok(CompareRequest::Plain(a.options()?)),
+        _ => anyhow::bail!("not a compare command"),
+    }
 }
 
 /// One budget of --budgets (the list as a whole is checked after parsing).
@@ -703,6 +744,12 @@ fn run(cli: Cli) -> Result<i32> {
         Command::Reference(args) => crate::commands::reference::reference(&args.options()),
         Command::Merge(args) => crate::commands::merge::merge(&args.parts, &args.output),
         Command::Slurm(args) => crate::commands::slurm::write(&args.options()?),
+        Command::Compare(args) if args.plan.is_some() => crate::compare::shards::run_plan(
+            args.plan.as_deref().unwrap_or(std::path::Path::new("")),
+            args.shard,
+            args.threads.map(|t| t as usize),
+            args.quiet,
+        ),
         Command::Compare(args) if args.preset == Some(Preset::Thesis) => {
             crate::compare::thesis::run(&args.thesis_options())
         }
@@ -751,7 +798,42 @@ fn run(cli: Cli) -> Result<i32> {
 impl SlurmArgs {
     /// The options, after checking the command to shard as `stagelight` would parse it.
     fn options(&self) -> Result<crate::commands::slurm::SlurmOptions> {
-        crate::commands::slurm::check_command(&self.command)?;
+        let is_compare = crate::commands::slurm::check_command(&self.command)?.is_none();
+        let binary = match &self.stagelight {
+            Some(b) => b.clone(),
+            None => std::env::current_exe().context("cannot find this stagelight binary")?,
+        };
+        let workdir = std::env::current_dir().context("cannot read the current folder")?;
+        let dir = std::path::absolute(workdir.join(&self.output))
+            .context("cannot find the job folder")?;
+        let options = |name: String, plan| crate::commands::slurm::SlurmOptions {
+            shards: self.shards,
+            dir: dir.clone(),
+            command: self.command.clone(),
+            binary: binary.clone(),
+            workdir: workdir.clone(),
+            partition: self.partition.clone(),
+            time_limit: self.time_limit.clone(),
+            cpus_per_task: self.cpus_per_task,
+            signal_seconds: self.signal_seconds,
+            name: crate::commands::slurm::job_name(&name, &dir),
+            plan,
+        };
+        if is_compare {
+            let request = compare_request(&self.command)?;
+            let name = match &request {
+                crate::compare::shards::CompareRequest::Plain(o) => scene_stem(&o.scene),
+                crate::compare::shards::CompareRequest::Thesis(_) => "thesis".into(),
+            };
+            let plan = crate::compare::shards::make_plan(
+                &self.command,
+                &request,
+                self.shards,
+                &dir.join("parts"),
+                &workdir,
+            )?;
+            return Ok(options(name, Some(plan)));
+        }
         let shard = format!("1/{}", self.shards);
         let line = ["stagelight"]
             .into_iter()
@@ -778,28 +860,12 @@ impl SlurmArgs {
                 self.shards
             );
         }
-        let binary = match &self.stagelight {
-            Some(b) => b.clone(),
-            None => std::env::current_exe().context("cannot find this stagelight binary")?,
-        };
-        let workdir = std::env::current_dir().context("cannot read the current folder")?;
         let name = self
             .command
             .get(1)
             .map(|scene| scene_stem(std::path::Path::new(scene)))
             .unwrap_or_else(|| "stagelight".into());
-        Ok(crate::commands::slurm::SlurmOptions {
-            shards: self.shards,
-            dir: self.output.clone(),
-            command: self.command.clone(),
-            binary,
-            workdir,
-            partition: self.partition.clone(),
-            time_limit: self.time_limit.clone(),
-            cpus_per_task: self.cpus_per_task,
-            signal_seconds: self.signal_seconds,
-            name,
-        })
+        Ok(options(name, None))
     }
 }
 

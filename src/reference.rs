@@ -126,6 +126,11 @@ pub struct CheckpointHeader {
     /// as text (`integrators::film_settings`; empty when all are defaults).
     #[serde(default)]
     pub settings: String,
+    /// The film's sums are in units of 2^(unit_exponent - 64) (`film::fixed`: the power of
+    /// two of the scene's brightest emission); 0 in files from before units followed the
+    /// scene, which were all in units of 2^-64.
+    #[serde(default)]
+    pub unit_exponent: i32,
 }
 
 /// What part of a render a shard makes.
@@ -175,6 +180,7 @@ impl CheckpointHeader {
             }),
             made_by: reference_command(),
             settings: crate::integrators::film_settings(integrator, settings),
+            unit_exponent: Film::scene_unit_exponent(&data.scene),
         }
     }
 
@@ -246,6 +252,12 @@ impl CheckpointHeader {
             return Err(format!(
                 "made by \"{}\", not render or reference",
                 crate::scene::echo(&self.made_by)
+            ));
+        }
+        if !(-1000..=1000).contains(&self.unit_exponent) {
+            return Err(format!(
+                "film unit 2^({} - 64), beyond what a film uses",
+                self.unit_exponent
             ));
         }
         let samples =
@@ -337,7 +349,12 @@ impl Checkpoint {
     /// The checkpoint file's bytes.
     pub fn to_bytes(&self) -> Result<Vec<u8>, String> {
         let splats = self.film.fixed_splats();
-        let header = ron::to_string(&self.header).map_err(|e| e.to_string())?;
+        // The header says the film's unit, whatever it was given.
+        let header = CheckpointHeader {
+            unit_exponent: self.film.unit_exponent(),
+            ..self.header.clone()
+        };
+        let header = ron::to_string(&header).map_err(|e| e.to_string())?;
         let pixels = self.film.width * self.film.height;
         let per_pixel = FIXED_RGB_BYTES * (1 + usize::from(!splats.is_empty())) + 8;
         let mut bytes = Vec::with_capacity(MAGIC.len() + header.len() + 1 + pixels * per_pixel + 8);
@@ -463,7 +480,7 @@ impl Checkpoint {
             }
         } else {
             let fixed = |v: DVec3| {
-                FixedRgb::from_dvec3(v)
+                FixedRgb::from_dvec3(v, header.unit_exponent)
                     .ok_or_else(|| damaged("a pixel sum beyond the film's range (+-2^63)"))
             };
             for chunk in data.chunks_exact(PIXEL_BYTES_V3) {
@@ -487,6 +504,7 @@ impl Checkpoint {
         let mut film = Film::from_fixed_parts(
             header.width,
             header.height,
+            header.unit_exponent,
             sum,
             samples,
             splat,
@@ -625,7 +643,8 @@ impl PassRange {
         }
         if count > total {
             return Err(format!(
-                "--shard {index}/{count}: {count} shards of {total} passes would leave some                  empty (at most one shard per pass)"
+                "--shard {index}/{count}: {count} shards of {total} passes would leave some \
+                 empty (at most one shard per pass)"
             ));
         }
         let at = |i: u64| (total as u128 * i as u128 / count as u128) as u64;
@@ -701,7 +720,7 @@ pub fn render_reference(
                 ),
             ));
         }
-        Film::new(width, height)
+        Film::for_scene(&job.data)
     };
     let passes_before = header.passes;
     // A shard's budget is its range's end.

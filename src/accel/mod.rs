@@ -1,29 +1,31 @@
-//! The acceleration structure over the scene's triangles (obvhs), watertight ray-triangle
+//! The acceleration structure over the scene's triangles, watertight ray-triangle
 //! intersection, and robust spawning of rays from surfaces.
 //!
-//! The tree is built by obvhs (a compressed wide BVH8 from a PLOC binary BVH) and converted
-//! into our own eight-wide nodes with exact f32 child boxes (see `cwbvh`); traversal is our
-//! own, nearest child first, with a conservative box test (no box that holds a hit triangle
-//! is ever culled) and the watertight triangle test of Woop, Benthin and Wald, four triangles
-//! (one leaf) at a time, so that rays never slip through shared edges or vertices. The
-//! triangles are copied into the tree's leaf order, so a leaf's triangles are contiguous in
-//! memory.
+//! obvhs builds a binary tree (PLOC, then reinsertion), which we collapse into our own
+//! eight-wide nodes with exact f32 child boxes by a surface area heuristic (see `collapse`),
+//! with leaves of up to four triangles that share four-lane packets with their siblings (see
+//! `bvh8`). Traversal is our own, nearest child first, with a conservative box test (no box that
+//! holds a hit triangle is ever culled) and the watertight triangle test of Woop, Benthin and
+//! Wald, four triangles (one packet) at a time, so that rays never slip through shared edges
+//! or vertices.
 //!
 //! Measured against a binary BVH (obvhs' BVH2, SAH-collapsed leaves of up to 8 triangles, with
 //! our own traversal of the same robustness: nearest child first, entry distances on the
-//! stack), the CWBVH was 40-45% faster for closest hits and 30% faster for any hits on incoherent rays, in both
-//! the Cornell box and a 10k-triangle door_ajar stand-in, so the BVH2 was removed.
+//! stack), an eight-wide tree was 40-45% faster for closest hits and 30% faster for any hits
+//! on incoherent rays, in both the Cornell box and a 10k-triangle door_ajar stand-in, so the
+//! BVH2 was removed.
 
-mod cwbvh;
+mod bvh8;
+mod collapse;
 mod stack;
 mod triangle;
 
 use crate::geometry::TriangleColumns;
-use cwbvh::CwBvhAccel;
+use bvh8::Bvh8;
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
-use std::time::Duration;
+use rayon::prelude::*;
 use triangle::{TraversalRay, columns};
 
 /// A closest hit: distance along the (unnormalised) direction, triangle id, barycentrics of
@@ -40,25 +42,23 @@ pub struct Hit {
 /// tree's leaf order. Shared freely across threads.
 pub struct Accel {
     /// `None` when no triangle has a non-zero area: nothing is ever hit.
-    tree: Option<CwBvhAccel>,
+    tree: Option<Bvh8>,
     tris: LeafTriangles,
     /// Whether the CPU has AVX2 (checked once, here, rather than per ray): traversal then runs
     /// as code compiled for it.
     avx2: bool,
 }
 
-/// The triangles in leaf order, four slots per leaf (unused slots are zero triangles, never
-/// tested): vertices as per-axis columns (the layout of the one-triangle test), as four-lane
-/// packets (one per leaf), and the id of each in `TriangleColumns`.
+/// The triangles in leaf order, as four-lane packets (unused lanes are zero triangles, never
+/// tested), and the id in `TriangleColumns` of each lane's triangle (`u32::MAX` if unused).
 pub(crate) struct LeafTriangles {
-    verts: Vec<triangle::TriangleColumns>,
     packets: Vec<triangle::TrianglePacket>,
     ids: Vec<u32>,
-    /// The number of triangles (used slots).
+    /// The number of triangles (used lanes).
     len: usize,
 }
 
-/// A hit on the triangle at leaf slot `slot`.
+/// A hit on the triangle in lane `slot % LANES` of packet `slot / LANES`.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct TriangleHit {
     t: f32,
@@ -95,26 +95,77 @@ fn cyclic_key(corners: [Vec3; 3]) -> [[u32; 3]; 3] {
     [bits[first], bits[(first + 1) % 3], bits[(first + 2) % 3]]
 }
 
+/// A hash of a `cyclic_key` in the high 32 bits of a word (each key word mixed in with a
+/// multiply and xor-shift): equal keys hash equal; the unequal keys that collide are told
+/// apart by comparing the keys.
+fn key_hash(key: &[[u32; 3]; 3]) -> u64 {
+    let h = key
+        .iter()
+        .flatten()
+        .fold(0x9e37_79b9_7f4a_7c15u64, |h, &w| {
+            let h = (h ^ u64::from(w)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+            h ^ (h >> 31)
+        });
+    h & !u64::from(u32::MAX)
+}
+
+/// The triangles the tree holds, in increasing order: those with a non-zero area, and of
+/// exact copies (the same corners in the same cyclic order) only the first. A copy is never
+/// the nearest hit before its original, and thousands of them (a polygon that repeats its
+/// vertices) make a binary tree as deep as they are many. Copies are found by sorting words
+/// of (hash, index) in parallel, not with a hash set, which took a third of the build.
+fn kept_triangles(triangles: &TriangleColumns) -> Vec<u32> {
+    let corners = |i: usize| [triangles.p0[i], triangles.p1[i], triangles.p2[i]];
+    let mut hashed: Vec<u64> = (0..triangles.len())
+        .into_par_iter()
+        .filter_map(|i| {
+            let c = corners(i);
+            (!is_degenerate(c[0], c[1], c[2])).then(|| key_hash(&cyclic_key(c)) | i as u64)
+        })
+        .collect();
+    let mut kept: Vec<u32> = hashed.par_iter().map(|&h| h as u32).collect();
+    hashed.par_sort_unstable();
+    let hash = |h: u64| h >> 32;
+    // Within a run of equal hashes, in increasing index: a copy of an earlier one goes.
+    let mut copies: Vec<u32> = hashed
+        .par_chunk_by(|a, b| hash(*a) == hash(*b))
+        .filter(|run| run.len() > 1)
+        .flat_map_iter(|run| {
+            let keys: Vec<_> = run
+                .iter()
+                .map(|&h| cyclic_key(corners(h as u32 as usize)))
+                .collect();
+            (1..run.len())
+                .filter(move |&j| keys[..j].contains(&keys[j]))
+                .map(move |j| run[j] as u32)
+        })
+        .collect();
+    if !copies.is_empty() {
+        copies.par_sort_unstable();
+        kept.retain(|i| copies.binary_search(i).is_err());
+    }
+    kept
+}
+
+/// obvhs' settings for the binary tree: its medium preset (PLOC with a search radius of 14,
+/// 64-bit Morton codes) with the reinsertion batches of its fast preset (2% of the nodes, not
+/// 5%). Measured on the big scenes (PT samples/s, 2 threads): trees of the slow settings (radius
+/// 24, 20% batches) traced no faster and took 1.7x as long to build at 5M triangles; radius 6
+/// or no reinsertion traced 4-10% slower at 1M; 2% batches instead of 5% cost at most 3% and
+/// saved 0.2 s of the 5M build.
+const BUILD_PARAMS: BvhBuildParams = BvhBuildParams {
+    reinsertion_batch_ratio: 0.02,
+    ..BvhBuildParams::medium_build()
+};
+
 impl Accel {
-    /// Builds the tree. Zero-area triangles are left out: they are never hit.
+    /// Builds the tree. Zero-area triangles and exact copies are left out: they are never hit.
     pub fn build(triangles: &TriangleColumns) -> Accel {
-        // Exact copies of a triangle (the same corners in the same cyclic order) are left out
-        // too: a copy is never the nearest hit before its original, and thousands of them
-        // (a polygon that repeats its vertices) made a tree too deep for obvhs' checks.
-        let mut seen = std::collections::HashSet::new();
-        let kept: Vec<u32> = (0..triangles.len())
-            .filter(|&i| {
-                let corners = [triangles.p0[i], triangles.p1[i], triangles.p2[i]];
-                !is_degenerate(corners[0], corners[1], corners[2])
-                    && seen.insert(cyclic_key(corners))
-            })
-            .map(|i| i as u32)
-            .collect();
+        let kept = kept_triangles(triangles);
         if kept.is_empty() {
             return Accel {
                 tree: None,
                 tris: LeafTriangles {
-                    verts: Vec::new(),
                     packets: Vec::new(),
                     ids: Vec::new(),
                     len: 0,
@@ -122,47 +173,41 @@ impl Accel {
                 avx2: false,
             };
         }
-        let aabbs: Vec<Aabb> = kept
-            .iter()
-            .map(|&i| {
-                let i = i as usize;
-                let (a, b, c) = (triangles.p0[i], triangles.p1[i], triangles.p2[i]);
-                Aabb::new(Vec3A::from(a.min(b).min(c)), Vec3A::from(a.max(b).max(c)))
-            })
-            .collect();
-        let params = BvhBuildParams::medium_build();
-        let bvh = obvhs::cwbvh::builder::build_cwbvh(&aabbs, params, &mut Duration::default());
         let kept_verts: Vec<[Vec3; 3]> = kept
-            .iter()
+            .par_iter()
             .map(|&i| {
                 let i = i as usize;
                 [triangles.p0[i], triangles.p1[i], triangles.p2[i]]
             })
             .collect();
-        let (tree, order, packets) = CwBvhAccel::new(bvh, &kept_verts);
-        let ids: Vec<u32> = order
-            .iter()
-            .map(|&k| {
-                if k == u32::MAX {
-                    u32::MAX
-                } else {
-                    kept[k as usize]
-                }
-            })
+        let aabbs: Vec<Aabb> = kept_verts
+            .par_iter()
+            .map(|&[a, b, c]| Aabb::new(Vec3A::from(a.min(b).min(c)), Vec3A::from(a.max(b).max(c))))
             .collect();
-        let verts = order
-            .iter()
-            .map(|&k| match kept_verts.get(k as usize) {
-                Some(v) => columns(v),
-                None => columns(&[Vec3::ZERO; 3]),
-            })
-            .collect();
+        let params = BUILD_PARAMS;
+        let mut bvh2 = obvhs::ploc::PlocBuilder::with_capacity(aabbs.len()).build(
+            params.ploc_search_distance,
+            &aabbs,
+            (0..aabbs.len() as u32).collect(),
+            params.sort_precision,
+            params.search_depth_threshold,
+        );
+        obvhs::bvh2::reinsertion::ReinsertionOptimizer::default().run(
+            &mut bvh2,
+            params.reinsertion_batch_ratio,
+            None,
+        );
+        let mut collapsed = collapse::collapse(&bvh2, &kept_verts);
+        // The lanes' indices into `kept` become triangle ids, in place.
+        collapsed
+            .lanes
+            .par_iter_mut()
+            .for_each(|k| *k = kept.get(*k as usize).copied().unwrap_or(u32::MAX));
         Accel {
-            tree: Some(tree),
+            tree: Some(collapsed.tree),
             tris: LeafTriangles {
-                verts,
-                packets,
-                ids,
+                packets: collapsed.packets,
+                ids: collapsed.lanes,
                 len: kept.len(),
             },
             avx2: crate::cpu::has_avx2_fma(),
@@ -173,8 +218,7 @@ impl Accel {
     pub fn memory_bytes(&self) -> (usize, usize) {
         let nodes = self.tree.as_ref().map_or(0, |t| t.memory_bytes());
         let t = &self.tris;
-        let triangles = t.verts.capacity() * std::mem::size_of::<triangle::TriangleColumns>()
-            + t.packets.capacity() * std::mem::size_of::<triangle::TrianglePacket>()
+        let triangles = t.packets.capacity() * std::mem::size_of::<triangle::TrianglePacket>()
             + t.ids.capacity() * std::mem::size_of::<u32>();
         (nodes, triangles)
     }

@@ -197,17 +197,37 @@ fn in_range_scalar(det: f32, t_scaled: f32, t_max: f32) -> bool {
     }
 }
 
+/// Triangles per packet.
+pub const LANES: usize = 4;
+
 /// Four triangles laid out for the four-lane test: `v[vertex][axis][lane]`. Unused lanes hold
-/// zeros and are masked out by the leaf's triangle count.
+/// zeros and are never tested (the caller names the lanes).
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(16))]
 pub struct TrianglePacket {
-    pub v: [[[f32; 4]; 3]; 3],
+    pub v: [[[f32; LANES]; 3]; 3],
+}
+
+impl TrianglePacket {
+    /// Puts the triangle `tri` in lane `lane`.
+    pub fn set(&mut self, lane: usize, tri: &[Vec3; 3]) {
+        for (vertex, p) in tri.iter().enumerate() {
+            for axis in 0..3 {
+                self.v[vertex][axis][lane] = p[axis];
+            }
+        }
+    }
+
+    /// The columns of the triangle in lane `lane`, for the one-triangle test.
+    #[inline(always)]
+    pub fn columns(&self, lane: usize) -> TriangleColumns {
+        let v = &self.v;
+        [0, 1, 2].map(|axis| Vec3A::new(v[0][axis][lane], v[1][axis][lane], v[2][axis][lane]))
+    }
 }
 
 impl TraversalRay {
-    /// Tests the first `count` triangles of `packet` (whose single-triangle columns are
-    /// `cols`), in lane order, exactly as `intersect` would one after another: each hit
+    /// Tests the triangles of `packet` in the lanes set in `lanes`, in lane order, exactly as `intersect` would one after another: each hit
     /// narrows `t_max`; with `ANY`, the first hit ends the test. Returns the lane and the hit
     /// of the last hit found (the closest one), if any.
     ///
@@ -221,13 +241,11 @@ impl TraversalRay {
     pub fn intersect4<const ANY: bool>(
         &self,
         packet: &TrianglePacket,
-        cols: &[TriangleColumns],
-        count: u32,
+        valid: u32,
         t_max: &mut f32,
     ) -> Option<(u32, (f32, f32, f32))> {
         use std::arch::x86_64::*;
         let [kx, ky, kz] = self.k;
-        let valid = (1u32 << count) - 1;
         // SAFETY: SSE2 is part of the x86_64 baseline, so these intrinsics are always
         // available; the loads and stores are `_mm_loadu_ps`/`_mm_storeu_ps` on `[f32; 4]`
         // arrays that are borrowed (or owned) for the duration of the call.
@@ -353,7 +371,7 @@ impl TraversalRay {
                     let i = left.trailing_zeros() as usize;
                     left &= left - 1;
                     let h = if exact & (1 << i) != 0 {
-                        self.intersect(&cols[i], *t_max)
+                        self.intersect(&packet.columns(i), *t_max)
                     } else if hit.is_none()
                         || (in_range_scalar(det[i], t_scaled[i], *t_max) && t[i] < *t_max)
                     {
@@ -372,7 +390,7 @@ impl TraversalRay {
                 }
                 hit
             } else if exact != 0 {
-                self.intersect_lanes::<ANY>(cols, exact, t_max)
+                self.intersect_lanes::<ANY>(packet, exact, t_max)
             } else {
                 None
             }
@@ -384,19 +402,18 @@ impl TraversalRay {
     #[inline(always)]
     pub fn intersect4<const ANY: bool>(
         &self,
-        _packet: &TrianglePacket,
-        cols: &[TriangleColumns],
-        count: u32,
+        packet: &TrianglePacket,
+        lanes: u32,
         t_max: &mut f32,
     ) -> Option<(u32, (f32, f32, f32))> {
-        self.intersect_lanes::<ANY>(cols, (1u32 << count) - 1, t_max)
+        self.intersect_lanes::<ANY>(packet, lanes, t_max)
     }
 
-    /// The scalar test of the triangles `cols[i]` for the bits i of `lanes`, in order.
+    /// The scalar test of the triangles of `packet` in the lanes set in `lanes`, in order.
     #[inline(always)]
     fn intersect_lanes<const ANY: bool>(
         &self,
-        cols: &[TriangleColumns],
+        packet: &TrianglePacket,
         mut lanes: u32,
         t_max: &mut f32,
     ) -> Option<(u32, (f32, f32, f32))> {
@@ -404,7 +421,7 @@ impl TraversalRay {
         while lanes != 0 {
             let i = lanes.trailing_zeros();
             lanes &= lanes - 1;
-            if let Some(h) = self.intersect(&cols[i as usize], *t_max) {
+            if let Some(h) = self.intersect(&packet.columns(i as usize), *t_max) {
                 *t_max = h.0;
                 hit = Some((i, h));
                 if ANY {

@@ -83,7 +83,7 @@ fn identity(h: &CheckpointHeader) -> Vec<(&'static str, String)> {
     } else {
         h.max_depth.to_string()
     };
-    vec![
+    let mut identity = vec![
         ("command", h.made_by.clone()),
         ("integrator", h.integrator.clone()),
         ("seed", h.seed.to_string()),
@@ -99,7 +99,17 @@ fn identity(h: &CheckpointHeader) -> Vec<(&'static str, String)> {
             "total passes",
             h.shard.map_or(0, |s| s.total_passes).to_string(),
         ),
-    ]
+    ];
+    // An unbiased part's film is in its scene's unit, so the parts of one scene agree on it
+    // unless one was made by a stagelight from before units followed the scene. (A biased
+    // part's unit follows its image; merge converts those.)
+    if h.is_unbiased() {
+        identity.push((
+            "film unit",
+            format!("2^{}", h.unit_exponent - crate::film::fixed::FRACTION_BITS),
+        ));
+    }
+    identity
 }
 
 /// Checks that the parts belong to one render and cover each of its passes once; returns
@@ -179,35 +189,35 @@ fn missing(from: u64, to: u64, after: Option<&Part>) -> String {
     }
 }
 
-/// Merges the parts into `output` and says what it did. Returns the exit code (0).
-pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
-    if output
-        .extension()
-        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
-    {
-        bail!("{}: the output must be an .exr file", output.display());
-    }
+/// Reads the parts and checks that they belong to one render and cover each of its passes
+/// once (every problem named), in pass order.
+fn read_parts(parts: &[PathBuf]) -> Result<Vec<Part>> {
     let mut read = parts
         .iter()
         .map(|p| read_part(p))
         .collect::<Result<Vec<_>>>()?;
+    if read.is_empty() {
+        bail!("no parts to merge");
+    }
     read.sort_by_key(|p| (p.header().first_pass, p.header().passes));
     let found = problems(&read);
     if !found.is_empty() {
         bail!("cannot merge {} parts: {}", read.len(), found.join("; "));
     }
-    let is_reference = read[0].header().made_by == "reference";
-    let png = output.with_extension("png");
-    let merged_film_path = checkpoint_path(output);
-    let mut outputs = vec![output, png.as_path()];
-    if is_reference {
-        outputs.push(&merged_film_path);
-    }
-    let inputs: Vec<&Path> = read.iter().map(|p| p.film_path.as_path()).collect();
-    check_outputs(&outputs, &inputs)?;
+    Ok(read)
+}
 
+/// The film of all the parts' passes and its header (that of a whole render).
+fn add_parts(read: &[Part]) -> Result<(CheckpointHeader, Film)> {
     let first = read[0].header().clone();
-    let mut film = Film::new(first.width, first.height);
+    // One unit for all: the parts' own for the unbiased integrators (`problems` checked that
+    // they agree), the coarsest for the biased ones' weighted images, each rounded to it.
+    let unit = read
+        .iter()
+        .map(|p| p.checkpoint.film.unit_exponent())
+        .max()
+        .unwrap_or(0);
+    let mut film = Film::with_unit(first.width, first.height, unit);
     let mut header = CheckpointHeader {
         first_pass: 0,
         shard: None,
@@ -218,8 +228,18 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
         out_of_range: 0,
         ..first
     };
-    for part in &read {
-        film.add_film(&part.checkpoint.film)
+    for part in read {
+        let added = &part.checkpoint.film;
+        let converted;
+        let added = if added.unit_exponent() == unit {
+            added
+        } else {
+            converted = added
+                .in_unit(unit)
+                .map_err(|e| anyhow::anyhow!("{}: {e}", part.name()))?;
+            &converted
+        };
+        film.add_film(added)
             .map_err(|e| anyhow::anyhow!("{}: {e}", part.name()))?;
         let h = part.header();
         header.passes = header.passes.max(h.passes);
@@ -228,6 +248,34 @@ pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
     header.nonfinite = film.nonfinite;
     header.nonfinite_splats = film.nonfinite_splats;
     header.out_of_range = film.out_of_range;
+    Ok((header, film))
+}
+
+/// The merged film of shards (`PART.exr` or their checkpoints), checked as `merge` checks
+/// them, without writing anything: what a sharded comparison measures.
+pub fn merged_film(parts: &[PathBuf]) -> Result<(CheckpointHeader, Film)> {
+    add_parts(&read_parts(parts)?)
+}
+
+/// Merges the parts into `output` and says what it did. Returns the exit code (0).
+pub fn merge(parts: &[PathBuf], output: &Path) -> Result<i32> {
+    if output
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("{}: the output must be an .exr file", output.display());
+    }
+    let read = read_parts(parts)?;
+    let is_reference = read[0].header().made_by == "reference";
+    let png = output.with_extension("png");
+    let merged_film_path = checkpoint_path(output);
+    let mut outputs = vec![output, png.as_path()];
+    if is_reference {
+        outputs.push(&merged_film_path);
+    }
+    let inputs: Vec<&Path> = read.iter().map(|p| p.film_path.as_path()).collect();
+    check_outputs(&outputs, &inputs)?;
+    let (header, film) = add_parts(&read)?;
 
     if is_reference {
         // A merged reference is a reference: its checkpoint lets `reference` extend it.

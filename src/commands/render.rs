@@ -104,8 +104,7 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
             crate::integrators::render(o.integrator, data.clone(), &settings, budget, &control)
         }
         Some(range) => {
-            let cam = data.scene.camera;
-            let start = Resume::shard_start(cam.width as usize, cam.height as usize, range.first);
+            let start = Resume::shard_start(&data, range.first);
             let budget = Budget::SamplesPerPixel(range.end);
             let settings = &o.settings;
             crate::integrators::resume(

@@ -6,6 +6,7 @@ pub mod format;
 pub mod plot;
 pub mod report;
 pub mod run;
+pub mod shards;
 pub mod thesis;
 
 use crate::film::Image;
@@ -156,6 +157,9 @@ pub struct Comparison {
     pub results: Vec<RunResult>,
     /// True when a stop cut the comparison short: some runs are missing.
     pub interrupted: bool,
+    /// How the runs were made when they were rendered as shards (a paragraph for the
+    /// summary); None when one machine rendered them.
+    pub sharded: Option<String>,
 }
 
 impl Comparison {
@@ -254,6 +258,15 @@ pub fn run_comparison(
 /// One pass before the timed runs, so the first timed run does not pay for page faults and
 /// cold caches the later ones do not.
 fn warm_up(kind: IntegratorKind, job: &CompareJob) {
+    warm_up_integrator(kind, job.data.clone(), &job.settings);
+}
+
+/// One untimed pass of `kind` with a seed of its own (see `warm_up`).
+pub(crate) fn warm_up_integrator(
+    kind: IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &RenderSettings,
+) {
     let never = AtomicBool::new(false);
     let control = Control {
         stop: &never,
@@ -261,10 +274,10 @@ fn warm_up(kind: IntegratorKind, job: &CompareJob) {
     };
     let _ = crate::integrators::render(
         kind,
-        job.data.clone(),
+        data,
         &RenderSettings {
-            seed: job.settings.seed ^ 0x77a2_3e11,
-            ..job.settings
+            seed: settings.seed ^ 0x77a2_3e11,
+            ..*settings
         },
         Budget::SamplesPerPixel(1),
         &control,

@@ -138,6 +138,9 @@ pub fn summary_markdown(c: &Comparison) -> String {
         c.reference_path.display(),
         c.reference_note
     );
+    if let Some(note) = &c.sharded {
+        let _ = writeln!(s, "{note}\n");
+    }
     if let Some(noise) = c.reference_noise {
         let _ = writeln!(
             s,

@@ -46,7 +46,7 @@ pub(crate) struct ComparePlan {
 
 impl ComparePlan {
     /// Checks the budgets and the integrator list (the messages name the option).
-    fn new(o: &CompareOptions) -> Result<ComparePlan> {
+    pub(crate) fn new(o: &CompareOptions) -> Result<ComparePlan> {
         super::validate_budgets(&o.budgets, o.unit)
             .map_err(|e| anyhow::anyhow!("--budgets: {e}"))?;
         let mut integrators: Vec<IntegratorKind> = Vec::new();
@@ -269,5 +269,6 @@ pub(crate) fn compare_scene(
         budgets: plan.budgets.clone(),
         results,
         interrupted,
+        sharded: None,
     })))
 }

@@ -113,7 +113,14 @@ pub struct SceneResult<'a> {
 
 /// The preset's summary.md: the study's two tables with our seconds and relMSE beside its
 /// seconds.
-pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: &[u64]) -> String {
+///
+/// `sharded`: a paragraph saying how a sharded run's figures were made (None for one machine).
+pub fn summary_markdown(
+    scenes: &[SceneResult],
+    threads: usize,
+    photon_budgets: &[u64],
+    sharded: Option<&str>,
+) -> String {
     let mut s = String::new();
     let mut sizes: Vec<String> = scenes
         .iter()
@@ -136,6 +143,9 @@ pub fn summary_markdown(scenes: &[SceneResult], threads: usize, photon_budgets: 
          (see each scene's summary for it). The thesis' figures are printed as it printed them, \
          inconsistencies included.\n"
     );
+    if let Some(note) = sharded {
+        let _ = writeln!(s, "{note}\n");
+    }
     let max_spp = UNBIASED_SPP[UNBIASED_SPP.len() - 1];
     let thin: Vec<String> = scenes
         .iter()
@@ -344,31 +354,8 @@ pub struct ThesisOptions {
 /// the exit code: 0, or `EXIT_INTERRUPTED` when Ctrl-C stopped it.
 pub fn run(o: &ThesisOptions) -> Result<i32> {
     let out_dir = &o.output;
-    let plan = ComparePlan {
-        integrators: unbiased_built(),
-        unit: BudgetUnit::Spp,
-        budgets: UNBIASED_SPP.iter().map(|&s| s as f64).collect(),
-        settings: RenderSettings {
-            seed: o.seed,
-            max_depth: o.max_depth,
-            ..RenderSettings::default()
-        },
-    };
-    // Every given reference is checked before the first run of hours.
-    let given: Vec<Option<PathBuf>> = SCENES
-        .iter()
-        .map(|(key, _)| o.references.as_ref().map(|d| d.join(format!("{key}.exr"))))
-        .collect();
-    for path in given.iter().flatten() {
-        if !path.is_file() {
-            anyhow::bail!(
-                "{}: no such reference (--references needs one SCENE.exr per scene of the \
-                 study: {})",
-                path.display(),
-                SCENES.map(|(k, _)| format!("{k}.exr")).join(", ")
-            );
-        }
-    }
+    let plan = unbiased_plan(o);
+    let given = given_references(o)?;
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
     let mut comparisons: Vec<(&'static str, Comparison)> = Vec::new();
@@ -421,7 +408,7 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
     let summary = out_dir.join(report::SUMMARY_MD);
     crate::film::output::write_bytes(
         &summary,
-        summary_markdown(&scenes, pool.current_num_threads(), &o.photon_budgets).as_bytes(),
+        summary_markdown(&scenes, pool.current_num_threads(), &o.photon_budgets, None).as_bytes(),
     )?;
     let csv = out_dir.join(report::RESULTS_CSV);
     let all: Vec<(&str, &Comparison)> = comparisons.iter().map(|(k, c)| (*k, c)).collect();
@@ -439,6 +426,64 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
     Ok(exit_code(interrupted))
 }
 
+/// The preset's unbiased runs: PT, BDPT and MLT at `UNBIASED_SPP`.
+pub(crate) fn unbiased_plan(o: &ThesisOptions) -> ComparePlan {
+    ComparePlan {
+        integrators: unbiased_built(),
+        unit: BudgetUnit::Spp,
+        budgets: UNBIASED_SPP.iter().map(|&s| s as f64).collect(),
+        settings: RenderSettings {
+            seed: o.seed,
+            max_depth: o.max_depth,
+            ..RenderSettings::default()
+        },
+    }
+}
+
+/// The given reference of each scene of `SCENES` (None: the preset makes it), each checked
+/// to exist before the first run of hours.
+pub(crate) fn given_references(o: &ThesisOptions) -> Result<Vec<Option<PathBuf>>> {
+    let given: Vec<Option<PathBuf>> = SCENES
+        .iter()
+        .map(|(key, _)| o.references.as_ref().map(|d| d.join(format!("{key}.exr"))))
+        .collect();
+    for path in given.iter().flatten() {
+        if !path.is_file() {
+            anyhow::bail!(
+                "{}: no such reference (--references needs one SCENE.exr per scene of the \
+                 study: {})",
+                path.display(),
+                SCENES.map(|(k, _)| format!("{k}.exr")).join(", ")
+            );
+        }
+    }
+    Ok(given)
+}
+
+/// The biased runs of a scene in run order: (integrator, passes, photons per pass, settings),
+/// each row of `BIASED` at each of the photon budgets.
+pub(crate) fn biased_runs_of(
+    plan: &ComparePlan,
+    o: &ThesisOptions,
+) -> Result<Vec<(IntegratorKind, u64, u64, RenderSettings)>> {
+    let mut runs = Vec::new();
+    for &photons in &o.photon_budgets {
+        for (name, passes, _row) in BIASED {
+            let kind = IntegratorKind::from_name(name).map_err(|e| anyhow::anyhow!("{e}"))?;
+            let settings = RenderSettings {
+                photons: PhotonSettings {
+                    photons_per_pass: photons,
+                    photons,
+                    ..o.photons
+                },
+                ..plan.settings
+            };
+            runs.push((kind, passes, photons, settings));
+        }
+    }
+    Ok(runs)
+}
+
 /// The biased runs of one scene: each row of `BIASED` at each of the photon budgets, against
 /// the scene's reference. Returns the runs and whether a stop cut them short.
 fn biased_runs(
@@ -451,42 +496,31 @@ fn biased_runs(
 ) -> Result<(Vec<RunResult>, bool)> {
     let data = load_scene(scene)?;
     let mut runs = Vec::new();
-    for &photons in &o.photon_budgets {
-        for (name, passes, row) in BIASED {
-            let kind = IntegratorKind::from_name(name).map_err(|e| anyhow::anyhow!("{e}"))?;
-            if !o.quiet {
-                eprintln!("  {row} at {photons} photons");
-            }
-            let settings = RenderSettings {
-                photons: PhotonSettings {
-                    photons_per_pass: photons,
-                    photons,
-                    ..o.photons
-                },
-                ..plan.settings
-            };
-            let job = CompareJob {
-                data: data.clone(),
-                reference,
-                integrators: &[kind],
-                unit: BudgetUnit::Spp,
-                budgets: &[passes as f64],
-                settings,
-            };
-            let (results, stopped) = pool
-                .install(|| super::run_comparison(&job, stop, &|_, _| {}))
-                .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
-            runs.extend(results);
-            if stopped {
-                return Ok((runs, true));
-            }
+    for (kind, passes, photons, settings) in biased_runs_of(plan, o)? {
+        if !o.quiet {
+            eprintln!("  {kind} at {passes} passes, {photons} photons");
+        }
+        let job = CompareJob {
+            data: data.clone(),
+            reference,
+            integrators: &[kind],
+            unit: BudgetUnit::Spp,
+            budgets: &[passes as f64],
+            settings,
+        };
+        let (results, stopped) = pool
+            .install(|| super::run_comparison(&job, stop, &|_, _| {}))
+            .map_err(|e| anyhow::anyhow!("{}: {e}", scene.display()))?;
+        runs.extend(results);
+        if stopped {
+            return Ok((runs, true));
         }
     }
     Ok((runs, false))
 }
 
 /// One CSV of every scene's runs, with a scene column first.
-fn write_csv(all: &[(&str, &Comparison)], path: &Path) -> Result<()> {
+pub(crate) fn write_csv(all: &[(&str, &Comparison)], path: &Path) -> Result<()> {
     let mut rows = Vec::new();
     let mut scenes = Vec::new();
     for (key, c) in all {

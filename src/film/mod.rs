@@ -1,6 +1,7 @@
-//! The film: per-pixel sums in fixed point (`fixed`: each sample rounded once to units of
-//! 2^-64 and summed as an integer, so the sum does not depend on the order of its samples and
-//! two films of disjoint samples add up to the film of all of them, bit for bit), non-finite
+//! The film: per-pixel sums in fixed point (`fixed`: each sample rounded once to the film's
+//! unit, 2^-64 times the power of two of the scene's brightest emission, and summed as an
+//! integer, so the sum does not depend on the order of its samples and two films of disjoint
+//! samples of one scene add up to the film of all of them, bit for bit), non-finite
 //! samples counted and never added, and images written as EXR (float32 linear RGB, unscaled)
 //! and PNG (sRGB preview), each under a temporary name and renamed (`output`).
 //!
@@ -8,8 +9,8 @@
 //! black in the pixel's mean, so a pixel with rejected samples is darkened by their share.
 //! Every integrator does the same (the photon mappers drop a non-finite estimate as zero),
 //! and the reports count them; `stagelight render` warns when their share is large. A sample
-//! beyond the film's range (a pixel sum beyond +-2^63) is rejected the same way and counted
-//! apart (`out_of_range`).
+//! beyond the film's range (a pixel sum beyond +-2^63 times the film's scale) is rejected the
+//! same way and counted apart (`out_of_range`).
 
 pub mod fixed;
 pub mod output;
@@ -25,6 +26,8 @@ use std::path::Path;
 pub struct Film {
     pub width: usize,
     pub height: usize,
+    /// The sums' unit is 2^(unit_exponent - 64) (`fixed::unit_exponent`).
+    unit_exponent: i32,
     sum: Vec<FixedRgb>,
     samples: Vec<u64>,
     /// Splatted contributions (light tracing): they land in any pixel, not the one sampled,
@@ -36,15 +39,47 @@ pub struct Film {
     /// Splats rejected because a channel was NaN or infinite (counted apart from samples).
     pub nonfinite_splats: u64,
     /// Samples and splats rejected because they would take their pixel's sum beyond the
-    /// film's range, +-2^63 (samples count as black, splats are dropped).
+    /// film's range, +-2^(unit_exponent + 63) (samples count as black, splats are dropped).
     pub out_of_range: u64,
 }
 
 impl Film {
+    /// An empty film in units of 2^-64 (a scene whose brightest light is between 1 and 2;
+    /// renders make theirs with `for_scene`).
     pub fn new(width: usize, height: usize) -> Film {
+        Film::with_unit(width, height, 0)
+    }
+
+    /// An empty film of the scene's camera, in the scene's unit: 2^-64 times the power of two
+    /// of its brightest emission channel, so that the film's range and precision follow the
+    /// scene's light. Every film of a scene has this unit, so they add.
+    pub fn for_scene(data: &crate::scene::SceneData) -> Film {
+        let cam = data.scene.camera;
+        Film::with_unit(
+            cam.width as usize,
+            cam.height as usize,
+            Film::scene_unit_exponent(&data.scene),
+        )
+    }
+
+    /// The unit exponent of a scene's films (`fixed::unit_exponent` of its brightest
+    /// emission channel).
+    pub fn scene_unit_exponent(scene: &crate::scene::PreparedScene) -> i32 {
+        let brightest = scene
+            .emitters
+            .radiance
+            .iter()
+            .map(|r| r.max_element())
+            .fold(0.0, f32::max);
+        fixed::unit_exponent(brightest)
+    }
+
+    /// An empty film in units of 2^(unit_exponent - 64).
+    pub fn with_unit(width: usize, height: usize, unit_exponent: i32) -> Film {
         Film {
             width,
             height,
+            unit_exponent,
             sum: vec![FixedRgb::ZERO; width * height],
             samples: vec![0; width * height],
             splat: Vec::new(),
@@ -59,7 +94,7 @@ impl Film {
     #[inline]
     pub fn add_sample(&mut self, pixel: usize, value: Vec3) {
         self.samples[pixel] += 1;
-        match self.sum[pixel].add_sample(value) {
+        match self.sum[pixel].add_sample(value, self.unit_exponent) {
             Ok(()) => {}
             Err(Rejected::NonFinite) => self.nonfinite += 1,
             Err(Rejected::OutOfRange) => self.out_of_range += 1,
@@ -77,6 +112,7 @@ impl Film {
         if pixels == 0 {
             return;
         }
+        let exponent = self.unit_exponent;
         // Sample i lands in pixel (offset + i) % pixels: pixel p's first sample is
         // (p + pixels - offset) % pixels, then every `pixels` further.
         let offset = (first_sample % pixels as u64) as usize;
@@ -99,7 +135,7 @@ impl Film {
                     let mut i = (pixel + pixels - offset) % pixels;
                     while i < values.len() {
                         *count += 1;
-                        match sum.add_sample(values[i]) {
+                        match sum.add_sample(values[i], exponent) {
                             Ok(()) => {}
                             Err(Rejected::NonFinite) => nonfinite += 1,
                             Err(Rejected::OutOfRange) => out_of_range += 1,
@@ -125,21 +161,30 @@ impl Film {
         if self.splat.is_empty() {
             self.splat = vec![FixedRgb::ZERO; self.width * self.height];
         }
-        match self.splat[pixel].add_sample(value) {
+        match self.splat[pixel].add_sample(value, self.unit_exponent) {
             Ok(()) => {}
             Err(Rejected::NonFinite) => self.nonfinite_splats += 1,
             Err(Rejected::OutOfRange) => self.out_of_range += 1,
         }
     }
 
-    /// Adds another film of the same size (samples, splats and rejected counts): the film of
-    /// both sets of samples, exactly as if they had been added one by one. An error when the
-    /// sizes differ or a sum would leave the film's range (this film is then unchanged).
+    /// Adds another film of the same size and unit (samples, splats and rejected counts): the
+    /// film of both sets of samples, exactly as if they had been added one by one. An error
+    /// when the sizes or units differ or a sum would leave the film's range (this film is
+    /// then unchanged).
     pub fn add_film(&mut self, other: &Film) -> Result<(), String> {
         if (self.width, self.height) != (other.width, other.height) {
             return Err(format!(
                 "a {}x{} film cannot be added to a {}x{} one",
                 other.width, other.height, self.width, self.height
+            ));
+        }
+        if self.unit_exponent != other.unit_exponent {
+            return Err(format!(
+                "a film in units of 2^{} cannot be added to one in units of 2^{} (films of \
+                 different scenes, or made by different versions of stagelight)",
+                other.unit_exponent - fixed::FRACTION_BITS,
+                self.unit_exponent - fixed::FRACTION_BITS
             ));
         }
         let add = |a: &[FixedRgb], b: &[FixedRgb], what: &str| -> Result<Vec<FixedRgb>, String> {
@@ -149,9 +194,11 @@ impl Film {
                 .map(|(i, (x, y))| {
                     x.checked_add(y).ok_or_else(|| {
                         format!(
-                            "the {what} of pixel ({}, {}) would leave the film's range (+-2^63)",
+                            "the {what} of pixel ({}, {}) would leave the film's range \
+                             (+-2^{})",
                             i % self.width,
-                            i / self.width
+                            i / self.width,
+                            self.unit_exponent + 63
                         )
                     })
                 })
@@ -176,11 +223,13 @@ impl Film {
         Ok(())
     }
 
-    /// Rebuilds a film from its fixed-point per-pixel sums, sample counts and splat sums (a
-    /// checkpoint; `splat` may be empty); None when their lengths do not match the size.
+    /// Rebuilds a film from its unit exponent, fixed-point per-pixel sums, sample counts and
+    /// splat sums (a checkpoint; `splat` may be empty); None when their lengths do not match
+    /// the size.
     pub fn from_fixed_parts(
         width: usize,
         height: usize,
+        unit_exponent: i32,
         sum: Vec<FixedRgb>,
         samples: Vec<u64>,
         splat: Vec<FixedRgb>,
@@ -198,6 +247,7 @@ impl Film {
             .then_some(Film {
                 width,
                 height,
+                unit_exponent,
                 sum,
                 samples,
                 splat,
@@ -205,6 +255,38 @@ impl Film {
                 nonfinite_splats: 0,
                 out_of_range: 0,
             })
+    }
+
+    /// The sums' unit is 2^(this - 64).
+    pub fn unit_exponent(&self) -> i32 {
+        self.unit_exponent
+    }
+
+    /// The same film in units of 2^(unit_exponent - 64), each sum rounded to the new unit
+    /// (exact when it is finer); an error naming the pixel when a sum does not fit.
+    pub fn in_unit(&self, unit_exponent: i32) -> Result<Film, String> {
+        let (from, to) = (self.unit_exponent, unit_exponent);
+        let convert = |sums: &[FixedRgb]| -> Result<Vec<FixedRgb>, String> {
+            sums.iter()
+                .enumerate()
+                .map(|(i, s)| {
+                    s.rescaled(from, to).ok_or_else(|| {
+                        format!(
+                            "pixel ({}, {}) does not fit in units of 2^{}",
+                            i % self.width.max(1),
+                            i / self.width.max(1),
+                            to - fixed::FRACTION_BITS
+                        )
+                    })
+                })
+                .collect()
+        };
+        Ok(Film {
+            unit_exponent,
+            sum: convert(&self.sum)?,
+            splat: convert(&self.splat)?,
+            ..self.clone()
+        })
     }
 
     /// The fixed-point per-pixel sums, row 0 first.
@@ -218,10 +300,10 @@ impl Film {
     }
 
     /// Builds a film from f64 per-pixel sums, sample counts and splat sums (`splat` may be
-    /// empty for a film without splats), each sum rounded to the film's unit (2^-64); a sum
-    /// beyond the film's range (+-2^63) or not finite is taken as 0 and counted in
-    /// `out_of_range` or `nonfinite`. None when their lengths do not match the size. For films
-    /// made from f64 images (the photon mappers, MLT).
+    /// empty for a film without splats), in a unit taken from the largest finite sum
+    /// (`fixed::unit_exponent_of_sums`: 2^-104 of it), each sum rounded to it; a sum not
+    /// finite is taken as 0 and counted in `nonfinite`. None when their lengths do not match
+    /// the size. For films made from f64 images (the photon mappers, MLT).
     pub fn from_parts(
         width: usize,
         height: usize,
@@ -230,11 +312,18 @@ impl Film {
         splat: Vec<DVec3>,
         nonfinite: u64,
     ) -> Option<Film> {
+        let largest = sum
+            .iter()
+            .chain(&splat)
+            .flat_map(|s| s.to_array())
+            .filter(|c| c.is_finite())
+            .fold(0.0, |m, c| c.abs().max(m));
+        let exponent = fixed::unit_exponent_of_sums(largest);
         let (mut rejected_nonfinite, mut out_of_range) = (0, 0);
         let mut fixed = |v: Vec<DVec3>| -> Vec<FixedRgb> {
             v.into_iter()
                 .map(|s| {
-                    FixedRgb::from_dvec3(s).unwrap_or_else(|| {
+                    FixedRgb::from_dvec3(s, exponent).unwrap_or_else(|| {
                         if s.is_finite() {
                             out_of_range += 1;
                         } else {
@@ -249,6 +338,7 @@ impl Film {
         let mut film = Film::from_fixed_parts(
             width,
             height,
+            exponent,
             sum,
             samples,
             splat,
@@ -262,12 +352,15 @@ impl Film {
     pub fn splat_sum(&self, pixel: usize) -> DVec3 {
         self.splat
             .get(pixel)
-            .map_or(DVec3::ZERO, FixedRgb::to_dvec3)
+            .map_or(DVec3::ZERO, |s| s.to_dvec3(self.unit_exponent))
     }
 
     /// Per-pixel sums of the finite samples, rounded to f64, row 0 first.
     pub fn sums(&self) -> Vec<DVec3> {
-        self.sum.iter().map(FixedRgb::to_dvec3).collect()
+        self.sum
+            .iter()
+            .map(|s| s.to_dvec3(self.unit_exponent))
+            .collect()
     }
 
     /// Per-pixel sample counts (rejected non-finite samples included).
@@ -292,12 +385,12 @@ impl Film {
                 let mut v = if n == 0 {
                     DVec3::ZERO
                 } else {
-                    s.to_dvec3() / n as f64
+                    s.to_dvec3(self.unit_exponent) / n as f64
                 };
                 if let Some(splat) = self.splat.get(i)
                     && passes > 0.0
                 {
-                    v += splat.to_dvec3() / passes;
+                    v += splat.to_dvec3(self.unit_exponent) / passes;
                 }
                 v.as_vec3()
             })
@@ -606,6 +699,24 @@ mod tests {
             assert_eq!(wave.sample_counts(), one_by_one.sample_counts());
             assert_eq!(wave.nonfinite, one_by_one.nonfinite);
         }
+    }
+
+    #[test]
+    fn films_in_different_units_do_not_add_until_converted() {
+        let mut a = Film::with_unit(2, 1, 4);
+        a.add_sample(0, Vec3::splat(3.0));
+        let mut b = Film::new(2, 1);
+        b.add_sample(0, Vec3::splat(3.0));
+        let e = a.add_film(&b).unwrap_err();
+        assert!(e.contains("units of 2^-64") && e.contains("2^-60"), "{e}");
+        assert_eq!(a.total_samples(), 1, "left as it was");
+        a.add_film(&b.in_unit(4).unwrap()).unwrap();
+        assert_eq!(a.image().pixels, vec![Vec3::splat(3.0), Vec3::ZERO]);
+        // A sum too large for a finer unit is named, not wrapped.
+        let mut big = Film::with_unit(2, 1, 40);
+        big.add_sample(1, Vec3::splat(1e20));
+        let e = big.in_unit(0).unwrap_err();
+        assert!(e.contains("pixel (1, 0)"), "{e}");
     }
 
     #[test]

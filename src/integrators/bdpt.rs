@@ -268,6 +268,7 @@ impl BdptState {
         let cam = data.scene.camera;
         let pixels = cam.width as u64 * cam.height as u64;
         let subpaths = 2 * capacity;
+        let film = Film::for_scene(&data);
         BdptState {
             sampler: Numbers::Render(Sampler::new(
                 settings.sampler,
@@ -295,7 +296,7 @@ impl BdptState {
             shadow: ShadowRays::default(),
             connections: Connections::default(),
             sample_radiance: vec![Vec3::ZERO; capacity],
-            film: Film::new(cam.width as usize, cam.height as usize),
+            film,
             strategy_sums: BTreeMap::new(),
             scratch: Scratch {
                 rays: Rays::new(subpaths),

@@ -397,10 +397,11 @@ pub struct Resume {
 }
 
 impl Resume {
-    /// A shard's start: an empty film, the render beginning at pass `first_pass`.
-    pub fn shard_start(width: usize, height: usize, first_pass: u64) -> Resume {
+    /// A shard's start: an empty film of the scene, the render beginning at pass
+    /// `first_pass`.
+    pub fn shard_start(data: &SceneData, first_pass: u64) -> Resume {
         Resume {
-            film: Film::new(width, height),
+            film: Film::for_scene(data),
             first_pass,
             passes: first_pass,
         }

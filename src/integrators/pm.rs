@@ -130,7 +130,7 @@ impl PmState {
             photon_pass,
             maps: None,
             caustics,
-            film: Film::new(cam.width as usize, cam.height as usize),
+            film: Film::for_scene(&data),
             nonfinite: 0,
             data,
         }

@@ -131,6 +131,7 @@ impl PtState {
     pub fn new(data: Arc<SceneData>, settings: PtSettings, capacity: usize) -> PtState {
         let cam = data.scene.camera;
         let pixels = cam.width as u64 * cam.height as u64;
+        let film = Film::for_scene(&data);
         PtState {
             sampler: Sampler::new(settings.sampler, settings.seed, cam.width, cam.height),
             data,
@@ -146,7 +147,7 @@ impl PtState {
             ranges: MaterialRanges::default(),
             shadow_len: 0,
             sample_radiance: vec![Vec3::ZERO; capacity],
-            film: Film::new(cam.width as usize, cam.height as usize),
+            film,
             scratch: Scratch {
                 rays: Rays::new(capacity),
                 hits: Hits::new(capacity),

@@ -52,7 +52,7 @@ impl WaveState for MegakernelState {
         MegakernelState {
             sampler: Sampler::new(settings.sampler, settings.seed, cam.width, cam.height),
             pixels: cam.width as u64 * cam.height as u64,
-            film: Film::new(cam.width as usize, cam.height as usize),
+            film: Film::for_scene(&data),
             data,
             settings,
             wave: Wave::default(),

@@ -360,7 +360,12 @@ fn the_thesis_tables_hold_the_studys_seconds_beside_ours() {
             comparison: None,
         })
         .collect();
-    let md = summary_markdown(&scenes, 2, &stagelight::compare::thesis::PHOTONS_PER_PASS);
+    let md = summary_markdown(
+        &scenes,
+        2,
+        &stagelight::compare::thesis::PHOTONS_PER_PASS,
+        None,
+    );
     assert!(md.contains("## Unbiased algorithms, by samples per pixel"));
     assert!(md.contains("## Biased algorithms, by photons per pass"));
     assert!(md.contains("| 25 spp: s | thesis s | relMSE |"), "{md}");
@@ -518,6 +523,80 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         noise_line.contains("Cornell box") && !noise_line.contains("torus"),
         "{noise_line}"
     );
+
+    // The same preset as 5 tasks of a plan (each with its own thread count) reports the
+    // figures of one machine: every run's relMSE and image means in each scene's results.csv
+    // and the study's, and every cell of the study's tables but our seconds.
+    let job = dir.join("job");
+    let sharded = dir.join("thesis-sharded");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let o = stagelight(&[
+        "slurm",
+        "--shards",
+        "5",
+        "-o",
+        &s(&job),
+        "--",
+        "compare",
+        "--preset",
+        "thesis",
+        "--scenes-dir",
+        &s(&scenes),
+        "--references",
+        &s(&given),
+        "--thesis-photons",
+        "2000",
+        "-o",
+        &s(&sharded),
+    ]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let plan = s(&job.join("plan.ron"));
+    for task in 1..=5 {
+        let shard = format!("{task}/5");
+        let threads = (task % 3 + 1).to_string();
+        let o = stagelight(&[
+            "compare",
+            "--plan",
+            &plan,
+            "--shard",
+            &shard,
+            "--threads",
+            &threads,
+            "--quiet",
+        ]);
+        assert_eq!(o.status.code(), Some(0), "task {task}: {}", stderr(&o));
+    }
+    let o = stagelight(&["compare", "--plan", &plan]);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    for name in ["cornell_box", "torus_glass", "door_ajar"] {
+        assert_eq!(
+            untimed_figures(&out_given.join(name).join("results.csv")),
+            untimed_figures(&sharded.join(name).join("results.csv")),
+            "{name}"
+        );
+    }
+    let all = untimed_figures(&out_given.join("results.csv"));
+    assert_eq!(all.len(), 3 * (9 + 3));
+    assert_eq!(all, untimed_figures(&sharded.join("results.csv")));
+    let (a, b) = (
+        std::fs::read_to_string(out_given.join("summary.md")).unwrap(),
+        std::fs::read_to_string(sharded.join("summary.md")).unwrap(),
+    );
+    let rows = |md: &str| -> Vec<Vec<String>> {
+        md.lines()
+            .filter(|l| l.starts_with("| ") && !l.starts_with("| scene"))
+            .map(|l| {
+                l.split('|')
+                    .enumerate()
+                    .filter(|(i, _)| ![3, 6, 9].contains(i))
+                    .map(|(_, c)| c.trim().to_string())
+                    .collect()
+            })
+            .collect()
+    };
+    assert_eq!(rows(&a).len(), 18);
+    assert_eq!(rows(&a), rows(&b));
+    assert!(b.contains("Rendered as shards by the 5 tasks"), "{b}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -557,5 +636,182 @@ fn ctrl_c_during_a_comparison_writes_the_finished_runs_and_exits_130() {
         .count();
     assert!(rows <= 1, "{rows} rows");
     assert!(out.join("grid.png").exists() && out.join("error_vs_time.png").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// results.csv's rows as "column=value" cells, without the columns that time the runs
+/// (wall_s, cpu_s, efficiency): what a sharded comparison must reproduce.
+fn untimed_figures(csv_path: &Path) -> Vec<Vec<String>> {
+    let mut reader = csv::Reader::from_path(csv_path).unwrap();
+    let header: Vec<String> = reader.headers().unwrap().iter().map(String::from).collect();
+    let timed = ["wall_s", "cpu_s", "efficiency"];
+    reader
+        .records()
+        .map(|r| {
+            let r = r.unwrap();
+            header
+                .iter()
+                .zip(r.iter())
+                .filter(|(h, _)| !timed.contains(&h.as_str()))
+                .map(|(h, v)| format!("{h}={v}"))
+                .collect()
+        })
+        .collect()
+}
+
+/// Runs `stagelight`; it must exit 0. Returns its stdout.
+#[track_caller]
+fn succeeds(args: &[&str]) -> String {
+    let o = stagelight(args);
+    assert_eq!(o.status.code(), Some(0), "{args:?}: {}", stderr(&o));
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// Runs a generated batch script with bash as a Slurm node would (no Slurm here).
+#[cfg(unix)]
+fn run_batch_script(script: &Path, task: Option<u64>) -> std::process::Output {
+    let mut command = std::process::Command::new("bash");
+    command.arg(script);
+    if let Some(task) = task {
+        command.env("SLURM_ARRAY_TASK_ID", task.to_string());
+    }
+    command.output().expect("bash runs")
+}
+
+#[track_caller]
+fn assert_same_bytes(a: &Path, b: &Path) {
+    let (x, y) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+    assert!(x == y, "{} and {} differ", a.display(), b.display());
+}
+
+/// A comparison split by `stagelight slurm` into a plan of 4 tasks, whose tasks run (in any
+/// order, as an array would) by the generated script, reports what one machine reports: the
+/// reference its shards make is the same file, and every run's relMSE, image means, samples
+/// and rays are the same (PT and BDPT from merged shards, PM rendered whole by one task).
+#[cfg(unix)]
+#[test]
+fn a_sharded_comparison_reports_the_figures_of_one_machine() {
+    let dir = temp_dir("compare-shards");
+    let scene = tiny_cornell(&dir, 12);
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    let scene_arg = path(&scene);
+    let compare_args = |out: &Path| -> Vec<String> {
+        [
+            "compare",
+            &scene_arg,
+            "--integrators",
+            "pt,bdpt,pm",
+            // 1 shard (fewer than 16 passes each), 3 and 4 shards; the reference 4.
+            "--budgets",
+            "8,48,80",
+            "--budget-unit",
+            "spp",
+            "--reference-spp",
+            "64",
+            "--photons",
+            "3000",
+            "--quiet",
+            "-o",
+            &path(out),
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let one = dir.join("one");
+    let args = compare_args(&one);
+    succeeds(&args.iter().map(String::as_str).collect::<Vec<_>>());
+
+    let job = dir.join("job");
+    let sharded = dir.join("sharded");
+    let mut args = vec!["slurm", "--shards", "4", "-o"]
+        .into_iter()
+        .map(String::from)
+        .collect::<Vec<_>>();
+    args.push(path(&job));
+    args.push("--".into());
+    args.extend(compare_args(&sharded));
+    let slurm_args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let out = succeeds(&slurm_args);
+    assert!(
+        out.contains("plan.ron (1 scene, 9 runs (3 whole, 16 shards) and 1 reference (4 shards))"),
+        "{out}"
+    );
+    // The report before every task has run names what is missing, and its task.
+    let o = run_batch_script(&job.join("shards.sbatch"), Some(3));
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let o = run_batch_script(&job.join("merge.sbatch"), None);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("not finished") && stderr(&o).contains("(task 1)"),
+        "{}",
+        stderr(&o)
+    );
+    for task in [4, 1, 2] {
+        let o = run_batch_script(&job.join("shards.sbatch"), Some(task));
+        assert_eq!(o.status.code(), Some(0), "task {task}: {}", stderr(&o));
+    }
+    // A task run again (Slurm's next job after a stop) finds its shards done.
+    let o = run_batch_script(&job.join("shards.sbatch"), Some(2));
+    assert!(
+        String::from_utf8_lossy(&o.stdout).contains("task 2/4: 0 shards rendered"),
+        "{}",
+        String::from_utf8_lossy(&o.stdout)
+    );
+    let o = run_batch_script(&job.join("merge.sbatch"), None);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+
+    assert_same_bytes(&one.join("reference.exr"), &sharded.join("reference.exr"));
+    let (a, b) = (
+        untimed_figures(&one.join("results.csv")),
+        untimed_figures(&sharded.join("results.csv")),
+    );
+    assert_eq!(a.len(), 9);
+    assert_eq!(a, b);
+    let summary = std::fs::read_to_string(sharded.join("summary.md")).unwrap();
+    assert!(
+        summary.contains("Rendered as shards by the 4 tasks"),
+        "{summary}"
+    );
+
+    // A timed comparison is refused: sharding cannot reproduce a run of S seconds.
+    let o = stagelight(&[
+        "slurm",
+        "--shards",
+        "2",
+        "-o",
+        &path(&dir.join("timed")),
+        "--",
+        "compare",
+        &scene_arg,
+        "--budgets",
+        "1,2",
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("a timed (equal-time) comparison cannot be sharded"),
+        "{}",
+        stderr(&o)
+    );
+    // A plan that no longer matches its command, or a scene changed since the plan, is
+    // refused rather than rendered into shards that do not belong together.
+    let plan = job.join("plan.ron");
+    let text = std::fs::read_to_string(&plan).unwrap();
+    std::fs::write(&plan, text.replacen("passes: 48,", "passes: 47,", 1)).unwrap();
+    let o = stagelight(&["compare", "--plan", &path(&plan)]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("write the plan again"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::write(&plan, &text).unwrap();
+    shrunk_scene("cornell_box", 13, &scene);
+    let o = stagelight(&["compare", "--plan", &path(&plan), "--shard", "1/4"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(
+        stderr(&o).contains("is not the one planned"),
+        "{}",
+        stderr(&o)
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -862,6 +862,7 @@ fn write_binary_fuzz_seeds() {
         shard: None,
         made_by: "reference".into(),
         settings: String::new(),
+        unit_exponent: 0,
     };
     let film = |width: usize, height: usize, passes: u64, splat: bool| {
         let n = width * height;

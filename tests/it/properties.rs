@@ -39,9 +39,10 @@ fn header(width: usize, height: usize, passes: u64) -> impl Strategy<Value = Che
         any::<u64>(),
         0.0f64..1e7,
         0u64..1000,
+        -20i32..20,
     )
         .prop_map(
-            move |(integrator, seed, max_depth, scene, fingerprint, seconds, splats)| {
+            move |(integrator, seed, max_depth, scene, fingerprint, seconds, splats, unit)| {
                 CheckpointHeader {
                     integrator: integrator.into(),
                     seed,
@@ -60,6 +61,7 @@ fn header(width: usize, height: usize, passes: u64) -> impl Strategy<Value = Che
                     shard: None,
                     made_by: "reference".into(),
                     settings: String::new(),
+                    unit_exponent: unit,
                 }
             },
         )
@@ -77,7 +79,7 @@ fn checkpoint() -> impl Strategy<Value = Checkpoint> {
             )
         })
         .prop_map(|(mut header, samples, splats)| {
-            let mut film = Film::new(header.width, header.height);
+            let mut film = Film::with_unit(header.width, header.height, header.unit_exponent);
             let n = header.width * header.height;
             for (i, s) in samples.iter().enumerate() {
                 film.add_sample(i % n, *s);
@@ -139,6 +141,7 @@ proptest! {
         let mut resumed = Film::from_fixed_parts(
             w,
             h,
+            first.unit_exponent(),
             first.fixed_sums().to_vec(),
             first.sample_counts().to_vec(),
             first.fixed_splats().to_vec(),
@@ -220,6 +223,7 @@ proptest! {
                 shard: None,
                 made_by: "reference".into(),
                 settings: String::new(),
+                unit_exponent: part.film.unit_exponent(),
             },
             film: part.film,
         };

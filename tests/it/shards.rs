@@ -505,27 +505,31 @@ fn slurm_scripts_run_by_hand_merge_into_the_single_render() {
     assert!(err.contains("the command to shard"), "{err}");
 }
 
-/// The generated shard script passes Slurm's signal to the render and requeues a reference
-/// shard only when stopped before its time limit (SIGINT), not when cancelled (SIGTERM).
-/// `scontrol` is a stand-in that records its arguments.
+/// The generated shard script passes Slurm's signal to the render and, when the signal is the
+/// one before the time limit (SIGINT), submits the shard's next job (`--dependency=singleton`,
+/// after this one), which resumes from the checkpoint; a cancelled shard (SIGTERM) hands
+/// nothing on. `sbatch` is a stand-in that records its arguments.
 #[cfg(target_os = "linux")]
 #[test]
-fn a_shard_script_passes_the_signal_on_and_requeues_only_before_its_limit() {
+fn a_shard_script_passes_the_signal_on_and_goes_on_in_a_next_job_only_before_its_limit() {
     use std::os::unix::fs::PermissionsExt;
     let dir = temp_dir("shards-slurm-signal");
     let scene = shrunk_scene("cornell_box", 8, &dir.join("scene.ron"));
     let fake = dir.join("bin");
     std::fs::create_dir_all(&fake).unwrap();
-    let scontrol = fake.join("scontrol");
-    let recorded = dir.join("scontrol.args");
+    let sbatch = fake.join("sbatch");
+    let recorded = dir.join("sbatch.args");
     std::fs::write(
-        &scontrol,
-        format!("#!/bin/sh\necho \"$@\" >> '{}'\n", recorded.display()),
+        &sbatch,
+        format!(
+            "#!/bin/sh\necho \"$@\" >> '{}'\necho '4242;cluster'\n",
+            recorded.display()
+        ),
     )
     .unwrap();
-    std::fs::set_permissions(&scontrol, std::fs::Permissions::from_mode(0o755)).unwrap();
+    std::fs::set_permissions(&sbatch, std::fs::Permissions::from_mode(0o755)).unwrap();
     let path = format!("{}:{}", fake.display(), std::env::var("PATH").unwrap());
-    for (signal, requeued) in [("INT", true), ("TERM", false)] {
+    for (signal, goes_on) in [("INT", true), ("TERM", false)] {
         let job = dir.join(format!("job-{signal}"));
         ok(&[
             "slurm",
@@ -544,11 +548,18 @@ fn a_shard_script_passes_the_signal_on_and_requeues_only_before_its_limit() {
             "-o",
             s(&dir.join(format!("ref-{signal}.exr"))),
         ]);
+        let script = std::fs::read_to_string(job.join("shards.sbatch")).unwrap();
+        let name = script
+            .lines()
+            .find_map(|l| l.strip_prefix("#SBATCH --job-name="))
+            .and_then(|n| n.strip_suffix("-shards"))
+            .unwrap()
+            .to_string();
         let checkpoint = job.join("parts/part-1.exr.checkpoint");
         let mut child = std::process::Command::new("bash")
             .arg(job.join("shards.sbatch"))
             .env("SLURM_ARRAY_TASK_ID", "1")
-            .env("SLURM_ARRAY_JOB_ID", "77")
+            .env("SLURM_JOB_ID", "77")
             .env("PATH", &path)
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::piped())
@@ -563,14 +574,59 @@ fn a_shard_script_passes_the_signal_on_and_requeues_only_before_its_limit() {
             .unwrap();
         assert!(sent.success());
         let o = child.wait_with_output().unwrap();
-        assert_eq!(o.status.code(), Some(130), "SIG{signal}: {}", stderr(&o));
-        assert!(stdout(&o).contains("shard 1/2: exit 130"), "{}", stdout(&o));
+        let out = stdout(&o);
+        assert!(out.contains("shard 1/2: exit 130"), "{out}");
         let args = std::fs::read_to_string(&recorded).unwrap_or_default();
-        assert_eq!(
-            args.contains("requeue 77_1"),
-            requeued,
-            "SIG{signal}: {args:?}"
-        );
+        if goes_on {
+            assert_eq!(o.status.code(), Some(0), "SIGINT: {}", stderr(&o));
+            assert!(out.contains("continues in job 4242"), "{out}");
+            let expected = format!(
+                "--parsable --array=1 --job-name={name}-shard-1 \
+                 --dependency=singleton,afterany:77 {}",
+                job.join("shards.sbatch").display()
+            );
+            assert_eq!(args.trim(), expected, "SIGINT");
+        } else {
+            assert_eq!(o.status.code(), Some(130), "SIGTERM: {}", stderr(&o));
+            assert_eq!(args, "", "SIGTERM: nothing handed on");
+        }
         let _ = std::fs::remove_file(&recorded);
     }
+    // The merge job waits while a shard's next job is queued: `squeue` (a stand-in) lists
+    // one, and the merge submits itself again after it instead of merging.
+    let job = dir.join("job-INT");
+    let script = std::fs::read_to_string(job.join("shards.sbatch")).unwrap();
+    let name = script
+        .lines()
+        .find_map(|l| l.strip_prefix("#SBATCH --job-name="))
+        .and_then(|n| n.strip_suffix("-shards"))
+        .unwrap()
+        .to_string();
+    let squeue = fake.join("squeue");
+    std::fs::write(
+        &squeue,
+        format!("#!/bin/sh\necho '4242 {name}-shard-1'\necho '99 other-shard-1'\n"),
+    )
+    .unwrap();
+    std::fs::set_permissions(&squeue, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let o = std::process::Command::new("bash")
+        .arg(job.join("merge.sbatch"))
+        .env("PATH", &path)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(
+        stdout(&o).contains("shards go on in job(s) 4242; the merge follows in job 4242"),
+        "{}",
+        stdout(&o)
+    );
+    let args = std::fs::read_to_string(&recorded).unwrap();
+    assert_eq!(
+        args.trim(),
+        format!(
+            "--parsable --dependency=afterany:4242 {}",
+            job.join("merge.sbatch").display()
+        )
+    );
+    assert!(!dir.join("ref-INT.exr").exists(), "not merged yet");
 }

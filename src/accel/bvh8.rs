@@ -1,73 +1,117 @@
-//! An eight-wide BVH with uncompressed child boxes, converted from obvhs' compressed wide BVH8
-//! (Ylitie et al. 2017; obvhs does the build and the SAH collapse), with each leaf's (up to
-//! three) triangles in one four-lane packet.
+//! An eight-wide BVH with exact f32 child boxes, collapsed from obvhs' binary PLOC tree, whose
+//! leaves (up to four triangles each) share four-lane triangle packets with their siblings.
 //!
 //! Each node stores its children's boxes as exact f32 planes (the min and max of the
-//! children's triangle vertices, recomputed here), eight per plane, so that one node is
+//! children's triangle vertices, computed in `collapse`), eight per plane, so that one node is
 //! tested against a ray with a few SSE2 instructions (or fewer AVX2 ones, where the CPU has
-//! them: see `crate::cpu`). The box test is made conservative by
-//! one padding per ray (see `BoxRay`), not per node. Children are visited nearest first, and
-//! the entry distance of each pending child is kept on the stack, so a closest-hit ray skips
-//! the children beyond its nearest hit so far.
+//! them: see `crate::cpu`). The box test is made conservative by one padding per ray (see
+//! `BoxRay`), not per node.
+//!
+//! A node's leaf children are packed together into as few packets as fit (first fit,
+//! largest leaves first), each leaf naming its packet and its lanes there: when a ray enters
+//! several leaf boxes of one node that share a packet, the packet is tested once, with the
+//! union of their lanes. A closest-hit ray visits a node's children, leaves and nodes alike,
+//! nearest first (their entry distances kept on the stack), and skips those beyond its nearest
+//! hit; an any-hit ray tests a node's leaves before it descends, as they may end the search.
 
 use super::LeafTriangles;
 use super::TriangleHit;
 use super::stack::TraversalStack;
-use super::triangle::{TraversalRay, TrianglePacket};
+use super::triangle::{LANES, TraversalRay, TrianglePacket};
 use glam::{Vec3, Vec3A};
-use obvhs::cwbvh::CwBvh;
 
-/// A child reference: a node index, or (with `LEAF` set) a packet index times four plus the
-/// packet's triangle count.
-const LEAF: u32 = 1 << 31;
+/// A child reference: a node index (0, the root, is never a child: 0 marks an empty slot),
+/// or (with `LEAF` set) a packet index shifted left by `LANES` with the leaf's lanes of that
+/// packet in the low bits.
+pub(super) const LEAF: u32 = 1 << 31;
+/// The lane mask of a leaf reference.
+const LANE_MASK: u32 = (1 << LANES) - 1;
+/// The most triangles a leaf holds: one packet.
+pub(super) const LEAF_MAX: u32 = LANES as u32;
+/// The most packets a tree may hold (the bits of a leaf reference).
+pub(super) const MAX_PACKETS: usize = 1 << (31 - LANES);
 
+/// Eight children: 224 bytes (seven 32-byte lines' worth, aligned for the eight-lane loads).
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(32))]
-struct Node {
+pub(super) struct Node {
     /// `planes[axis][0]` are the children's minima along `axis`, `planes[axis][1]` their
-    /// maxima. Empty slots hold an inverted box (+inf, -inf) and are also left out of `valid`.
+    /// maxima. Empty slots hold an inverted box (+inf, -inf), which no ray enters.
     planes: [[[f32; 8]; 2]; 3],
-    child: [u32; 8],
-    valid: u32,
+    pub(super) child: [u32; 8],
 }
 
-pub(crate) struct CwBvhAccel {
+impl Node {
+    pub(super) const EMPTY: Node = Node {
+        planes: [[[f32::INFINITY; 8], [f32::NEG_INFINITY; 8]]; 3],
+        child: [0; 8],
+    };
+
+    /// Puts the child `reference`, whose box is `lo..hi`, in slot `slot`.
+    pub(super) fn set_child(&mut self, slot: usize, reference: u32, lo: Vec3, hi: Vec3) {
+        for axis in 0..3 {
+            self.planes[axis][0][slot] = lo[axis];
+            self.planes[axis][1][slot] = hi[axis];
+        }
+        self.child[slot] = reference;
+    }
+
+    /// The box of all the children.
+    pub(super) fn bounds(&self) -> (Vec3, Vec3) {
+        let p = &self.planes;
+        let lo =
+            Vec3::from([0, 1, 2].map(|a| p[a][0].iter().copied().fold(f32::INFINITY, f32::min)));
+        let hi = Vec3::from(
+            [0, 1, 2].map(|a| p[a][1].iter().copied().fold(f32::NEG_INFINITY, f32::max)),
+        );
+        (lo, hi)
+    }
+}
+
+pub(crate) struct Bvh8 {
     nodes: Vec<Node>,
     /// The largest magnitude of any vertex coordinate: the scale of the box padding.
     scale: f32,
 }
 
-impl CwBvhAccel {
+impl Bvh8 {
     /// Bytes of the tree's nodes.
     pub(crate) fn memory_bytes(&self) -> usize {
         self.nodes.capacity() * std::mem::size_of::<Node>()
     }
 
-    /// Converts the built tree over `verts` (indexed like the boxes it was built from).
-    /// Returns it with the input indices of the leaf slots (four per packet, `u32::MAX` for an
-    /// unused lane) and the packets.
-    pub(crate) fn new(
-        bvh: CwBvh,
-        verts: &[[Vec3; 3]],
-    ) -> (CwBvhAccel, Vec<u32>, Vec<TrianglePacket>) {
-        let mut out = Builder {
-            bvh: &bvh,
-            verts,
-            nodes: Vec::new(),
-            slots: Vec::new(),
-            packets: Vec::new(),
-        };
-        out.convert(0);
-        let scale = verts
-            .iter()
-            .flatten()
-            .map(|v| v.abs().max_element())
-            .fold(0.0f32, f32::max);
-        let accel = CwBvhAccel {
-            nodes: out.nodes,
-            scale,
-        };
-        (accel, out.slots, out.packets)
+    pub(super) fn new(nodes: Vec<Node>, scale: f32) -> Bvh8 {
+        Bvh8 { nodes, scale }
+    }
+
+    /// Asks the CPU to bring the node or packet `reference` into the cache.
+    #[inline(always)]
+    fn prefetch(&self, tris: &LeafTriangles, reference: u32) {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+            let (start, bytes) = if reference & LEAF != 0 {
+                let packet = ((reference & !LEAF) >> LANES) as usize;
+                (
+                    tris.packets.as_ptr().wrapping_add(packet).cast::<i8>(),
+                    std::mem::size_of::<TrianglePacket>(),
+                )
+            } else {
+                (
+                    self.nodes
+                        .as_ptr()
+                        .wrapping_add(reference as usize)
+                        .cast::<i8>(),
+                    std::mem::size_of::<Node>(),
+                )
+            };
+            let mut offset = 0;
+            while offset < bytes {
+                // SAFETY: a prefetch is a hint that never faults, whatever the address.
+                unsafe { _mm_prefetch::<_MM_HINT_T0>(start.wrapping_add(offset)) };
+                offset += 64;
+            }
+        }
     }
 
     /// Closest hit (`ANY = false`) or the first hit found (`ANY = true`) with t in (0, t_max).
@@ -81,49 +125,113 @@ impl CwBvhAccel {
         ray: &TraversalRay,
         mut t_max: f32,
     ) -> Option<TriangleHit> {
-        if self.nodes.is_empty() {
-            return None;
-        }
         let box_ray = BoxRay::new(ray, self.scale);
         let mut hit = None;
         // Pending children: the entry distance (non-negative, so its bits order like the
         // value) in the high half, the child reference in the low half.
-        let mut stack = TraversalStack::<u64, 16>::new();
+        let mut stack = TraversalStack::<u64, 24>::new();
         let mut current = 0u32;
         loop {
-            if current & LEAF == 0 {
+            if current & LEAF != 0 {
+                let packet = ((current & !LEAF) >> LANES) as usize;
+                if let Some((lane, (t, b1, b2))) =
+                    ray.intersect4::<ANY>(&tris.packets[packet], current & LANE_MASK, &mut t_max)
+                {
+                    hit = Some(TriangleHit {
+                        t,
+                        slot: (packet * LANES + lane as usize) as u32,
+                        b1,
+                        b2,
+                    });
+                    if ANY {
+                        return hit;
+                    }
+                }
+            } else {
                 let node = &self.nodes[current as usize];
-                let (mut mask, t_near) = if AVX2 {
+                let (mask, leaf_bits, mut t_near) = if AVX2 {
                     // SAFETY: `AVX2` is only set in code compiled for, and run on, CPUs with
                     // AVX2 (see the doc comment above).
                     unsafe { box_hits8_avx2(node, &box_ray, t_max) }
                 } else {
                     box_hits8(node, &box_ray, t_max)
                 };
-                mask &= node.valid;
+                // The leaves entered that share a packet become one visit of the packet with
+                // the union of their lanes (at the nearest of their entry distances), put in
+                // the slot of the first of them.
+                let mut refs = node.child;
+                let mut mask = mask;
+                let mut leaves = mask & leaf_bits;
+                while leaves != 0 {
+                    let first = leaves.trailing_zeros() as usize;
+                    leaves &= leaves - 1;
+                    let mut others = leaves;
+                    while others != 0 {
+                        let c = others.trailing_zeros() as usize;
+                        others &= others - 1;
+                        if (refs[c] ^ refs[first]) & !LANE_MASK == 0 {
+                            refs[first] |= refs[c];
+                            t_near[first] = t_near[first].min(t_near[c]);
+                            leaves &= !(1 << c);
+                            mask &= !(1 << c);
+                        }
+                    }
+                }
+                if ANY && mask & leaf_bits != 0 {
+                    // Any hit will do: the leaves first, as they may end the search.
+                    let mut leaves = mask & leaf_bits;
+                    while leaves != 0 {
+                        let c = leaves.trailing_zeros() as usize;
+                        leaves &= leaves - 1;
+                        let packet = ((refs[c] & !LEAF) >> LANES) as usize;
+                        if let Some((lane, (t, b1, b2))) = ray.intersect4::<ANY>(
+                            &tris.packets[packet],
+                            refs[c] & LANE_MASK,
+                            &mut t_max,
+                        ) {
+                            return Some(TriangleHit {
+                                t,
+                                slot: (packet * LANES + lane as usize) as u32,
+                                b1,
+                                b2,
+                            });
+                        }
+                    }
+                    mask &= !leaf_bits;
+                }
+                if mask & (mask.wrapping_sub(1)) != 0 {
+                    // Two or more children to visit: fetch them all while the nearest is
+                    // visited, so those popped later are in the cache.
+                    let mut pf = mask;
+                    while pf != 0 {
+                        let c = pf.trailing_zeros() as usize;
+                        pf &= pf - 1;
+                        self.prefetch(tris, refs[c]);
+                    }
+                }
                 if mask != 0 && mask & (mask - 1) == 0 {
-                    current = node.child[mask.trailing_zeros() as usize];
+                    current = refs[mask.trailing_zeros() as usize];
                     continue;
                 }
                 if ANY && mask != 0 {
-                    // Any hit will do: no need for an order.
-                    current = node.child[mask.trailing_zeros() as usize];
+                    // No need for an order.
+                    current = refs[mask.trailing_zeros() as usize];
                     mask &= mask - 1;
                     while mask != 0 {
                         let c = mask.trailing_zeros() as usize;
                         mask &= mask - 1;
-                        stack.push(u64::from(node.child[c]));
+                        stack.push(u64::from(refs[c]));
                     }
                     continue;
                 }
                 if mask != 0 {
                     // At least two children: visit them nearest first (by entry distance, then
                     // child reference). Two (the common case) need one comparison; more are
-                    // sorted farthest first (insertion sort of at most eight keys), all but
-                    // the nearest pushed.
+                    // sorted farthest first (insertion sort of at most eight keys), all but the
+                    // nearest pushed.
                     let key = |c: u32| {
                         (u64::from(t_near[c as usize].to_bits()) << 32)
-                            | u64::from(node.child[c as usize])
+                            | u64::from(refs[c as usize])
                     };
                     let k0 = key(mask.trailing_zeros());
                     mask &= mask - 1;
@@ -154,26 +262,6 @@ impl CwBvhAccel {
                     current = keys[n - 1] as u32;
                     continue;
                 }
-            } else {
-                let packet = ((current & !LEAF) >> 2) as usize;
-                let count = current & 3;
-                let base = packet * 4;
-                if let Some((lane, (t, b1, b2))) = ray.intersect4::<ANY>(
-                    &tris.packets[packet],
-                    &tris.verts[base..base + 4],
-                    count,
-                    &mut t_max,
-                ) {
-                    hit = Some(TriangleHit {
-                        t,
-                        slot: (base as u32) + lane,
-                        b1,
-                        b2,
-                    });
-                    if ANY {
-                        return hit;
-                    }
-                }
             }
             // The next pending child that may still hold a hit before t_max.
             loop {
@@ -188,73 +276,6 @@ impl CwBvhAccel {
                 }
             }
         }
-    }
-}
-
-struct Builder<'a> {
-    bvh: &'a CwBvh,
-    verts: &'a [[Vec3; 3]],
-    nodes: Vec<Node>,
-    slots: Vec<u32>,
-    packets: Vec<TrianglePacket>,
-}
-
-impl Builder<'_> {
-    /// Converts the obvhs node `index`; returns the new node's index and its exact box.
-    fn convert(&mut self, index: usize) -> (u32, Vec3, Vec3) {
-        let src = self.bvh.nodes[index];
-        let me = self.nodes.len();
-        self.nodes.push(Node {
-            planes: [[[f32::INFINITY; 8], [f32::NEG_INFINITY; 8]]; 3],
-            child: [0; 8],
-            valid: 0,
-        });
-        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        for c in 0..8 {
-            if src.is_child_empty(c) {
-                continue;
-            }
-            let (child, clo, chi) = if src.is_leaf(c) {
-                let (start, count) = src.child_primitives(c);
-                assert!(
-                    (1..=3).contains(&count),
-                    "a CWBVH leaf holds 1 to 3 primitives"
-                );
-                let packet = self.packets.len() as u32;
-                let mut p = TrianglePacket::default();
-                let (mut clo, mut chi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-                for lane in 0..4 {
-                    if lane < count as usize {
-                        let prim = self.bvh.primitive_indices[start as usize + lane];
-                        let tri = self.verts[prim as usize];
-                        for (vertex, v) in tri.iter().enumerate() {
-                            for axis in 0..3 {
-                                p.v[vertex][axis][lane] = v[axis];
-                            }
-                            clo = clo.min(*v);
-                            chi = chi.max(*v);
-                        }
-                        self.slots.push(prim);
-                    } else {
-                        self.slots.push(u32::MAX);
-                    }
-                }
-                self.packets.push(p);
-                (LEAF | (packet << 2) | count, clo, chi)
-            } else {
-                self.convert(src.child_node_index(c) as usize)
-            };
-            let node = &mut self.nodes[me];
-            for axis in 0..3 {
-                node.planes[axis][0][c] = clo[axis];
-                node.planes[axis][1][c] = chi[axis];
-            }
-            node.child[c] = child;
-            node.valid |= 1 << c;
-            lo = lo.min(clo);
-            hi = hi.max(chi);
-        }
-        (me as u32, lo, hi)
     }
 }
 
@@ -295,16 +316,17 @@ impl BoxRay {
     }
 }
 
-/// Which children's padded boxes the ray enters with t in [0, t_max] (bit c for slot c), and
-/// the entry distances.
+/// Which children's padded boxes the ray enters with t in [0, t_max] (bit c for slot c), which
+/// children are leaves (the sign bits of the references), and the entry distances.
 /// SSE2 (always present on x86_64), four children per instruction; the same arithmetic, in
 /// the same order, as the portable version below, so both give identical results.
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
-fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
+fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, u32, [f32; 8]) {
     use std::arch::x86_64::*;
     // SAFETY: SSE2 is part of the x86_64 baseline, so these intrinsics are always available;
-    // the loads and stores are unaligned ones on `[f32; 8]` arrays borrowed (or owned) here.
+    // the loads and stores are unaligned ones on `[f32; 8]` and `[u32; 8]` arrays borrowed
+    // (or owned) here.
     unsafe {
         let mut t0 = (_mm_setzero_ps(), _mm_setzero_ps());
         let mut t1 = (_mm_set1_ps(t_max), _mm_set1_ps(t_max));
@@ -331,10 +353,13 @@ fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
         }
         let lo = _mm_movemask_ps(_mm_cmple_ps(t0.0, t1.0)) as u32;
         let hi = _mm_movemask_ps(_mm_cmple_ps(t0.1, t1.1)) as u32;
+        let child = node.child.as_ptr().cast::<f32>();
+        let leaves = _mm_movemask_ps(_mm_loadu_ps(child)) as u32
+            | ((_mm_movemask_ps(_mm_loadu_ps(child.add(4))) as u32) << 4);
         let mut t = [0.0f32; 8];
         _mm_storeu_ps(t.as_mut_ptr(), t0.0);
         _mm_storeu_ps(t.as_mut_ptr().add(4), t0.1);
-        (lo | (hi << 4), t)
+        (lo | (hi << 4), leaves, t)
     }
 }
 
@@ -346,7 +371,7 @@ fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-unsafe fn box_hits8_avx2(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
+unsafe fn box_hits8_avx2(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, u32, [f32; 8]) {
     use std::arch::x86_64::*;
     let mut t0 = _mm256_setzero_ps();
     let mut t1 = _mm256_set1_ps(t_max);
@@ -367,22 +392,26 @@ unsafe fn box_hits8_avx2(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8
         t1 = _mm256_min_ps(tf, t1);
     }
     let hits = _mm256_movemask_ps(_mm256_cmp_ps::<_CMP_LE_OQ>(t0, t1)) as u32;
+    // SAFETY: an unaligned load of the eight u32 of `node.child`, read as f32 for their sign
+    // bits only.
+    let leaves =
+        _mm256_movemask_ps(unsafe { _mm256_loadu_ps(node.child.as_ptr().cast::<f32>()) }) as u32;
     let mut t = [0.0f32; 8];
     // SAFETY: an unaligned store of eight f32 into a local `[f32; 8]`.
     unsafe { _mm256_storeu_ps(t.as_mut_ptr(), t0) };
-    (hits, t)
+    (hits, leaves, t)
 }
 
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-unsafe fn box_hits8_avx2(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
+unsafe fn box_hits8_avx2(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, u32, [f32; 8]) {
     box_hits8(node, ray, t_max)
 }
 
 /// Which children's padded boxes the ray enters (portable version).
 #[cfg(not(target_arch = "x86_64"))]
 #[inline(always)]
-fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
+fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, u32, [f32; 8]) {
     let mut t0 = [0.0f32; 8];
     let mut t1 = [t_max; 8];
     for axis in 0..3 {
@@ -402,10 +431,14 @@ fn box_hits8(node: &Node, ray: &BoxRay, t_max: f32) -> (u32, [f32; 8]) {
         }
     }
     let mut hits = 0;
+    let mut leaves = 0;
     for c in 0..8 {
         if t0[c] <= t1[c] {
             hits |= 1 << c;
         }
+        if node.child[c] & LEAF != 0 {
+            leaves |= 1 << c;
+        }
     }
-    (hits, t0)
+    (hits, leaves, t0)
 }
