@@ -18,3 +18,22 @@ pub fn has_avx2_fma() -> bool {
         false
     }
 }
+
+/// Whether the CPU has the AVX-512 subsets (F, DQ, VL, BW) that the systems' AVX-512 copies are
+/// compiled for, with AVX2 and FMA: 32 vector registers, and 64-bit lane multiplies for the
+/// sampler's hash.
+#[inline]
+pub fn has_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        has_avx2_fma()
+            && std::is_x86_feature_detected!("avx512f")
+            && std::is_x86_feature_detected!("avx512dq")
+            && std::is_x86_feature_detected!("avx512vl")
+            && std::is_x86_feature_detected!("avx512bw")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}

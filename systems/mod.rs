@@ -25,7 +25,7 @@ pub mod shade {
     pub mod emitted_light;
     pub mod extend_camera_chains;
     pub mod extend_subpaths;
-    pub mod interpolate_surfaces;
+    pub mod lanes;
     pub mod material;
     pub mod order_hit_points;
     pub mod russian_roulette;

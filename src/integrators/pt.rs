@@ -199,9 +199,6 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
         bounce.push(Node::system(shade::emitted_light::AddEmittedLight));
     }
     bounce.push(Node::system(shade::sort_by_material::SortByMaterial));
-    bounce.push(Node::system(
-        shade::interpolate_surfaces::InterpolateSurfaces,
-    ));
     if light_sampling {
         bounce.push(Node::system(connect::sample_lights::SampleLights));
     }

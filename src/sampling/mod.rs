@@ -61,6 +61,17 @@ impl SampleKey {
     pub fn get2(self, dim: u32) -> Vec2 {
         Vec2::new(self.get(dim), self.get(dim + 1))
     }
+
+    /// `keys[l].get(dims[l])` for every lane, written so that the compiler runs the hash in
+    /// vector lanes (the same numbers as `get`).
+    #[inline(always)]
+    pub fn get_lanes<const N: usize>(keys: &[SampleKey; N], dims: &[u32; N]) -> [f32; N] {
+        let mut out = [0.0; N];
+        for l in 0..N {
+            out[l] = keys[l].get(dims[l]);
+        }
+        out
+    }
 }
 
 /// Cosine-weighted direction on the +z hemisphere (concentric mapping, Shirley and Chiu).

@@ -5,11 +5,17 @@
 use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
 use crate::integrators::SceneData;
 use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
+use crate::math::gamma;
 use crate::pipeline::Flow;
-use crate::sampling::{SampleKey, Sampler, power_heuristic};
+use crate::sampling::{SampleKey, Sampler, power_heuristic, sample_cdf};
 use crate::systems::shade::Surface;
+use crate::systems::shade::lanes::{
+    DiffuseLanes, F, LANES, M, V3, draw, draw2, lanes_of, offset_origin,
+    power_heuristic as power_heuristic_lanes, same_side,
+};
 use glam::Vec3;
 use rayon::prelude::*;
+use std::f32::consts::FRAC_1_PI;
 
 pub struct SampleLights;
 
@@ -29,6 +35,10 @@ crate::system! {
             .into_par_iter()
             .map(|c| {
                 #[cfg(target_arch = "x86_64")]
+                if crate::cpu::has_avx512() {
+                    // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+                    return unsafe { sample_chunk_avx512(data, sampler, hits, rays, paths, surfaces, c) };
+                }
                 if crate::cpu::has_avx2_fma() {
                     // SAFETY: the CPU has AVX2 and FMA (checked just above).
                     return unsafe { sample_chunk_avx2(data, sampler, hits, rays, paths, surfaces, c) };
@@ -55,6 +65,21 @@ fn sample_chunk_avx2(
     sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
 }
 
+/// `sample_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+fn sample_chunk_avx512(
+    data: &SceneData,
+    sampler: &Sampler,
+    hits: &Hits,
+    rays: &Rays,
+    paths: &Paths,
+    surfaces: &Surfaces,
+    c: ShadowRaysChunk,
+) -> usize {
+    sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
+}
+
 /// Light sampling at the paths of one chunk; returns the number of shadow rays cast.
 #[inline(always)]
 fn sample_chunk(
@@ -64,7 +89,7 @@ fn sample_chunk(
     rays: &Rays,
     paths: &Paths,
     surfaces: &Surfaces,
-    c: ShadowRaysChunk,
+    mut c: ShadowRaysChunk,
 ) -> usize {
     let mut cast = 0;
     let range = c.start..c.start + c.len();
@@ -72,7 +97,7 @@ fn sample_chunk(
     let rays = rays.view(range.clone());
     let paths = paths.view(range.clone());
     let surfaces = surfaces.view(range);
-    for i in 0..c.len() {
+    let one = |c: &mut ShadowRaysChunk, i: usize| {
         c.t_max[i] = 0.0;
         let surf = Surface::at(data, &surfaces, hits.triangle[i], i, rays.dir[i]);
         if let Some(light) = light_sample(
@@ -87,10 +112,122 @@ fn sample_chunk(
             c.dir[i] = light.dir;
             c.t_max[i] = light.t_max;
             c.contribution[i] = light.contribution;
-            cast += 1;
+            1
+        } else {
+            0
         }
+    };
+    // Lambertian paths LANES at a time; the rest (other kinds, the chunk's tail) one by one.
+    let mut i = 0;
+    while i + LANES <= c.len() {
+        match DiffuseLanes::at(data, &surfaces, hits.triangle, rays.dir, i) {
+            Some(surf) => {
+                let keys: &[SampleKey; LANES] = paths.key[i..i + LANES].try_into().unwrap();
+                let depths: &[u32; LANES] = paths.depth[i..i + LANES].try_into().unwrap();
+                let throughput = V3::load(&paths.throughput[i..]);
+                let light = light_sample_lanes(data, sampler, &surf, keys, depths, throughput);
+                let t_max = light.cast.select(F::splat(LIGHT_T_MAX), F::splat(0.0));
+                light.origin.store(&mut c.origin[i..]);
+                light.dir.store(&mut c.dir[i..]);
+                light.contribution.store(&mut c.contribution[i..]);
+                c.t_max[i..i + LANES].copy_from_slice(&t_max.0);
+                cast += light.cast.0.iter().filter(|&&b| b).count();
+            }
+            None => {
+                for j in i..i + LANES {
+                    cast += one(&mut c, j);
+                }
+            }
+        }
+        i += LANES;
+    }
+    for j in i..c.len() {
+        cast += one(&mut c, j);
     }
     cast
+}
+
+/// The length of every light sample's shadow ray (`spawn_ray_to`'s).
+const LIGHT_T_MAX: f32 = 1.0 - crate::geometry::SHADOW_EPSILON;
+
+/// `light_sample` of `LANES` paths on Lambertian surfaces: the shadow rays and their
+/// contributions, which count only where `cast` is set.
+pub struct LightLanes {
+    pub cast: M,
+    pub origin: V3,
+    pub dir: V3,
+    pub contribution: V3,
+}
+
+/// `light_sample` in lanes, for paths on Lambertian surfaces: lane by lane the same
+/// operations, so the same bits.
+#[inline(always)]
+pub fn light_sample_lanes(
+    data: &SceneData,
+    sampler: &Sampler,
+    surf: &DiffuseLanes,
+    keys: &[SampleKey; LANES],
+    depths: &[u32; LANES],
+    throughput: V3,
+) -> LightLanes {
+    let scene = &data.scene;
+    let emitters = &scene.emitters;
+    let u_pick = draw(
+        sampler,
+        keys,
+        &lanes_of(|l| bounce_dim(depths[l]) + DIM_LIGHT_PICK),
+    );
+    let (ux, uy) = draw2(
+        sampler,
+        keys,
+        &lanes_of(|l| bounce_dim(depths[l]) + DIM_LIGHT_POINT),
+    );
+    // sample_emitter: an emitter by the cdf, a point uniform on it.
+    let e: [usize; LANES] = lanes_of(|l| sample_cdf(&emitters.cdf, u_pick.0[l]));
+    let su = ux.sqrt();
+    let (b1, b2) = (1.0 - su, uy * su);
+    let tri: [usize; LANES] = lanes_of(|l| emitters.triangle[e[l]] as usize);
+    let tris = &scene.triangles;
+    let (p0, p1, p2) = (
+        V3::from_fn(|l| tris.p0[tri[l]]),
+        V3::from_fn(|l| tris.p1[tri[l]]),
+        V3::from_fn(|l| tris.p2[tri[l]]),
+    );
+    // surface_point: b0 from f64, so that its only error is the final rounding.
+    let b0 = F::from_fn(|l| (1.0 - f64::from(b1.0[l]) - f64::from(b2.0[l])) as f32);
+    let (w0, w1, w2) = (b0 * p0, b1 * p1, b2 * p2);
+    let light_p = w0 + w1 + w2;
+    let light_p_error = F::splat(gamma(7)) * (w0.abs() + w1.abs() + w2.abs());
+    let light_ng = V3::from_fn(|l| tris.normal[tri[l]]);
+    let pdf_area = F::from_fn(|l| emitters.pmf[e[l]] / emitters.area[e[l]]);
+    let radiance = V3::from_fn(|l| emitters.radiance[e[l]]);
+    // sample_light_from
+    let to_light = light_p - surf.p;
+    let dist2 = to_light.dot(to_light);
+    let wi = to_light / dist2.sqrt();
+    let cos_light = -wi.dot(light_ng);
+    let zero = F::splat(0.0);
+    let facing = !(cos_light.le(zero) | (wi.dot(surf.ng) * surf.wo.dot(surf.ng)).le(zero));
+    // spawn_ray_to: both ends moved off their surfaces, towards each other.
+    let origin = offset_origin(surf.p, surf.p_error, surf.ng, light_p - surf.p);
+    let target = offset_origin(light_p, light_p_error, light_ng, origin - light_p);
+    let light_pdf = pdf_area * dist2 / cos_light;
+    // The Lambertian BSDF toward the light, and MIS against sampling it.
+    let wi_local = surf.frame.to_local(wi);
+    let same = same_side(surf.wo_local.z, wi_local.z);
+    let f = same.select3(
+        surf.reflectance * F::splat(FRAC_1_PI),
+        V3::splat(Vec3::ZERO),
+    );
+    let black = f.x.eq(zero) & f.y.eq(zero) & f.z.eq(zero);
+    let bsdf_pdf = same.select(wi_local.z.abs() * FRAC_1_PI, zero);
+    let weight = power_heuristic_lanes(light_pdf, bsdf_pdf);
+    LightLanes {
+        cast: facing & !black,
+        origin,
+        dir: target - origin,
+        contribution: throughput * f * (wi_local.z.abs() * weight / light_pdf) * radiance,
+    }
 }
 
 /// A shadow ray toward a light sample and what it brings if unoccluded.

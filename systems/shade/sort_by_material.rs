@@ -1,10 +1,13 @@
 //! Compacts the paths after tracing and groups them by material kind, so that each shading
 //! system runs over one contiguous queue. Paths end here when their ray found nothing (they
 //! left the scene, or shading or Russian roulette ended them and left them no ray), or when
-//! they reached the depth cap (after their emission was added).
+//! they reached the depth cap (after their emission was added). The same pass that moves a
+//! kept path computes the surface point of its hit (position with its error bound, geometric
+//! and shading normals) for the light-sampling and shading systems.
 
 use crate::bsdf::MaterialKind;
 use crate::components::{CHUNK, MISS};
+use crate::geometry::{SurfacePoint, TriangleColumns, surface_point};
 use crate::integrators::pt::{MaterialRanges, PtState};
 use crate::pipeline::Flow;
 use rayon::prelude::*;
@@ -28,7 +31,7 @@ crate::system! {
     SortByMaterial = "sort_by_material";
     on PtState {
         read scene = data.scene, max_depth = settings.max_depth;
-        write hits, paths, rays, sample_radiance, ranges, active, scratch;
+        write hits, paths, rays, sample_radiance, ranges, active, scratch, surfaces;
     }
     run {
         let taken = *active;
@@ -105,23 +108,42 @@ crate::system! {
             sample_radiance[paths.sample[slot] as usize] = paths.radiance[slot];
         }
         order.truncate(kept);
-        // Moves the kept paths to slots 0..kept. Only what later systems of the bounce read
-        // moves: the path state, the ray direction (wo) and the hit's triangle and
-        // barycentrics. The ray origins and hit distances left behind are stale until shading
-        // and tracing write them again.
+        // Moves the kept paths to slots 0..kept and interpolates each one's surface point, in
+        // one parallel pass over the destination, where the hit is being read anyway (it was
+        // a pass per column plus a system for the surfaces). Only what later systems of the
+        // bounce read moves: the path state, the ray direction (wo) and the hit's
+        // triangle. The ray origins, hit distances and barycentrics left behind are stale
+        // until shading and tracing write them again.
         {
-            use crate::components::gather_column;
-            use std::mem::swap;
-            scratch.paths.gather_from(paths, &order);
-            gather_column(&mut scratch.rays.dir, &rays.dir, &order);
-            gather_column(&mut scratch.hits.triangle, &hits.triangle, &order);
-            gather_column(&mut scratch.hits.b1, &hits.b1, &order);
-            gather_column(&mut scratch.hits.b2, &hits.b2, &order);
-            swap(paths, &mut scratch.paths);
-            swap(&mut rays.dir, &mut scratch.rays.dir);
-            swap(&mut hits.triangle, &mut scratch.hits.triangle);
-            swap(&mut hits.b1, &mut scratch.hits.b1);
-            swap(&mut hits.b2, &mut scratch.hits.b2);
+            let tris = &scene.triangles;
+            let (from_paths, from_dir, from_hits) = (&*paths, &rays.dir, &*hits);
+            let dirs = scratch.rays.dir[..kept].par_chunks_mut(CHUNK);
+            let triangles = scratch.hits.triangle[..kept].par_chunks_mut(CHUNK);
+            scratch
+                .paths
+                .chunks_mut(0..kept)
+                .into_par_iter()
+                .zip(surfaces.chunks_mut(0..kept))
+                .zip(dirs)
+                .zip(triangles)
+                .zip(order.par_chunks(CHUNK))
+                .for_each(|((((mut p, s), dir), triangle), from)| {
+                    for (i, &slot) in from.iter().enumerate() {
+                        let slot = slot as usize;
+                        p.set(i, from_paths.get(slot));
+                        dir[i] = from_dir[slot];
+                        let t = from_hits.triangle[slot];
+                        triangle[i] = t;
+                        let sp = shading_point(tris, t, from_hits.b1[slot], from_hits.b2[slot]);
+                        s.p[i] = sp.p;
+                        s.p_error[i] = sp.p_error;
+                        s.ng[i] = sp.ng;
+                        s.ns[i] = sp.ns;
+                    }
+                });
+            std::mem::swap(paths, &mut scratch.paths);
+            std::mem::swap(&mut rays.dir, &mut scratch.rays.dir);
+            std::mem::swap(&mut hits.triangle, &mut scratch.hits.triangle);
         }
         *active = kept;
         scratch.order = order;
@@ -131,5 +153,21 @@ crate::system! {
             dielectric: counts[0] + counts[1]..kept,
         };
         Flow::new(taken, kept)
+    }
+}
+
+/// The surface point of a hit with its shading normal turned into the hemisphere of the
+/// geometric one: the per-path step that this system runs for every kept path, shared with
+/// the megakernel (`systems/trace/paths.rs`).
+#[inline(always)]
+pub fn shading_point(tris: &TriangleColumns, triangle: u32, b1: f32, b2: f32) -> SurfacePoint {
+    let sp = surface_point(tris, triangle, b1, b2);
+    SurfacePoint {
+        ns: if sp.ns.dot(sp.ng) < 0.0 {
+            -sp.ns
+        } else {
+            sp.ns
+        },
+        ..sp
     }
 }

@@ -37,6 +37,10 @@ crate::system! {
             .into_par_iter()
             .map(|h| {
                 #[cfg(target_arch = "x86_64")]
+                if crate::cpu::has_avx512() {
+                    // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+                    return unsafe { trace_chunk_avx512(accel, rays, h) };
+                }
                 if crate::cpu::has_avx2_fma() {
                     // SAFETY: the CPU has AVX2 and FMA (checked just above).
                     return unsafe { trace_chunk_avx2(accel, rays, h) };
@@ -55,6 +59,17 @@ fn trace_chunk_avx2(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) 
     trace_chunk(rays, h, |o, d| {
         // SAFETY: this function is compiled for AVX2 and FMA and only called where the CPU
         // has them.
+        unsafe { accel.trace_in_avx2::<false>(o, d, f32::INFINITY) }
+    })
+}
+
+/// `trace_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`), the traversal inlined.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+fn trace_chunk_avx512(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) {
+    trace_chunk(rays, h, |o, d| {
+        // SAFETY: this function is compiled for AVX2 and FMA (and AVX-512) and only called
+        // where the CPU has them.
         unsafe { accel.trace_in_avx2::<false>(o, d, f32::INFINITY) }
     })
 }

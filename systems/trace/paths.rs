@@ -16,8 +16,8 @@ use crate::scene::Frustum;
 use crate::systems::connect::sample_lights::light_sample;
 use crate::systems::generate::camera_rays::camera_ray;
 use crate::systems::shade::emitted_light::emitted_light;
-use crate::systems::shade::interpolate_surfaces::shading_point;
 use crate::systems::shade::russian_roulette::roulette;
+use crate::systems::shade::sort_by_material::shading_point;
 use crate::systems::shade::{Surface, scatter};
 use glam::Vec3;
 use rayon::prelude::*;
@@ -169,7 +169,7 @@ fn walk_path(
         if depth >= walk.max_depth {
             break;
         }
-        // interpolate_surfaces
+        // sort_by_material interpolates the surface point
         let point = shading_point(&data.scene.triangles, hit.triangle, hit.b1, hit.b2);
         let surf = Surface::new(data, hit.triangle, &point, dir);
         // sample_lights, only at non-delta kinds

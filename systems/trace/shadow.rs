@@ -35,6 +35,10 @@ crate::system! {
             .into_par_iter()
             .map(|c| {
                 #[cfg(target_arch = "x86_64")]
+                if crate::cpu::has_avx512() {
+                    // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+                    return unsafe { trace_chunk_avx512(accel, c) };
+                }
                 if crate::cpu::has_avx2_fma() {
                     // SAFETY: the CPU has AVX2 and FMA (checked just above).
                     return unsafe { trace_chunk_avx2(accel, c) };
@@ -53,6 +57,17 @@ fn trace_chunk_avx2(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
     trace_chunk(c, |o, d, t_max| {
         // SAFETY: this function is compiled for AVX2 and FMA and only called where the CPU
         // has them.
+        unsafe { accel.trace_in_avx2::<true>(o, d, t_max) }.is_some()
+    })
+}
+
+/// `trace_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`), the traversal inlined.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+fn trace_chunk_avx512(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
+    trace_chunk(c, |o, d, t_max| {
+        // SAFETY: this function is compiled for AVX2 and FMA (and AVX-512) and only called
+        // where the CPU has them.
         unsafe { accel.trace_in_avx2::<true>(o, d, t_max) }.is_some()
     })
 }
