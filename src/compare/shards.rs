@@ -240,6 +240,22 @@ impl SceneStudy {
 }
 
 /// Every scene and run of the comparison, in the order one machine renders them.
+/// One run per integrator and budget of a samples-per-pixel comparison.
+fn spp_runs(plan: &ComparePlan) -> Vec<RunStudy> {
+    plan.integrators
+        .iter()
+        .flat_map(|&kind| {
+            plan.budgets.iter().map(move |&budget| RunStudy {
+                kind,
+                budget,
+                passes: budget as u64,
+                settings: plan.settings,
+                name: format!("{kind}-{budget}spp"),
+            })
+        })
+        .collect()
+}
+
 fn study_of(request: &CompareRequest) -> Result<Vec<SceneStudy>> {
     match request {
         CompareRequest::Plain(o) => {
@@ -253,19 +269,7 @@ fn study_of(request: &CompareRequest) -> Result<Vec<SceneStudy>> {
                      measured seconds), or run it on one machine"
                 );
             }
-            let runs = plan
-                .integrators
-                .iter()
-                .flat_map(|&kind| {
-                    plan.budgets.iter().map(move |&budget| RunStudy {
-                        kind,
-                        budget,
-                        passes: budget as u64,
-                        settings: plan.settings,
-                        name: format!("{kind}-{budget}spp"),
-                    })
-                })
-                .collect();
+            let runs = spp_runs(&plan);
             Ok(vec![SceneStudy {
                 key: scene_stem(&o.scene),
                 path: o.scene.clone(),
@@ -282,19 +286,7 @@ fn study_of(request: &CompareRequest) -> Result<Vec<SceneStudy>> {
             let biased = thesis::biased_runs_of(&plan, o)?;
             let mut scenes = Vec::new();
             for ((key, _), given) in thesis::SCENES.into_iter().zip(given) {
-                let mut runs: Vec<RunStudy> = plan
-                    .integrators
-                    .iter()
-                    .flat_map(|&kind| {
-                        plan.budgets.iter().map(move |&budget| RunStudy {
-                            kind,
-                            budget,
-                            passes: budget as u64,
-                            settings: plan.settings,
-                            name: format!("{kind}-{budget}spp"),
-                        })
-                    })
-                    .collect();
+                let mut runs = spp_runs(&plan);
                 runs.extend(
                     biased
                         .iter()
