@@ -313,9 +313,13 @@ pub const PILOT_SUBPATHS: usize = 1 << 13;
 /// Salt of the pilot's seed: its light subpaths are not the render's.
 const PILOT_SEED_SALT: u64 = 0x6c76_635f_7069_6c6f;
 
-/// The light-vertex cache of a wave (LVC-BDPT): every connectible light vertex past the
-/// emitter (s >= 2) that carries light, in light-subpath order then depth order, so the cache
-/// and the picks into it do not depend on the thread count.
+/// Samples whose camera vertices pick from the light vertices of their own light subpaths
+/// alone: one cache per group of a wave, small enough (~4k vertices on door_ajar, ~0.5 MB)
+/// to stay in a core's L2 while its camera vertices pick from it at random, and built in
+/// parallel, group by group.
+pub const CACHE_GROUP: usize = 1024;
+
+/// The light-vertex caches of a wave (LVC-BDPT), one per `CACHE_GROUP` samples.
 #[derive(Default)]
 pub struct LightVertexCache {
     /// Vertices each camera vertex joins (M; 0: no cache).
@@ -323,11 +327,20 @@ pub struct LightVertexCache {
     /// How many times as often as each other strategy MIS counts each connection strategy
     /// (s >= 2, t >= 2): M over the mean cached vertices per light subpath. A constant
     /// measured before the render (`PILOT_SUBPATHS` light subpaths of a salted seed): were it
-    /// the wave's own V / N, the weights would depend on the light subpaths they weigh.
+    /// a group's own V / N, the weights would depend on the light subpaths they weigh.
     pub connection_count: f32,
     /// The pilot's mean cached vertices per light subpath.
     pub pilot_mean: f32,
-    /// Light subpaths of the wave the cache holds (N).
+    /// Group g serves the wave's samples `g * CACHE_GROUP..(g + 1) * CACHE_GROUP`.
+    pub groups: Vec<CacheGroup>,
+}
+
+/// The cache of one group of samples: every connectible light vertex past the emitter
+/// (s >= 2) of their light subpaths that carries light, in light-subpath order then depth
+/// order, so the cache and the picks into it do not depend on the thread count.
+#[derive(Default)]
+pub struct CacheGroup {
+    /// The group's light subpaths (N).
     pub light_subpaths: usize,
     /// Per cached vertex: its light subpath's slot, its depth (s - 1), the vertex, and the
     /// vertex prepared for joining.
@@ -335,6 +348,44 @@ pub struct LightVertexCache {
     pub depth: Vec<u32>,
     pub vertex: Vec<Vertex>,
     pub joint: Vec<Joint>,
+}
+
+impl CacheGroup {
+    /// Vertices cached (V).
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.vertex.len()
+    }
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.vertex.is_empty()
+    }
+
+    pub fn clear(&mut self) {
+        self.subpath.clear();
+        self.depth.clear();
+        self.vertex.clear();
+        self.joint.clear();
+    }
+
+    /// What each connection through the cache is multiplied by, V / (N M) with M
+    /// `per_camera_vertex`: a pick is uniform over the V, so M picks so scaled average the
+    /// sum over all of them, 1 / N of it (BDPT joins one light subpath per camera path).
+    #[inline]
+    pub fn scale(&self, per_camera_vertex: u32) -> f32 {
+        (self.len() as f64 / (self.light_subpaths as f64 * per_camera_vertex as f64)) as f32
+    }
+
+    /// The index of pick `m` of `per_camera_vertex` at a camera vertex whose 48-bit uniform
+    /// is `x`: the picks are stratified over the cache, each uniform on its own (which is all
+    /// the estimator needs), exactly up to 2^-48. The group must not be empty.
+    #[inline]
+    pub fn pick(&self, x: u64, m: u32, per_camera_vertex: u32) -> usize {
+        // floor((m + x / 2^48) V / M), in integers.
+        let at = ((m as u128) << 48) | x as u128;
+        (((at * self.len() as u128) >> 48) as u64 / per_camera_vertex as u64) as usize
+    }
 }
 
 impl LightVertexCache {
@@ -370,7 +421,7 @@ impl LightVertexCache {
                 m as f32
             },
             pilot_mean,
-            ..LightVertexCache::default()
+            groups: Vec::new(),
         }
     }
 
@@ -385,33 +436,19 @@ impl LightVertexCache {
         ctx.joint(v, crate::path::towards(v, &subpath[d - 1]))
     }
 
-    /// Vertices cached (V).
+    /// The cache sample `k` of the wave picks from.
     #[inline]
-    pub fn len(&self) -> usize {
-        self.vertex.len()
+    pub fn group(&self, k: usize) -> &CacheGroup {
+        &self.groups[k / CACHE_GROUP]
     }
 
-    #[inline]
-    pub fn is_empty(&self) -> bool {
-        self.vertex.is_empty()
-    }
-
-    /// What each connection through the cache is multiplied by, V / (N M): a pick is uniform
-    /// over V vertices, so M picks scaled so average the sum over all cached vertices of
-    /// the wave's N light subpaths, 1 / N of it (BDPT joins one light subpath per camera path).
-    #[inline]
-    pub fn scale(&self) -> f32 {
-        (self.len() as f64 / (self.light_subpaths as f64 * self.per_camera_vertex as f64)) as f32
-    }
-
-    /// The cache index of pick `m` (of M) at a camera vertex whose 48-bit uniform is `x`: the
-    /// picks are stratified over the cache, each uniform on its own (which is all the
-    /// estimator needs), exactly up to 2^-48.
-    #[inline]
-    pub fn pick(&self, x: u64, m: u32) -> usize {
-        let strata = self.per_camera_vertex as u128;
-        let at = ((m as u128) << 48) + x as u128;
-        (at * self.len() as u128 / (strata << 48)) as usize
+    /// Bytes the caches hold.
+    pub fn bytes(&self) -> usize {
+        let per_vertex = std::mem::size_of::<Vertex>() + std::mem::size_of::<Joint>() + 8;
+        self.groups
+            .iter()
+            .map(|g| g.vertex.capacity() * per_vertex)
+            .sum()
     }
 }
 
@@ -477,10 +514,8 @@ impl BdptState {
             + self.vertices.len() * PathVertices::bytes_per_item();
         let connections =
             self.shadow.capacity() * (ShadowRays::bytes_per_item() + Connections::bytes_per_item());
-        let cache = &self.light_cache;
-        let cached = cache.vertex.capacity()
-            * (std::mem::size_of::<Vertex>() + std::mem::size_of::<Joint>() + 8)
-            + self.cache_pick.capacity() * std::mem::size_of::<u32>();
+        let cached =
+            self.light_cache.bytes() + self.cache_pick.capacity() * std::mem::size_of::<u32>();
         2 * per_subpath
             + std::mem::size_of::<usize>()
             + std::mem::size_of::<Vec3>()

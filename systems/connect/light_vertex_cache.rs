@@ -1,23 +1,15 @@
-//! Fills the wave's light-vertex cache (LVC-BDPT): every light vertex past the emitter
-//! (depth >= 1, strategy s >= 2) that a connection may join and that carries light, prepared
-//! for joining, in light-subpath order then depth order (the order the picks index, the same
-//! for any thread count).
+//! Fills the wave's light-vertex caches (LVC-BDPT), one per `CACHE_GROUP` samples, in
+//! parallel: every light vertex past the emitter (depth >= 1, strategy s >= 2) of the group's
+//! light subpaths that a connection may join and that carries light, prepared for joining, in
+//! light-subpath order then depth order (the order the picks index, the same for any thread
+//! count).
 
-use crate::integrators::bdpt::{BdptState, CONNECT_CHUNK, LightVertexCache};
-use crate::path::{Joint, PathContext, Vertex};
+use crate::integrators::bdpt::{BdptState, CACHE_GROUP, LightVertexCache};
+use crate::path::{PathContext, Vertex};
 use crate::pipeline::Flow;
 use rayon::prelude::*;
 
 pub struct CacheLightVertices;
-
-/// The cached vertices of one chunk of light subpaths.
-#[derive(Default)]
-struct Piece {
-    subpath: Vec<u32>,
-    depth: Vec<u32>,
-    vertex: Vec<Vertex>,
-    joint: Vec<Joint>,
-}
 
 crate::system! {
     CacheLightVertices = "cache_light_vertices";
@@ -30,12 +22,18 @@ crate::system! {
         let cap = *capacity;
         let ctx = PathContext::new(&data.scene);
         let stores: Vec<_> = vertices.iter().map(|v| v.view(0..v.capacity())).collect();
-        let pieces: Vec<Piece> = (0..n.div_ceil(CONNECT_CHUNK))
-            .into_par_iter()
-            .map(|c| {
-                let mut piece = Piece::default();
+        // The groups keep their allocations from wave to wave.
+        let groups = &mut light_cache.groups;
+        groups.resize_with(n.div_ceil(CACHE_GROUP), Default::default);
+        let cached: usize = groups
+            .par_iter_mut()
+            .enumerate()
+            .map(|(g, group)| {
+                group.clear();
+                let samples = g * CACHE_GROUP..((g + 1) * CACHE_GROUP).min(n);
+                group.light_subpaths = samples.len();
                 let mut subpath: Vec<Vertex> = Vec::new();
-                for k in c * CONNECT_CHUNK..((c + 1) * CONNECT_CHUNK).min(n) {
+                for k in samples {
                     let sub = cap + k;
                     subpath.clear();
                     for (d, store) in stores.iter().enumerate().take(subpath_len[sub] as usize) {
@@ -43,28 +41,16 @@ crate::system! {
                     }
                     for d in 1..subpath.len() {
                         if let Some(joint) = LightVertexCache::joint(&ctx, &subpath, d) {
-                            piece.subpath.push(sub as u32);
-                            piece.depth.push(d as u32);
-                            piece.vertex.push(subpath[d]);
-                            piece.joint.push(joint);
+                            group.subpath.push(sub as u32);
+                            group.depth.push(d as u32);
+                            group.vertex.push(subpath[d]);
+                            group.joint.push(joint);
                         }
                     }
                 }
-                piece
+                group.len()
             })
-            .collect();
-        let cache = &mut *light_cache;
-        cache.light_subpaths = n;
-        cache.subpath.clear();
-        cache.depth.clear();
-        cache.vertex.clear();
-        cache.joint.clear();
-        for piece in &pieces {
-            cache.subpath.extend_from_slice(&piece.subpath);
-            cache.depth.extend_from_slice(&piece.depth);
-            cache.vertex.extend_from_slice(&piece.vertex);
-            cache.joint.extend_from_slice(&piece.joint);
-        }
-        Flow::new(n, cache.len())
+            .sum();
+        Flow::new(n, cached)
     }
 }

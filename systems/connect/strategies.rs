@@ -213,7 +213,6 @@ pub fn connect_wave(
         None => (None, chunk_starts.iter().map(|_| None).collect()),
     };
     let connection_count = cache.map_or(1.0, |c| c.connection_count);
-    let cache_scale = cache.map_or(1.0, |c| c.scale());
     let scene = &data.scene;
     let has_light = !scene.emitters.triangle.is_empty();
     // Every strategy within the depth bounds counts (no filter to ask).
@@ -338,8 +337,10 @@ pub fn connect_wave(
                     if !settings.joins_cache(t) {
                         continue;
                     }
-                    // M light vertices picked from the cache, stratified over it by one
-                    // 48-bit uniform of this camera vertex.
+                    // M light vertices picked from the sample's group's cache, stratified
+                    // over it by one 48-bit uniform of this camera vertex.
+                    let group = cache.group(k);
+                    let cache_scale = group.scale(cache.per_camera_vertex);
                     let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
                     let dim = camera_vertex_dim(t - 1) + DIM_CACHE_PICK;
                     let bits =
@@ -355,11 +356,11 @@ pub fn connect_wave(
                         cn.pixel[slot] = pixel;
                         cn.s[slot] = 0;
                         cn.t[slot] = t as u16;
-                        if cache.is_empty() {
+                        if group.is_empty() {
                             continue;
                         }
-                        let i = cache.pick(x, m);
-                        let s = cache.depth[i] as usize + 1;
+                        let i = group.pick(x, m, cache.per_camera_vertex);
+                        let s = group.depth[i] as usize + 1;
                         picks[slot] = i as u32;
                         cn.s[slot] = s as u16;
                         if !settings.uses(s, t) {
@@ -368,8 +369,8 @@ pub fn connect_wave(
                         let Some(zj) = &camera.joints[t - 1] else {
                             continue;
                         };
-                        let y = &cache.vertex[i];
-                        let Some(c) = ctx.join_prepared((y, &cache.joint[i]), (z, zj)) else {
+                        let y = &group.vertex[i];
+                        let Some(c) = ctx.join_prepared((y, &group.joint[i]), (z, zj)) else {
                             continue;
                         };
                         sh.contribution[slot] = c * cache_scale;

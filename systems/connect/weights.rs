@@ -137,7 +137,7 @@ pub fn weigh_wave(
                         sampled = [sampled_light_vertex(scene, sampler, key, t)];
                         &sampled
                     } else if let Some((cache, picks)) = cache.filter(|_| through_cache(s, t)) {
-                        let sub = cache.subpath[picks[slot] as usize] as usize;
+                        let sub = cache.group(k).subpath[picks[slot] as usize] as usize;
                         picked.clear();
                         for (d, store) in vertices.iter().enumerate().take(s) {
                             picked.push(Vertex::from_store(store, sub, d));
