@@ -13,17 +13,19 @@
 //! sum to one) at a small cost in weighting quality.
 //!
 //! With a light-vertex cache (`--light-vertex-cache M`, Davidovic et al. 2014, "Progressive
-//! light transport simulation on the GPU", LVC-BDPT), the wave's light subpaths are walked as
-//! usual, their connectible vertices past the emitter go into one cache, and each camera
-//! vertex joins M vertices picked uniformly from it instead of every vertex of its own light
-//! subpath: the strategies s >= 2, t >= 2 cost M connections per camera vertex instead of one
-//! per light vertex. Each such connection is scaled by V / (N M) (V cached vertices, N light
-//! subpaths in the wave), so its expectation is that of BDPT's, and MIS counts the connection
-//! strategies `LightVertexCache::connection_count` = M / (mean cached vertices per light
-//! subpath) times (a constant found before the render from light subpaths of their own, so the
-//! weights depend on the path alone and the estimator stays unbiased). Strategies s = 0, s = 1
-//! and t = 1 are BDPT's. The cache is per wave, so the image (not its expectation) depends on
-//! the wave layout (`--wavefront`, where a resumed render starts), not on the thread count.
+//! light transport simulation on the GPU", LVC-BDPT), the light subpaths are walked as usual,
+//! the connectible vertices past the emitter of each group of `CACHE_GROUP` samples' light
+//! subpaths go into the group's cache, and each camera vertex joins M vertices picked
+//! uniformly from its group's cache instead of every vertex of its own light subpath: the
+//! strategies s >= 2, t >= 2 cost M connections per camera vertex instead of one per light
+//! vertex, and join light subpaths other than the sample's own. Each such connection is scaled
+//! by V / (N M) (V cached vertices, N light subpaths in the group), so its expectation is that
+//! of BDPT's, and MIS counts the connection strategies `LightVertexCache::connection_count` =
+//! M / (mean cached vertices per light subpath) times (a constant found before the render
+//! from light subpaths of their own, so the weights depend on the path alone and the estimator
+//! stays unbiased). Strategies s = 0, s = 1 and t = 1 are BDPT's. Groups are counted from each
+//! wave's start, so the image (not its expectation) depends on the wave layout (`--wavefront`,
+//! where a resumed render starts), not on the thread count.
 
 use crate::components::{Connections, Hits, PathVertices, Rays, ShadowRays, Walkers};
 use crate::film::{Film, Image};
