@@ -294,6 +294,11 @@ pub struct RenderArgs {
     /// Also write each strategy's weighted contribution as DIR/s{S}_t{T}.exr (bdpt).
     #[arg(long, value_name = "DIR")]
     pub strategy_images: Option<PathBuf>,
+    /// Light-vertex cache (bdpt; Davidovic et al. 2014): each camera vertex joins M light
+    /// vertices picked from all of the wave's light subpaths instead of every vertex of its
+    /// own. Unbiased; fewer connections per sample.
+    #[arg(long, value_name = "M", value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub light_vertex_cache: Option<u32>,
     /// Output EXR (default render/SCENE_INTEGRATOR.exr); a PNG preview is written beside it.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
@@ -901,6 +906,7 @@ impl RenderArgs {
                 max_depth: self.max_depth.unwrap_or(u32::MAX),
                 mis: self.mis.heuristic(),
                 strategy_images: self.strategy_images.is_some(),
+                light_vertex_cache: self.light_vertex_cache.unwrap_or(0),
                 photons: self.photons.settings(),
                 mlt: self.mlt.options(),
                 ..RenderSettings::default()

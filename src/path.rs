@@ -486,6 +486,7 @@ impl PathContext<'_> {
     /// The MIS weight of strategy (s, t) for the path its connection makes, by Veach's ratio
     /// walk over the stored forward and reverse densities; the densities the connection itself
     /// changes (at the two joined vertices and their predecessors) are recomputed here.
+    #[inline]
     pub fn mis_weight(
         &self,
         camera: &[Vertex],
@@ -493,6 +494,22 @@ impl PathContext<'_> {
         s: usize,
         t: usize,
         heuristic: MisHeuristic,
+    ) -> f32 {
+        self.mis_weight_counted(camera, light, s, t, heuristic, 1.0)
+    }
+
+    /// `mis_weight` where each connection strategy (s >= 2, t >= 2) is sampled
+    /// `connection_count` times as often as the others (a light-vertex cache: Davidovic et al.
+    /// 2014): strategy j weighs `n_j p_j` against the others' instead of `p_j`. Any positive
+    /// count keeps the weights of a path summing to one; with 1 it is `mis_weight` bit for bit.
+    pub fn mis_weight_counted(
+        &self,
+        camera: &[Vertex],
+        light: &[Vertex],
+        s: usize,
+        t: usize,
+        heuristic: MisHeuristic,
+        connection_count: f32,
     ) -> f32 {
         // Reverse densities at the joint, as the connection makes them.
         let z_last = camera.get(t.wrapping_sub(1)).filter(|_| t >= 1);
@@ -547,6 +564,14 @@ impl PathContext<'_> {
         };
         let light_delta = |i: usize| i + 1 != s && light[i].delta;
 
+        // n_j / n_{(s, t)}: the count of strategy (sj, tj) relative to this one's.
+        let is_connection = |s: usize, t: usize| s >= 2 && t >= 2;
+        let this_connects = is_connection(s, t);
+        let relative_count = |sj: usize, tj: usize| match (is_connection(sj, tj), this_connects) {
+            (true, false) => connection_count,
+            (false, true) => 1.0 / connection_count,
+            _ => 1.0,
+        };
         let mut sum = 0.0f32;
         let mut ratio = 1.0f32;
         // Strategies with fewer camera vertices: (s + 1, t - 1), (s + 2, t - 2), ..., down
@@ -554,7 +579,7 @@ impl PathContext<'_> {
         for i in (1..t).rev() {
             ratio *= remap0(camera_rev(i)) / remap0(camera[i].pdf_fwd);
             if !camera_delta(i) && !camera_delta(i - 1) {
-                sum += h(ratio);
+                sum += h(ratio * relative_count(s + t - i, i));
             }
         }
         // Strategies with fewer light vertices, down to s = 0 (area lights are not delta).
@@ -563,7 +588,7 @@ impl PathContext<'_> {
             ratio *= remap0(light_rev(i)) / remap0(light[i].pdf_fwd);
             let delta_before = i > 0 && light_delta(i - 1);
             if !light_delta(i) && !delta_before {
-                sum += h(ratio);
+                sum += h(ratio * relative_count(i, s + t - i));
             }
         }
         1.0 / (1.0 + sum)

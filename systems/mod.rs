@@ -38,6 +38,9 @@ pub mod shade {
 /// Joining paths to lights: light sampling and the shadow rays' contributions.
 pub mod connect {
     pub mod apply_shadow;
+    pub mod cached_strategies;
+    pub mod cached_weights;
+    pub mod light_vertex_cache;
     pub mod sample_direct_light;
     pub mod sample_lights;
     pub mod strategies;

@@ -45,6 +45,18 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
         bail!("--strategy-images needs --integrator bdpt");
     }
+    if o.settings.light_vertex_cache > 0
+        && !o
+            .integrator
+            .info()
+            .options
+            .contains(&"--light-vertex-cache")
+    {
+        bail!(
+            "--light-vertex-cache needs --integrator bdpt, not {}",
+            o.integrator
+        );
+    }
     check_threads(o.threads)?;
     check_kernel(o.integrator, &o.settings)?;
     let data = load_scene(&o.scene)?;

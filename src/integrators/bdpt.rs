@@ -11,6 +11,21 @@
 //! wave reaches its depth. Russian roulette (after `roulette::ROULETTE_DEPTH` vertices) ends subpaths;
 //! it is left out of the MIS densities, which keeps every estimator unbiased (its weights still
 //! sum to one) at a small cost in weighting quality.
+//!
+//! With a light-vertex cache (`--light-vertex-cache M`, Davidovic et al. 2014, "Progressive
+//! light transport simulation on the GPU", LVC-BDPT), the light subpaths are walked as usual,
+//! the connectible vertices past the emitter of each group of `CACHE_GROUP` samples' light
+//! subpaths go into the group's cache, and each camera vertex joins M vertices picked
+//! uniformly from its group's cache instead of every vertex of its own light subpath: the
+//! strategies s >= 2, t >= 2 cost M connections per camera vertex instead of one per light
+//! vertex, and join light subpaths other than the sample's own. Each such connection is scaled
+//! by V / (N M) (V cached vertices, N light subpaths in the group), so its expectation is that
+//! of BDPT's, and MIS counts the connection strategies `LightVertexCache::connection_count` =
+//! M / (mean cached vertices per light subpath) times (a constant found before the render
+//! from light subpaths of their own, so the weights depend on the path alone and the estimator
+//! stays unbiased). Strategies s = 0, s = 1 and t = 1 are BDPT's. Groups are counted from each
+//! wave's start, so the image (not its expectation) depends on the wave layout (`--wavefront`,
+//! where a resumed render starts), not on the thread count.
 
 use crate::components::{Connections, Hits, PathVertices, Rays, ShadowRays, Walkers};
 use crate::film::{Film, Image};
@@ -18,7 +33,7 @@ use crate::integrators::driver::render_waves;
 use crate::integrators::{
     Budget, Control, IntegratorState, RenderOutcome, RenderSettings, SceneData, Wave, WaveState,
 };
-use crate::path::MisHeuristic;
+use crate::path::{Joint, MisHeuristic, PathContext, Vertex};
 use crate::pipeline::{Graph, Node, Stats};
 use crate::sampling::{PrimarySamples, SampleKey, Sampler, SamplerKind, Stream};
 use crate::systems::{connect, gather, generate, shade, trace};
@@ -49,6 +64,11 @@ pub const LIGHT_DIM_PICK: u32 = 0;
 pub const LIGHT_DIM_POINT: u32 = 1;
 pub const LIGHT_DIM_DIRECTION: u32 = 3;
 pub const LIGHT_DIMS_PER_VERTEX: u32 = 3;
+
+/// Connection-stream dimensions of camera vertex z_d (from `camera_vertex_dim(d)`) that pick
+/// its light-cache vertices: two numbers make one 48-bit uniform (the strategy s = 1 light
+/// sample reads the same vertex's `DIM_LIGHT_PICK` and `DIM_LIGHT_POINT`, above these).
+pub const DIM_CACHE_PICK: u32 = 0;
 
 /// Connection-stream dimension that picks the strategy s of a multiplexed (MMLT) sample. Only
 /// multiplexed samples read it, and they draw from `Numbers::Primary`, where the connection
@@ -168,6 +188,9 @@ pub struct BdptSettings {
     pub strategy_images: bool,
     /// Paths shallower than this are left out (path-space MLT renders them apart).
     pub min_depth: u32,
+    /// Light-vertex cache: each camera vertex joins this many vertices picked from the
+    /// wave's cache instead of its own light subpath's (0: plain BDPT).
+    pub light_vertex_cache: u32,
 }
 
 impl From<&RenderSettings> for BdptSettings {
@@ -176,6 +199,7 @@ impl From<&RenderSettings> for BdptSettings {
             mis: s.mis,
             sampler: s.sampler,
             strategy_images: s.strategy_images,
+            light_vertex_cache: s.light_vertex_cache,
             ..BdptSettings::new(s.seed, s.max_depth)
         }
     }
@@ -191,6 +215,7 @@ impl BdptSettings {
             strategies: StrategyFilter::All,
             strategy_images: false,
             min_depth: 0,
+            light_vertex_cache: 0,
         }
     }
 
@@ -215,6 +240,14 @@ impl BdptSettings {
             return 0..0;
         }
         first..last.min(nl) + 1
+    }
+
+    /// Whether the light-vertex cache may join some light vertex to camera vertex z_{t-1}:
+    /// a strategy (s >= 2, t) is within the depth bounds (its picks past them are wasted).
+    #[inline]
+    pub fn joins_cache(&self, t: usize) -> bool {
+        let s = self.light_vertices(t, usize::MAX);
+        self.light_vertex_cache > 0 && t >= 2 && s.end > s.start.max(2)
     }
 
     /// Whether strategy (s, t) may contribute: a camera vertex, at least two vertices in all,
@@ -269,6 +302,156 @@ pub struct BdptState {
     /// Weighted contribution of each strategy (s, t), summed per pixel.
     pub strategy_sums: BTreeMap<(u16, u16), Vec<DVec3>>,
     pub scratch: Scratch,
+    /// The wave's light-vertex cache (empty without `light_vertex_cache`).
+    pub light_cache: LightVertexCache,
+    /// Per connection slot joined through the cache: the cache index of its light vertex.
+    pub cache_pick: Vec<u32>,
+}
+
+/// Light subpaths traced before an LVC render to count the vertices a light subpath leaves
+/// in the cache: MIS needs that mean as a constant (see `LightVertexCache`).
+pub const PILOT_SUBPATHS: usize = 1 << 13;
+
+/// Salt of the pilot's seed: its light subpaths are not the render's.
+const PILOT_SEED_SALT: u64 = 0x6c76_635f_7069_6c6f;
+
+/// Samples whose camera vertices pick from the light vertices of their own light subpaths
+/// alone: one cache per group of a wave, small enough (~4k vertices on door_ajar, ~0.5 MB)
+/// to stay in a core's L2 while its camera vertices pick from it at random, and built in
+/// parallel, group by group.
+pub const CACHE_GROUP: usize = 1024;
+
+/// The light-vertex caches of a wave (LVC-BDPT), one per `CACHE_GROUP` samples.
+#[derive(Default)]
+pub struct LightVertexCache {
+    /// Vertices each camera vertex joins (M; 0: no cache).
+    pub per_camera_vertex: u32,
+    /// How many times as often as each other strategy MIS counts each connection strategy
+    /// (s >= 2, t >= 2): M over the mean cached vertices per light subpath. A constant
+    /// measured before the render (`PILOT_SUBPATHS` light subpaths of a salted seed): were it
+    /// a group's own V / N, the weights would depend on the light subpaths they weigh.
+    pub connection_count: f32,
+    /// The pilot's mean cached vertices per light subpath.
+    pub pilot_mean: f32,
+    /// Group g serves the wave's samples `g * CACHE_GROUP..(g + 1) * CACHE_GROUP`.
+    pub groups: Vec<CacheGroup>,
+}
+
+/// The cache of one group of samples: every connectible light vertex past the emitter
+/// (s >= 2) of their light subpaths that carries light, in light-subpath order then depth
+/// order, so the cache and the picks into it do not depend on the thread count.
+#[derive(Default)]
+pub struct CacheGroup {
+    /// The group's light subpaths (N).
+    pub light_subpaths: usize,
+    /// Per cached vertex: its light subpath's slot, its depth (s - 1), the vertex, and the
+    /// vertex prepared for joining.
+    pub subpath: Vec<u32>,
+    pub depth: Vec<u32>,
+    pub vertex: Vec<Vertex>,
+    pub joint: Vec<Joint>,
+}
+
+impl CacheGroup {
+    /// Vertices cached (V).
+    #[inline]
+    pub fn len(&self) -> usize {
+        self.vertex.len()
+    }
+
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.vertex.is_empty()
+    }
+
+    pub fn clear(&mut self) {
+        self.subpath.clear();
+        self.depth.clear();
+        self.vertex.clear();
+        self.joint.clear();
+    }
+
+    /// What each connection through the cache is multiplied by, V / (N M) with M
+    /// `per_camera_vertex`: a pick is uniform over the V, so M picks so scaled average the
+    /// sum over all of them, 1 / N of it (BDPT joins one light subpath per camera path).
+    #[inline]
+    pub fn scale(&self, per_camera_vertex: u32) -> f32 {
+        (self.len() as f64 / (self.light_subpaths as f64 * per_camera_vertex as f64)) as f32
+    }
+
+    /// The index of pick `m` of `per_camera_vertex` at a camera vertex whose 48-bit uniform
+    /// is `x`: the picks are stratified over the cache, each uniform on its own (which is all
+    /// the estimator needs), exactly up to 2^-48. The group must not be empty.
+    #[inline]
+    pub fn pick(&self, x: u64, m: u32, per_camera_vertex: u32) -> usize {
+        // floor((m + x / 2^48) V / M), in integers.
+        let at = ((m as u128) << 48) | x as u128;
+        (((at * self.len() as u128) >> 48) as u64 / per_camera_vertex as u64) as usize
+    }
+}
+
+impl LightVertexCache {
+    /// A cache joining `per_camera_vertex` vertices per camera vertex (0: none), its MIS count
+    /// from a pilot run of the scene's light subpaths.
+    pub fn new(data: &Arc<SceneData>, settings: &BdptSettings) -> LightVertexCache {
+        let m = settings.light_vertex_cache;
+        if m == 0 {
+            return LightVertexCache::default();
+        }
+        let pilot = BdptSettings {
+            seed: settings.seed ^ PILOT_SEED_SALT,
+            light_vertex_cache: 0,
+            strategy_images: false,
+            ..*settings
+        };
+        let ctx = PathContext::new(&data.scene);
+        let cached: usize = trace_subpaths(data.clone(), pilot, 0, PILOT_SUBPATHS)
+            .iter()
+            .map(|(_, light)| {
+                (1..light.len())
+                    .filter(|&d| LightVertexCache::joint(&ctx, light, d).is_some())
+                    .count()
+            })
+            .sum();
+        let pilot_mean = cached as f32 / PILOT_SUBPATHS as f32;
+        LightVertexCache {
+            per_camera_vertex: m,
+            // Without cached vertices no connection strategy ever samples: any count will do.
+            connection_count: if cached > 0 {
+                m as f32 / pilot_mean
+            } else {
+                m as f32
+            },
+            pilot_mean,
+            groups: Vec::new(),
+        }
+    }
+
+    /// Light vertex `d` (>= 1) of `subpath` prepared for joining, if it goes into the cache:
+    /// connectible and carrying light.
+    #[inline]
+    pub fn joint(ctx: &PathContext, subpath: &[Vertex], d: usize) -> Option<Joint> {
+        let v = &subpath[d];
+        if v.beta == Vec3::ZERO {
+            return None;
+        }
+        ctx.joint(v, crate::path::towards(v, &subpath[d - 1]))
+    }
+
+    /// The cache sample `k` of the wave picks from.
+    #[inline]
+    pub fn group(&self, k: usize) -> &CacheGroup {
+        &self.groups[k / CACHE_GROUP]
+    }
+
+    /// Bytes the caches hold.
+    pub fn bytes(&self) -> usize {
+        let per_vertex = std::mem::size_of::<Vertex>() + std::mem::size_of::<Joint>() + 8;
+        self.groups
+            .iter()
+            .map(|g| g.vertex.capacity() * per_vertex)
+            .sum()
+    }
 }
 
 #[derive(Default)]
@@ -318,6 +501,8 @@ impl BdptState {
                 walkers: Walkers::new(subpaths),
                 order: Vec::with_capacity(subpaths),
             },
+            light_cache: LightVertexCache::default(),
+            cache_pick: Vec::new(),
         }
     }
 
@@ -331,10 +516,12 @@ impl BdptState {
             + self.vertices.len() * PathVertices::bytes_per_item();
         let connections =
             self.shadow.capacity() * (ShadowRays::bytes_per_item() + Connections::bytes_per_item());
+        let cached =
+            self.light_cache.bytes() + self.cache_pick.capacity() * std::mem::size_of::<u32>();
         2 * per_subpath
             + std::mem::size_of::<usize>()
             + std::mem::size_of::<Vec3>()
-            + connections / self.capacity.max(1)
+            + (connections + cached) / self.capacity.max(1)
     }
 }
 
@@ -348,6 +535,20 @@ pub fn graph() -> Graph<BdptState> {
         Node::system(gather::connections::AccumulateConnections),
     ]);
     Graph::new("bdpt", nodes)
+}
+
+/// The graph of LVC-BDPT (`light_vertex_cache` > 0): the light subpaths' vertices go into the
+/// wave's cache, and camera vertices join picks from it.
+pub fn cached_graph() -> Graph<BdptState> {
+    let mut nodes = subpath_nodes();
+    nodes.extend([
+        Node::system(connect::light_vertex_cache::CacheLightVertices),
+        Node::system(connect::cached_strategies::ConnectThroughCache),
+        Node::system(trace::shadow::TraceShadow),
+        Node::system(connect::cached_weights::WeighCachedConnections),
+        Node::system(gather::connections::AccumulateConnections),
+    ]);
+    Graph::new("bdpt_lvc", nodes)
 }
 
 /// The evaluation part of the graph, without the film: subpaths, connections and their
@@ -392,21 +593,41 @@ impl IntegratorState for BdptState {
         "strategy_sums",
         "scratch",
     ];
-    fn graph(_: &SceneData, _: &BdptSettings) -> Graph<BdptState> {
-        graph()
+    fn graph(_: &SceneData, settings: &BdptSettings) -> Graph<BdptState> {
+        if settings.light_vertex_cache > 0 {
+            cached_graph()
+        } else {
+            graph()
+        }
     }
 }
 
 impl WaveState for BdptState {
     const WAVEFRONT: usize = WAVEFRONT;
     fn new(data: Arc<SceneData>, settings: BdptSettings, capacity: usize) -> BdptState {
-        BdptState::new(data, settings, capacity)
+        let mut state = BdptState::new(data, settings, capacity);
+        state.light_cache = LightVertexCache::new(&state.data, &settings);
+        state
     }
     fn begin_wave(&mut self, wave: Wave) {
         self.wave = wave;
     }
     fn film_mut(&mut self) -> &mut Film {
         &mut self.film
+    }
+    fn notes(&self) -> Vec<(&'static str, String)> {
+        let cache = &self.light_cache;
+        if cache.per_camera_vertex == 0 {
+            return Vec::new();
+        }
+        vec![(
+            "light-vertex cache",
+            format!(
+                "{} joins per camera vertex; {:.3} cached vertices per light subpath (pilot), \
+                 connection strategies counted {:.4} times",
+                cache.per_camera_vertex, cache.pilot_mean, cache.connection_count
+            ),
+        )]
     }
     /// The strategy images (`s{s}_t{t}`) cover the passes of this run only.
     fn finish(self, new_passes: u64) -> (Film, Vec<(String, Image)>, usize) {

@@ -89,7 +89,7 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
         description: "bidirectional path tracing, every strategy MIS-weighted",
         unbiased: true,
         resumes: true,
-        options: &["--mis", "--strategy-images"],
+        options: &["--mis", "--strategy-images", "--light-vertex-cache"],
         render: |data, s, budget, control, from| {
             let settings = bdpt::BdptSettings::from(s);
             let wavefront = s.wavefront.unwrap_or(bdpt::WAVEFRONT);
@@ -361,6 +361,8 @@ pub struct RenderSettings {
     pub mis: crate::path::MisHeuristic,
     /// Keep each strategy's weighted contribution as its own image (bdpt).
     pub strategy_images: bool,
+    /// Light-vertex cache: light vertices each camera vertex joins (bdpt; 0: plain BDPT).
+    pub light_vertex_cache: u32,
     pub photons: PhotonSettings,
     pub mlt: MltOptions,
     /// How PT's work is laid out: wavefront systems or one path per thread (`--kernel`).
@@ -399,6 +401,7 @@ impl Default for RenderSettings {
             max_depth: u32::MAX,
             mis: crate::path::MisHeuristic::Power,
             strategy_images: false,
+            light_vertex_cache: 0,
             photons: PhotonSettings::default(),
             mlt: MltOptions::default(),
             kernel: pt::Kernel::Wavefront,
@@ -444,8 +447,18 @@ pub fn film_settings(kind: IntegratorKind, settings: &RenderSettings) -> String 
         format!("{:?}", settings.mlt)
     } else if options.contains(&"--photons") || options.contains(&"--photons-per-pass") {
         format!("{:?}", settings.photons)
-    } else if options.contains(&"--mis") && settings.mis != crate::path::MisHeuristic::Power {
-        format!("mis={:?}", settings.mis).to_ascii_lowercase()
+    } else if options.contains(&"--mis") {
+        let mut parts = Vec::new();
+        if settings.mis != crate::path::MisHeuristic::Power {
+            parts.push(format!("mis={:?}", settings.mis).to_ascii_lowercase());
+        }
+        if settings.light_vertex_cache > 0 {
+            parts.push(format!(
+                "light_vertex_cache={}",
+                settings.light_vertex_cache
+            ));
+        }
+        parts.join(",")
     } else {
         String::new()
     }

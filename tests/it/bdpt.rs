@@ -155,7 +155,9 @@ fn check_weights_sum_to_one(scene_name: &str) {
                 continue;
             }
             let full = &camera[..=k];
-            let sum = |heuristic| {
+            // With a light-vertex cache the connection strategies are counted differently:
+            // the weights must still sum to one.
+            let sum = |heuristic, connection_count| {
                 let mut sum = 0.0f64;
                 for t in 1..=full.len() {
                     let s = full.len() - t;
@@ -163,7 +165,9 @@ fn check_weights_sum_to_one(scene_name: &str) {
                     let joint_ok = (s == 0 || ctx.is_connectible(&light[s - 1]))
                         && (t == 1 || s == 0 || ctx.is_connectible(&cam[t - 1]));
                     if joint_ok {
-                        sum += ctx.mis_weight(&cam, &light, s, t, heuristic) as f64;
+                        sum +=
+                            ctx.mis_weight_counted(&cam, &light, s, t, heuristic, connection_count)
+                                as f64;
                     }
                 }
                 sum
@@ -183,12 +187,15 @@ fn check_weights_sum_to_one(scene_name: &str) {
                 continue;
             }
             for heuristic in [MisHeuristic::Power, MisHeuristic::Balance] {
-                let sum = sum(heuristic);
-                assert!(
-                    (sum - 1.0).abs() < 1e-3,
-                    "{scene_name}, {heuristic:?}: weights of a {}-vertex path sum to {sum}",
-                    full.len()
-                );
+                for count in [1.0, 0.26, 3.0] {
+                    let sum = sum(heuristic, count);
+                    assert!(
+                        (sum - 1.0).abs() < 1e-3,
+                        "{scene_name}, {heuristic:?}, connections counted {count}: weights of a \
+                         {}-vertex path sum to {sum}",
+                        full.len()
+                    );
+                }
             }
             checked += 1;
             if full

@@ -17,6 +17,7 @@ mod fuzz_targets;
 mod graph;
 mod hostile;
 mod kernels;
+mod light_vertex_cache;
 mod mlt;
 mod path_mlt;
 mod photon_checkpoint;
