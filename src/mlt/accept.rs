@@ -300,7 +300,7 @@ mod tests {
                         // Few pixels, so each gets many terms of very different sizes.
                         let pixel = (h % 61) as u32 * 211 % pixels as u32;
                         let size = 10f32.powi((h >> 20) as i32 % 13 - 6);
-                        let value = if h % 97 == 0 {
+                        let value = if h.is_multiple_of(97) {
                             Vec3::splat(f32::NAN)
                         } else {
                             Vec3::new(size, size * 0.3, (h >> 40) as f32 * 1e-9)

@@ -190,13 +190,13 @@ mod tests {
                 } else {
                     i as u32 * 3
                 };
-                c.alive[i] = h % 3 == 0;
-                c.triangle[i] = if h % 5 == 0 {
+                c.alive[i] = h.is_multiple_of(3);
+                c.triangle[i] = if h.is_multiple_of(5) {
                     NO_VISIBLE_POINT
                 } else {
                     i as u32
                 };
-                c.emitted[i] = Vec3::splat((h % 7 == 0) as u8 as f32);
+                c.emitted[i] = Vec3::splat(h.is_multiple_of(7) as u8 as f32);
                 c.p[i] = Vec3::splat(i as f32);
             }
             let (first, capacity) = (11, 3 * n);
