@@ -24,6 +24,34 @@ pub use visible_points::*;
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
 pub const CHUNK: usize = 1024;
 
+/// Items from which `filled` writes in parallel.
+const PARALLEL_FILL: usize = 1 << 16;
+
+/// `len` default values, written in parallel when many: PPM's stores of a million hit points
+/// were filled serially while the other core waited.
+pub fn filled<T: Default + Clone + Send + Sync>(len: usize) -> Vec<T> {
+    use rayon::prelude::*;
+    if len < PARALLEL_FILL {
+        return vec![T::default(); len];
+    }
+    let mut items = Vec::with_capacity(len);
+    items.par_extend(rayon::iter::repeat_n(T::default(), len));
+    items
+}
+
+/// Lengthens `items` to `len` with default values, written in parallel when many (as
+/// `filled`: PPM's hit-point stores grow to a million slots during its first pass).
+pub fn grow<T: Default + Clone + Send + Sync>(items: &mut Vec<T>, len: usize) {
+    use rayon::prelude::*;
+    let more = len.saturating_sub(items.len());
+    if more < PARALLEL_FILL {
+        items.resize(items.len() + more, T::default());
+        return;
+    }
+    items.reserve_exact(more);
+    items.par_extend(rayon::iter::repeat_n(T::default(), more));
+}
+
 /// `dst[i] = src[order[i]]` for `i < order.len()`, in parallel over fixed-size chunks.
 pub fn gather_column<T: Copy + Send + Sync>(dst: &mut [T], src: &[T], order: &[u32]) {
     use rayon::prelude::*;
@@ -158,7 +186,7 @@ macro_rules! soa {
 
         impl $name {
             pub fn new(capacity: usize) -> Self {
-                Self { $($field: vec![<$ty>::default(); capacity],)+ }
+                Self { $($field: $crate::components::filled(capacity),)+ }
             }
 
             pub fn capacity(&self) -> usize {
@@ -171,7 +199,7 @@ macro_rules! soa {
             pub fn reserve_slots(&mut self, capacity: usize) {
                 if self.capacity() < capacity {
                     let grown = capacity.max(2 * self.capacity());
-                    $(self.$field.resize(grown, <$ty>::default());)+
+                    $($crate::components::grow(&mut self.$field, grown);)+
                 }
             }
 
@@ -226,9 +254,17 @@ macro_rules! soa {
                 $view { $($field: &self.$field[range.clone()],)+ }
             }
 
-            /// Slot `i` takes `source`'s slot `order[i]`, for `i < order.len()`.
+            /// Slot `i` takes `source`'s slot `order[i]`, for `i < order.len()`. One parallel
+            /// loop over fixed chunks, each gathering every column (one loop per column
+            /// spent more on starting loops than on copying when few items were left).
             pub fn gather_from(&mut self, source: &Self, order: &[u32]) {
-                $($crate::components::gather_column(&mut self.$field, &source.$field, order);)+
+                use rayon::prelude::*;
+                self.chunks_mut(0..order.len()).into_par_iter().for_each(|c| {
+                    let order = &order[c.start..c.start + c.len()];
+                    $(for (d, &i) in c.$field.iter_mut().zip(order) {
+                        *d = source.$field[i as usize];
+                    })+
+                });
             }
         }
     };

@@ -1,10 +1,10 @@
 //! Acceptance with Veach's expected values: the systems `accept_or_reject`,
 //! `splat_expected_values` and `commit_accepted`.
 
-use super::chains::{ChainStates, Contributions, MltCounters};
+use super::chains::{ChainStates, Contributions, MltCounters, VECTOR_BLOCK};
 use super::mutate::LANE_ACCEPT;
 use crate::components::CHUNK;
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 
 /// a = min(1, c_prop / c_cur) for a symmetric proposal. A proposal whose target is zero,
@@ -83,6 +83,11 @@ impl ChainSplats {
         ChainSplats::default()
     }
 
+    /// Adds every finite splat to its pixel's sum (`add_splats`); returns (added, non-finite).
+    pub fn add_to(&self, sums: &mut [DVec3]) -> (u64, u64) {
+        add_splats(&self.chunks, sums)
+    }
+
     /// Every splat of the step, in chain order.
     pub fn iter(&self) -> impl Iterator<Item = &Splat> + '_ {
         self.chunks.iter().flatten()
@@ -95,6 +100,64 @@ impl ChainSplats {
     pub fn is_empty(&self) -> bool {
         self.chunks.iter().all(Vec::is_empty)
     }
+}
+
+/// Pixels per block when splats are added to the sums in parallel.
+const SPLAT_BLOCK: usize = 4096;
+
+/// Adds every finite splat of `chunks` to its pixel's sum in `sums`; returns (added,
+/// non-finite). In parallel over blocks of pixels: each chunk's splats are first grouped by
+/// block (stably), then each block adds its splats chunk after chunk, so every pixel's f64
+/// sum adds the same values in the same order as one loop over the chunks in order would:
+/// the same bits for any thread count. (That serial loop was a serial stretch of every MLT
+/// step.)
+pub fn add_splats(chunks: &[Vec<Splat>], sums: &mut [DVec3]) -> (u64, u64) {
+    let blocks = sums.len().div_ceil(SPLAT_BLOCK);
+    let grouped: Vec<(Vec<Splat>, Vec<usize>)> = chunks
+        .par_iter()
+        .with_max_len(1)
+        .map(|splats| {
+            let mut starts = vec![0; blocks + 1];
+            for s in splats {
+                starts[s.pixel as usize / SPLAT_BLOCK + 1] += 1;
+            }
+            for b in 0..blocks {
+                starts[b + 1] += starts[b];
+            }
+            let mut at = starts.clone();
+            let mut grouped = vec![
+                Splat {
+                    pixel: 0,
+                    value: Vec3::ZERO
+                };
+                splats.len()
+            ];
+            for s in splats {
+                let b = s.pixel as usize / SPLAT_BLOCK;
+                grouped[at[b]] = *s;
+                at[b] += 1;
+            }
+            (grouped, starts)
+        })
+        .collect();
+    sums.par_chunks_mut(SPLAT_BLOCK)
+        .with_max_len(1)
+        .enumerate()
+        .map(|(b, sums)| {
+            let (mut added, mut nonfinite) = (0, 0);
+            for (splats, starts) in &grouped {
+                for s in &splats[starts[b]..starts[b + 1]] {
+                    if s.value.is_finite() {
+                        sums[s.pixel as usize - b * SPLAT_BLOCK] += s.value.as_dvec3();
+                        added += 1;
+                    } else {
+                        nonfinite += 1;
+                    }
+                }
+            }
+            (added, nonfinite)
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
 }
 
 /// System `splat_expected_values`: per chain, the proposal's contributions with weight
@@ -149,8 +212,11 @@ pub fn commit_accepted(chains: &mut ChainStates) {
     let proposal = &chains.proposal;
     chains
         .current
-        .blocks_mut(CHUNK)
+        .blocks_mut(VECTOR_BLOCK)
         .into_par_iter()
+        // One block per task: a block's cost is its longest vector, which varies, and
+        // rayon's default split (a few pieces per thread) left a core idle at the end.
+        .with_max_len(1)
         .for_each(|block| {
             let first = block.first;
             for (dim, current) in block.columns.into_iter().enumerate() {
@@ -168,6 +234,7 @@ pub fn commit_accepted(chains: &mut ChainStates) {
     chains
         .current_contributions
         .par_chunks_mut()
+        .with_max_len(1)
         .for_each(|chunk| {
             for local in 0..chunk.len() {
                 let i = chunk.first_chain + local;
@@ -218,6 +285,50 @@ mod tests {
         let before = s.current_contributions.target.clone();
         commit_accepted(&mut s);
         assert_eq!(s.current_contributions.target, before);
+    }
+
+    /// The splats added by pixel blocks in parallel give every pixel the bits one serial
+    /// loop over the chunks in order gives (f64 sums depend on the order of their terms).
+    #[test]
+    fn splats_add_as_one_serial_loop_would_bit_for_bit() {
+        let pixels = 3 * SPLAT_BLOCK + 77;
+        let chunks: Vec<Vec<Splat>> = (0..9u64)
+            .map(|c| {
+                (0..1500u64)
+                    .map(|j| {
+                        let h = crate::sampling::mix64(c * 7919 + j);
+                        // Few pixels, so each gets many terms of very different sizes.
+                        let pixel = (h % 61) as u32 * 211 % pixels as u32;
+                        let size = 10f32.powi((h >> 20) as i32 % 13 - 6);
+                        let value = if h.is_multiple_of(97) {
+                            Vec3::splat(f32::NAN)
+                        } else {
+                            Vec3::new(size, size * 0.3, (h >> 40) as f32 * 1e-9)
+                        };
+                        Splat { pixel, value }
+                    })
+                    .collect()
+            })
+            .collect();
+        let mut serial = vec![DVec3::ZERO; pixels];
+        let (mut added, mut nonfinite) = (0, 0);
+        for s in chunks.iter().flatten() {
+            if s.value.is_finite() {
+                serial[s.pixel as usize] += s.value.as_dvec3();
+                added += 1;
+            } else {
+                nonfinite += 1;
+            }
+        }
+        let mut parallel = vec![DVec3::ZERO; pixels];
+        assert_eq!(add_splats(&chunks, &mut parallel), (added, nonfinite));
+        assert!(nonfinite > 0);
+        for (p, s) in parallel.iter().zip(&serial) {
+            assert_eq!(
+                p.to_array().map(f64::to_bits),
+                s.to_array().map(f64::to_bits)
+            );
+        }
     }
 
     #[test]

@@ -7,6 +7,12 @@ use crate::sampling::{PrimarySamples, SampleKey};
 use glam::Vec3;
 use rayon::prelude::*;
 
+/// Chains per task of the loops over primary-sample vectors (`propose_mutations`,
+/// `commit_accepted`): a block's loops run to its longest vector, so small blocks skip most
+/// of the dimensions that only a block's one deep chain uses, and many tasks balance the two
+/// cores. Any size gives the same numbers: each chain's are its own.
+pub const VECTOR_BLOCK: usize = 128;
+
 /// What one evaluation of a primary-sample vector produced, per chain: the target value `c`
 /// (the luminance the chain samples in proportion to) and up to `stride` image contributions
 /// (pixel, RGB). MMLT evaluates one strategy, so one contribution; PSSMLT over full BDPT may

@@ -45,7 +45,7 @@ pub mod path_space;
 mod seeds;
 
 pub use accept::{
-    ChainSplats, Splat, accept_or_reject, acceptance_probability, commit_accepted,
+    ChainSplats, Splat, accept_or_reject, acceptance_probability, add_splats, commit_accepted,
     splat_expected_values,
 };
 pub use chains::{ChainStates, Contributions, ContributionsChunk, MltCounters};

@@ -6,8 +6,7 @@
 //! once (pbrt-v4 keys its generator by the seed's index, so such chains move in lock step and
 //! their splats pile up as duplicates).
 
-use super::chains::ChainStates;
-use crate::components::CHUNK;
+use super::chains::{ChainStates, VECTOR_BLOCK};
 use crate::sampling::{SampleKey, mix64};
 use rayon::prelude::*;
 use std::f32::consts::TAU;
@@ -136,7 +135,7 @@ impl MutationSettings {
 
 /// System `propose_mutations`: for step `step`, every chain's key, large/small choice and
 /// proposal vector (the numbers its evaluation can read: `PrimarySamples::used`). One
-/// parallel loop over fixed `CHUNK`s of chains, each writing its chains' columns, so
+/// parallel loop over fixed blocks of `VECTOR_BLOCK` chains, each writing its chains' columns, so
 /// bit-identical for any thread count.
 pub fn propose_mutations(
     chains: &mut ChainStates,
@@ -149,10 +148,13 @@ pub fn propose_mutations(
     let current = &chains.current;
     chains
         .proposal
-        .blocks_mut(CHUNK)
+        .blocks_mut(VECTOR_BLOCK)
         .into_par_iter()
-        .zip(chains.step_key.par_chunks_mut(CHUNK))
-        .zip(chains.large_step.par_chunks_mut(CHUNK))
+        .zip(chains.step_key.par_chunks_mut(VECTOR_BLOCK))
+        .zip(chains.large_step.par_chunks_mut(VECTOR_BLOCK))
+        // One block per task: a block's cost is its longest vector, which varies, and
+        // rayon's default split (a few pieces per thread) left a core idle at the end.
+        .with_max_len(1)
         .for_each(|((block, keys), large)| {
             let first = block.first;
             for (local, (key, large)) in keys.iter_mut().zip(large.iter_mut()).enumerate() {

@@ -232,24 +232,38 @@ pub struct BootstrapError {
 
 /// b's estimate and relative standard error (see the module docs).
 pub fn bootstrap_error(groups: &[&[f32]]) -> BootstrapError {
+    use rayon::prelude::*;
+    // Each group's mean and variance in parallel (each summed in order, so the same bits
+    // for any thread count), combined in group order: the automatic bootstrap computes
+    // this after every wave over every weight so far.
+    let stats: Vec<(usize, f64, f64)> = groups
+        .par_iter()
+        .with_max_len(1)
+        .map(|weights| {
+            let n = weights.len();
+            if n == 0 {
+                return (0, 0.0, 0.0);
+            }
+            let mean = group_normalisation(weights);
+            let variance = if n > 1 {
+                weights
+                    .iter()
+                    .map(|&w| (usable_weight(w) - mean).powi(2))
+                    .sum::<f64>()
+                    / (n - 1) as f64
+            } else {
+                0.0
+            };
+            (n, mean, variance)
+        })
+        .collect();
     let (mut b, mut var_of_mean, mut variance_sum) = (0.0, 0.0, 0.0);
     let mut min_samples = usize::MAX;
-    for weights in groups {
-        let n = weights.len();
+    for (n, mean, variance) in stats {
         min_samples = min_samples.min(n);
         if n == 0 {
             continue;
         }
-        let mean = group_normalisation(weights);
-        let variance = if n > 1 {
-            weights
-                .iter()
-                .map(|&w| (usable_weight(w) - mean).powi(2))
-                .sum::<f64>()
-                / (n - 1) as f64
-        } else {
-            0.0
-        };
         b += mean;
         var_of_mean += variance / n as f64;
         variance_sum += variance;

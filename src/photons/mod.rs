@@ -114,26 +114,39 @@ impl PhotonTracing {
         self.photons_per_pass - self.next
     }
 
-    /// Appends photons to the pass's columns (growing them when a pass stores more than any
-    /// before it).
-    pub fn append(&mut self, photons: &[StoredPhoton]) {
-        let needed = self.stored + photons.len();
+    /// Appends each chunk's photons, in chunk order, to the pass's columns (growing them when
+    /// a pass stores more than any before it). The chunks are copied in parallel, each into
+    /// the slots after the chunks before it: one serial copy of every stored photon was a
+    /// serial stretch of `scatter_photons`.
+    pub fn append_chunks(&mut self, chunks: &[Vec<StoredPhoton>]) {
+        use rayon::prelude::*;
+        let mut starts = Vec::with_capacity(chunks.len());
+        let mut needed = self.stored;
+        for c in chunks {
+            starts.push(needed);
+            needed += c.len();
+        }
         if self.photons.capacity() < needed {
             let mut grown = Photons::new(needed.max(2 * self.photons.capacity()));
             let order: Vec<u32> = (0..self.stored as u32).collect();
             grown.gather_from(&self.photons, &order);
             self.photons = grown;
         }
-        let p = &mut self.photons;
-        for (k, ph) in photons.iter().enumerate() {
-            let i = self.stored + k;
-            p.p[i] = ph.p;
-            p.wi[i] = ph.wi;
-            p.power[i] = ph.power;
-            p.ng[i] = ph.ng;
-            p.depth[i] = ph.depth;
-            p.flags[i] = ph.flags;
-        }
+        self.photons
+            .split_mut(&starts, needed)
+            .into_par_iter()
+            .zip(chunks)
+            .with_max_len(1)
+            .for_each(|(p, photons)| {
+                for (i, ph) in photons.iter().enumerate() {
+                    p.p[i] = ph.p;
+                    p.wi[i] = ph.wi;
+                    p.power[i] = ph.power;
+                    p.ng[i] = ph.ng;
+                    p.depth[i] = ph.depth;
+                    p.flags[i] = ph.flags;
+                }
+            });
         self.stored = needed;
     }
 }
@@ -434,7 +447,10 @@ impl MapQuery<'_> {
     ) -> (usize, u64) {
         use rayon::prelude::*;
         let chunk = crate::components::CHUNK;
+        // One chunk per task: a pixel's cost varies over the image (k-nearest searches),
+        // and rayon's default split (a few pieces per thread) left a core idle at the end.
         out.par_chunks_mut(chunk)
+            .with_max_len(1)
             .enumerate()
             .map(|(c, out)| {
                 let mut nearest = Nearest::new(self.k, self.max_radius);

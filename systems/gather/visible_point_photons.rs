@@ -26,6 +26,10 @@ crate::system! {
         let found: usize = estimates
             .chunks_mut(0..pixels)
             .into_par_iter()
+            // One chunk per task: a pixel's cost is its photons in reach, which varies over
+            // the image, and rayon's default split (a few pieces per thread) left a core
+            // idle for a third of this loop.
+            .with_max_len(1)
             .map(|e| {
                 let mut found = 0;
                 for i in 0..e.len() {

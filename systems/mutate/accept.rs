@@ -35,16 +35,9 @@ crate::system! {
     }
     run {
         crate::mlt::splat_expected_values(chains, splats);
-        let mut made = 0;
-        for s in splats.iter() {
-            if s.value.is_finite() {
-                splat_sums[s.pixel as usize] += s.value.as_dvec3();
-            } else {
-                *nonfinite += 1;
-            }
-            made += 1;
-        }
-        Flow::new(chains.chains(), made)
+        let (added, dropped) = splats.add_to(splat_sums);
+        *nonfinite += dropped;
+        Flow::new(chains.chains(), (added + dropped) as usize)
     }
 }
 

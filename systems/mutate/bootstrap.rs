@@ -41,6 +41,9 @@ fn fill_vectors(store: &mut PrimarySamples, settings: &MltSettings, items: &[u64
         .blocks_mut(CHUNK)
         .into_par_iter()
         .take(items.len().div_ceil(CHUNK))
+        // One block per task: a block's cost is its longest vector, which varies, and
+        // rayon's default split (a few pieces per thread) left a core idle at the end.
+        .with_max_len(1)
         .for_each(|block| {
             let items = &items[block.first..items.len().min(block.first + CHUNK)];
             for (dim, column) in block.columns.into_iter().enumerate() {
@@ -97,17 +100,32 @@ crate::system! {
         let pixels = *pixels;
         let groups = settings.groups() as u64;
         let chains = settings.chain_count(pixels) as u64;
-        for k in 0..n {
-            let item = bootstrap.evaluated + k as u64;
-            let g = (item % groups) as usize;
-            let below = settings.multiplexed && (g as u32) < settings.min_depth;
-            bootstrap.weights[g].push(if below { 0.0 } else { contributions.target[k] });
-            if let Some(image) = bootstrap.images.get_mut(g) {
-                for (pixel, value) in contributions.entries(k) {
-                    image[pixel as usize] += value.as_dvec3();
+        // Per group in parallel (item k of the wave is in group (evaluated + k) % groups;
+        // each group's weights and image take its items in order, as one loop over the
+        // wave would): serial, this loop was a serial stretch of every bootstrap wave.
+        let evaluated = bootstrap.evaluated;
+        let mut images: Vec<Option<&mut Vec<glam::DVec3>>> =
+            bootstrap.images.iter_mut().map(Some).collect();
+        images.resize_with(bootstrap.weights.len(), || None);
+        bootstrap
+            .weights
+            .par_iter_mut()
+            .zip(images)
+            .enumerate()
+            .with_max_len(1)
+            .for_each(|(g, (weights, mut image))| {
+                let below = settings.multiplexed && (g as u32) < settings.min_depth;
+                let first = (g as u64 + groups - evaluated % groups) % groups;
+                for k in (first..n as u64).step_by(groups as usize) {
+                    let k = k as usize;
+                    weights.push(if below { 0.0 } else { contributions.target[k] });
+                    if let Some(image) = image.as_mut() {
+                        for (pixel, value) in contributions.entries(k) {
+                            image[pixel as usize] += value.as_dvec3();
+                        }
+                    }
                 }
-            }
-        }
+            });
         let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
         bootstrap.evaluated += n as u64;
         let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
@@ -136,11 +154,10 @@ pub fn automatic_bootstrap_done(
     pixels: u64,
 ) -> bool {
     let evaluated: u64 = weights.iter().map(|w| w.len() as u64).sum();
-    let nonzero = weights
-        .iter()
-        .flat_map(|w| w.iter())
-        .filter(|&&x| x > 0.0)
-        .count();
+    let nonzero: usize = weights
+        .par_iter()
+        .map(|w| w.par_iter().filter(|&&x| x > 0.0).count())
+        .sum();
     let groups = weights.len() as u64;
     let floor = (BOOTSTRAP_PER_CHAIN * chains)
         .max(MIN_BOOTSTRAP_SAMPLES as u64 * groups)
@@ -243,11 +260,11 @@ crate::system! {
             .map(|(&j, &g)| j as u64 * groups + g as u64)
             .collect();
         fill_vectors(&mut chains.current, settings, &items);
-        chains.proposal.clone_from(&chains.current);
+        chains.proposal.copy_from(&chains.current);
         let Numbers::Primary { store, .. } = numbers else {
             unreachable!("MLT evaluates primary samples")
         };
-        store.clone_from(&chains.current);
+        store.copy_from(&chains.current);
         multiplex.clear();
         if settings.multiplexed {
             multiplex.extend_from_slice(&chains.group);

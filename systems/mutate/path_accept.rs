@@ -89,15 +89,9 @@ crate::system! {
                 }
             }
         });
-        let mut made = 0;
-        for s in splats.iter().flatten() {
-            if s.value.is_finite() {
-                splat_sums[s.pixel as usize] += s.value.as_dvec3();
-                made += 1;
-            } else {
-                *nonfinite += 1;
-            }
-        }
+        let (made, dropped) = crate::mlt::add_splats(splats, splat_sums);
+        let made = made as usize;
+        *nonfinite += dropped;
         Flow::new(n, made)
     }
 }

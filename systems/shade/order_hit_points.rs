@@ -2,9 +2,10 @@
 //! its branches ended), numbers each among its pixel's (`branch`, which keeps their light
 //! samples apart), and gives each its own progressive statistics at the initial radius.
 
-use crate::components::{PixelEstimates, VisiblePoints};
+use crate::components::{CHUNK, PixelEstimates, VisiblePoints};
 use crate::integrators::sppm::ProgressiveState;
 use crate::pipeline::Flow;
+use rayon::prelude::*;
 
 pub struct OrderHitPoints;
 
@@ -19,18 +20,36 @@ crate::system! {
         if !*tree || *starts == 0 {
             return Flow::new(0, 0);
         }
+        // In parallel (a stable sort, so the same order for any thread count): serial, this
+        // once-per-render system was a serial stretch of PPM's first pass.
         let mut order: Vec<u32> = (0..n as u32).collect();
-        order.sort_by_key(|&i| visible.pixel[i as usize]);
+        order.par_sort_by_key(|&i| visible.pixel[i as usize]);
         let mut sorted = VisiblePoints::new(n);
         sorted.gather_from(visible, &order);
-        for i in 1..n {
-            if sorted.pixel[i] == sorted.pixel[i - 1] {
-                sorted.branch[i] = sorted.branch[i - 1] + 1;
-            }
-        }
+        // Each point's branch: its run's first point's plus its rank in the run.
+        let pixel = &sorted.pixel;
+        let first_branch = &visible.branch;
+        sorted
+            .branch
+            .par_chunks_mut(CHUNK)
+            .enumerate()
+            .for_each(|(c, branch)| {
+                let mut run_start = c * CHUNK;
+                while run_start > 0 && pixel[run_start - 1] == pixel[c * CHUNK] {
+                    run_start -= 1;
+                }
+                for (j, b) in branch.iter_mut().enumerate() {
+                    let i = c * CHUNK + j;
+                    if pixel[i] != pixel[run_start] {
+                        run_start = i;
+                    }
+                    *b = first_branch[order[run_start] as usize] + (i - run_start) as u32;
+                }
+            });
         *visible = sorted;
         *estimates = PixelEstimates::new(n);
-        estimates.radius.fill(settings.radius_in(data));
+        let radius = settings.radius_in(data);
+        estimates.radius.par_iter_mut().for_each(|r| *r = radius);
         shadow.reserve_slots(n);
         Flow::new(n, n)
     }

@@ -36,6 +36,9 @@ crate::system! {
             .into_par_iter()
             .zip(rays)
             .zip(&mut t.chunk_photons[..chunks])
+            // One chunk per task: photons' costs vary (misses, roulette), and rayon's
+            // default split (a few pieces per thread) left a core idle at the loop's end.
+            .with_max_len(1)
             .map(|((w, r), out)| {
                 out.clear();
                 let mut alive = 0;
@@ -132,9 +135,7 @@ crate::system! {
             .sum();
         let stored_before = t.stored;
         let mut chunk_photons = std::mem::take(&mut t.chunk_photons);
-        for out in &chunk_photons[..chunks] {
-            t.append(out);
-        }
+        t.append_chunks(&chunk_photons[..chunks]);
         for out in &mut chunk_photons {
             out.clear();
         }
