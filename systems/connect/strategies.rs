@@ -11,7 +11,10 @@
 //! estimation); t = 1 projects a light vertex onto the image (light tracing: it lands in
 //! whichever pixel it projects to).
 
-use crate::components::{Connections, PathVertices, PathVerticesView, ShadowRays, split_ranges};
+use crate::components::{
+    Connections, ConnectionsChunk, PathVertices, PathVerticesView, ShadowRays, ShadowRaysChunk,
+    split_ranges,
+};
 use crate::geometry::spawn_ray_to;
 use crate::integrators::Wave;
 use crate::integrators::bdpt::{
@@ -223,7 +226,7 @@ pub fn connect_wave(
         .zip(radiance)
         .zip(picks)
         .enumerate()
-        .map(|(c, (((sh, cn), radiance), mut picks))| {
+        .map(|(c, (((mut sh, mut cn), radiance), mut picks))| {
             let mut camera = Subpath::default();
             let mut light = Subpath::default();
             let mut made = 0;
@@ -253,12 +256,7 @@ pub fn connect_wave(
                         }
                         let slot = this;
                         this += 1;
-                        sh.t_max[slot] = 0.0;
-                        sh.contribution[slot] = Vec3::ZERO;
-                        cn.sample[slot] = k as u32;
-                        cn.pixel[slot] = pixel;
-                        cn.s[slot] = s as u16;
-                        cn.t[slot] = t as u16;
+                        open_slot(&mut sh, &mut cn, slot, k, pixel, (s, t));
                         let (contribution, segment) = if s == 0 {
                             // The camera subpath found the light by itself: nothing to
                             // test, weighted now; it reaches the sample's own pixel.
@@ -350,12 +348,8 @@ pub fn connect_wave(
                     for m in 0..cache.per_camera_vertex {
                         let slot = this;
                         this += 1;
-                        sh.t_max[slot] = 0.0;
-                        sh.contribution[slot] = Vec3::ZERO;
-                        cn.sample[slot] = k as u32;
-                        cn.pixel[slot] = pixel;
-                        cn.s[slot] = 0;
-                        cn.t[slot] = t as u16;
+                        // s is set once the pick names its light vertex.
+                        open_slot(&mut sh, &mut cn, slot, k, pixel, (0, t));
                         if group.is_empty() {
                             continue;
                         }
@@ -388,6 +382,25 @@ pub fn connect_wave(
         })
         .sum();
     Flow::new(n, made)
+}
+
+/// Opens connection slot `slot` (of a chunk) for strategy (s, t) of sample `k`: no shadow ray
+/// and no contribution until the connection makes them.
+#[inline(always)]
+fn open_slot(
+    sh: &mut ShadowRaysChunk,
+    cn: &mut ConnectionsChunk,
+    slot: usize,
+    k: usize,
+    pixel: u32,
+    (s, t): (usize, usize),
+) {
+    sh.t_max[slot] = 0.0;
+    sh.contribution[slot] = Vec3::ZERO;
+    cn.sample[slot] = k as u32;
+    cn.pixel[slot] = pixel;
+    cn.s[slot] = s as u16;
+    cn.t[slot] = t as u16;
 }
 
 /// The light vertex strategy s = 1 joins to camera vertex z_{t-1} (t >= 2): a point sampled on

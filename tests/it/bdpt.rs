@@ -360,24 +360,27 @@ fn strategy_images_add_up_to_the_image() {
     }
 }
 
+/// Plain BDPT, and BDPT through a light-vertex cache (whose caches are built per group of
+/// samples in parallel).
 #[test]
 fn same_image_for_any_thread_count() {
     let scene = load_small("torus_glass.ron", 24);
-    let render = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            render_bdpt(scene.clone(), 2, settings(5, u32::MAX))
-                .0
-                .film
-                .image()
-        })
-    };
-    let one = render(1);
-    assert_eq!(one, render(2));
-    assert_eq!(one, render(3));
+    for light_vertex_cache in [0, 2] {
+        let s = BdptSettings {
+            light_vertex_cache,
+            ..settings(5, u32::MAX)
+        };
+        let render = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| render_bdpt(scene.clone(), 2, s).0.film.image())
+        };
+        let one = render(1);
+        assert_eq!(one, render(2), "light_vertex_cache {light_vertex_cache}");
+        assert_eq!(one, render(3), "light_vertex_cache {light_vertex_cache}");
+    }
 }
 
 /// The connection layout counts strategies from `light_vertices`: it must hold exactly the s
