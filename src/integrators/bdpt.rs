@@ -76,6 +76,57 @@ pub const DIM_CACHE_PICK: u32 = 0;
 /// pixel jitter).
 pub const CONNECTION_DIM_STRATEGY: u32 = 0;
 
+/// Connection-stream dimension that picks the depth of a multiplexed sample of the tail group
+/// (depth `MULTIPLEX_TAIL_DEPTH` or more).
+pub const CONNECTION_DIM_TAIL_DEPTH: u32 = 1;
+
+/// Multiplexed samples (MMLT) have one exact depth per group below this; the last group holds
+/// every deeper path, each sample's depth drawn from a geometric distribution (so no depth is
+/// left out: no cap but the user's `--max-depth`).
+pub const MULTIPLEX_TAIL_DEPTH: u32 = 16;
+
+/// The tail group's depth is `MULTIPLEX_TAIL_DEPTH + j` with probability proportional to
+/// this^j: high, so deep paths in closed, bright scenes (light bouncing 30+ times) are drawn
+/// often enough (the estimator's variance is finite while the light kept per bounce is below
+/// sqrt of this, about 0.95).
+pub const MULTIPLEX_TAIL_CONTINUE: f64 = 0.9;
+
+/// The depth of a multiplexed sample of group `group` (its depth, or the tail group
+/// `MULTIPLEX_TAIL_DEPTH`), drawn for the tail group from `u` by the truncated geometric
+/// distribution over `MULTIPLEX_TAIL_DEPTH..=max_depth`.
+#[inline]
+pub fn multiplexed_depth(group: u32, u: f32, max_depth: u32) -> u32 {
+    if group < MULTIPLEX_TAIL_DEPTH {
+        return group;
+    }
+    let q = MULTIPLEX_TAIL_CONTINUE;
+    let mass = 1.0 - tail_beyond(max_depth);
+    let j = ((1.0 - u as f64 * mass).ln() / q.ln()).floor().max(0.0);
+    (MULTIPLEX_TAIL_DEPTH as f64 + j).min(max_depth as f64) as u32
+}
+
+/// q^(J + 1), J = max_depth - MULTIPLEX_TAIL_DEPTH: the geometric mass past `max_depth`.
+#[inline]
+fn tail_beyond(max_depth: u32) -> f64 {
+    let j = max_depth.saturating_sub(MULTIPLEX_TAIL_DEPTH) as f64;
+    MULTIPLEX_TAIL_CONTINUE.powf(j + 1.0)
+}
+
+/// The factor on a multiplexed sample's MIS-weighted contribution at depth `depth`: its
+/// strategy count (depth + 2, one strategy picked uniformly), over the probability of its
+/// depth in the tail group (1 below it).
+#[inline]
+pub fn multiplexed_factor(depth: u32, max_depth: u32) -> f32 {
+    let strategies = depth as f64 + 2.0;
+    if depth < MULTIPLEX_TAIL_DEPTH {
+        return strategies as f32;
+    }
+    let q = MULTIPLEX_TAIL_CONTINUE;
+    let j = (depth - MULTIPLEX_TAIL_DEPTH) as f64;
+    let p = (1.0 - q) * q.powf(j) / (1.0 - tail_beyond(max_depth));
+    (strategies / p) as f32
+}
+
 /// Numbers of one stream a sample draws with every depth up to `max_depth`: the camera
 /// stream's last is the roulette number at camera vertex `max_depth`, the connection stream's
 /// the light point of s = 1 joined at camera vertex `max_depth`; the light stream's are fewer.
@@ -679,4 +730,42 @@ pub fn trace_subpaths(
             .collect::<Vec<_>>()
     };
     (0..len).map(|k| (subpath(k), subpath(len + k))).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The tail group's depths are drawn with the probabilities its factor divides by: the
+    /// factors' implied probabilities sum to one, and a histogram of drawn depths matches them
+    /// (chi-square), with and without a finite max depth.
+    #[test]
+    fn tail_depths_follow_the_probability_in_their_factor() {
+        for max_depth in [u32::MAX, MULTIPLEX_TAIL_DEPTH + 5] {
+            let p = |d: u32| (d as f64 + 2.0) / multiplexed_factor(d, max_depth) as f64;
+            let last = max_depth.min(MULTIPLEX_TAIL_DEPTH + 400);
+            let total: f64 = (MULTIPLEX_TAIL_DEPTH..=last).map(p).sum();
+            assert!((total - 1.0).abs() < 1e-5, "{max_depth}: {total}");
+            let n = 200_000;
+            let bins = 12;
+            let mut counts = vec![0u64; bins + 1];
+            for i in 0..n {
+                let u = (i as f32 + 0.5) / n as f32;
+                let d = multiplexed_depth(MULTIPLEX_TAIL_DEPTH, u, max_depth);
+                assert!((MULTIPLEX_TAIL_DEPTH..=max_depth).contains(&d));
+                counts[((d - MULTIPLEX_TAIL_DEPTH) as usize).min(bins)] += 1;
+            }
+            for (j, &c) in counts.iter().enumerate().take(bins) {
+                let d = MULTIPLEX_TAIL_DEPTH + j as u32;
+                let want = if d <= max_depth { p(d) * n as f64 } else { 0.0 };
+                assert!(
+                    (c as f64 - want).abs() <= 4.0 * want.sqrt() + 2.0,
+                    "{max_depth} depth {d}: {c} vs {want}"
+                );
+            }
+            // Below the tail a group is its depth, with its strategy count as its factor.
+            assert_eq!(multiplexed_depth(3, 0.7, max_depth), 3);
+            assert_eq!(multiplexed_factor(3, max_depth), 5.0);
+        }
+    }
 }

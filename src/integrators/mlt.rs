@@ -15,23 +15,30 @@
 //!     select_seeds -> replay_seeds -> [bdpt evaluation] -> gather_chain_contributions -> adopt_seeds
 //! loop mutation_steps:
 //!     propose_mutations -> [bdpt evaluation] -> gather_chain_contributions -> accept_or_reject
-//!     -> splat_expected_values -> commit_accepted
+//!     -> estimate_normalisation -> splat_expected_values -> commit_accepted
 //! ```
 //!
 //! Chains are the BDPT state's wavefront slots (chain i = sample slot i), all in lock step.
 //!
-//! Bounded dimensions: a primary-sample vector must have a fixed length, so MLT caps the path
-//! depth at `MLT_MAX_DEPTH` (16; `--max-depth` below that is used as given) and sizes the
-//! vectors to every number a path of that depth can draw (`bdpt::stream_dims`, three streams
-//! interleaved). Paths deeper than the cap are not rendered (on the furnace, 2^-17 of the
-//! light).
+//! No depth cap but the user's `--max-depth` (default unlimited, Russian roulette ends paths,
+//! as PT and BDPT): a primary-sample vector stores every number a path of depth
+//! `STORED_DEPTH` can draw (`bdpt::stream_dims`, three streams interleaved), and a deeper path
+//! draws its further numbers from the vector's tail seed, fresh in every proposal (an
+//! independent uniform proposal for those numbers: symmetric, see `PrimarySamples`). mmlt's
+//! groups are the depths below `bdpt::MULTIPLEX_TAIL_DEPTH` and one tail group for every
+//! deeper path, each sample's depth drawn geometrically and divided by its probability.
+//!
+//! The normalisation b (and mmlt's b_k) is the bootstrap's mean target, refined as the chains
+//! run by every large step's target (fresh uniform vectors: more independent samples of b),
+//! and the image is scaled by it when developed (`estimate_normalisation`).
 
 use crate::film::Film;
 use crate::integrators::bdpt::{self, BdptSettings, BdptState, Numbers};
 use crate::integrators::driver::{IntegratorState, PassState, render_passes};
 use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
 use crate::mlt::{
-    ChainSplats, ChainStates, MltCounters, MutationSettings, SeedSelection, SmallStep,
+    ChainSplats, ChainStates, MltCounters, MutationSettings, Normalisation, SeedSelection,
+    SmallStep,
 };
 use crate::path::MisHeuristic;
 use crate::pipeline::{Graph, Node};
@@ -41,8 +48,9 @@ use glam::DVec3;
 use std::sync::Arc;
 use std::time::Duration;
 
-/// Deepest path MLT renders (see the module docs).
-pub const MLT_MAX_DEPTH: u32 = 16;
+/// Depth whose numbers a primary-sample vector stores (see the module docs): deeper paths
+/// draw their further numbers from the vector's tail seed.
+pub const STORED_DEPTH: u32 = 16;
 /// Most chains (the BDPT wavefront).
 pub const MAX_CHAINS: usize = bdpt::WAVEFRONT;
 /// Fewest chains.
@@ -80,6 +88,24 @@ pub const BOOTSTRAP_PER_CHAIN: u64 = 16;
 /// door_ajar at 20 s: relMSE 0.39 with the floor alone, 0.15 with 1.7 M evaluations).
 pub const NONZERO_SEEDS_PER_CHAIN: f64 = 0.25;
 
+/// Under a time budget, the bootstrap stops drawing waves once it has taken this share of the
+/// budget (the chains get the rest): measured as it runs, so a wave that starts below it may
+/// end a little above it. b is refined by the chains' large steps as they run, so a short
+/// bootstrap costs the seeds' spread rather than a frozen scale error (pssmlt, mmlt).
+pub const BOOTSTRAP_TIME_SHARE: f64 = 0.1;
+
+/// The report warns when the bootstrap took more than this share of the wall time.
+pub const BOOTSTRAP_SHARE_WARNING: f64 = 0.25;
+
+/// The report's warning for a bootstrap that took `share` of the wall time.
+pub fn bootstrap_warning(share: f64) -> String {
+    format!(
+        "the bootstrap took {:.0}% of the wall time: the chains had the rest (--bootstrap N \
+         or a longer budget)",
+        100.0 * share
+    )
+}
+
 /// Separates the bootstrap's numbers from every other use of the seed.
 const BOOTSTRAP_DOMAIN: u64 = 0x6d6c_745f_626f_6f74;
 
@@ -97,7 +123,7 @@ pub struct MltSettings {
     pub seed: u64,
     /// Multiplexed (mmlt) or full BDPT per evaluation (pssmlt).
     pub multiplexed: bool,
-    /// The path depth cap (at most `MLT_MAX_DEPTH`).
+    /// The path depth cap (`u32::MAX`: none).
     pub max_depth: u32,
     pub mis: MisHeuristic,
     pub mutation: MutationSettings,
@@ -116,6 +142,9 @@ pub struct MltSettings {
     /// Bootstrap evaluations per wave at least (path-space MLT: `BOOTSTRAP_WAVE`; else the
     /// chains, which evaluate in the same columns).
     pub bootstrap_wave: usize,
+    /// The render's time budget in seconds, if it has one: the bootstrap then ends once it
+    /// has taken `BOOTSTRAP_TIME_SHARE` of it (and found some light), whatever its size rule.
+    pub time_budget: Option<f64>,
 }
 
 impl MltSettings {
@@ -134,7 +163,7 @@ impl MltSettings {
         MltSettings {
             seed: s.seed,
             multiplexed,
-            max_depth: s.max_depth.min(MLT_MAX_DEPTH),
+            max_depth: s.max_depth,
             mis: s.mis,
             mutation,
             bootstrap: s.mlt.bootstrap,
@@ -144,28 +173,32 @@ impl MltSettings {
             min_depth: 0,
             chain_rule: ChainRule::StepsPerChain(STEPS_PER_CHAIN),
             bootstrap_wave: 0,
+            time_budget: None,
         }
     }
 
-    /// Seed groups: one per depth 0..=max_depth (mmlt), or one.
+    /// Seed groups: in mmlt one per depth below `MULTIPLEX_TAIL_DEPTH` (up to max_depth), and
+    /// the tail group of every deeper path if max_depth reaches it; in pssmlt one.
     pub fn groups(&self) -> usize {
         if self.multiplexed {
-            self.max_depth as usize + 1
+            let tail = bdpt::MULTIPLEX_TAIL_DEPTH;
+            self.max_depth.min(tail - 1) as usize + 1 + (self.max_depth >= tail) as usize
         } else {
             1
         }
     }
 
-    /// Numbers per primary-sample vector.
+    /// Numbers stored per primary-sample vector.
     pub fn dims(&self) -> u32 {
-        3 * bdpt::stream_dims(self.max_depth)
+        3 * bdpt::stream_dims(self.max_depth.min(STORED_DEPTH))
     }
 
-    /// Numbers the evaluations of seed group `group` can read: in mmlt, those of a path of
-    /// depth `group` (the BDPT streams read no further for that depth); all in pssmlt.
+    /// Stored numbers the evaluations of seed group `group` can read: in mmlt, those of a
+    /// path of depth `group` (the BDPT streams read no further for that depth), all for the
+    /// tail group; all in pssmlt.
     pub fn dims_of_group(&self, group: u32) -> u32 {
-        if self.multiplexed {
-            3 * bdpt::stream_dims(group.min(self.max_depth))
+        if self.multiplexed && group < bdpt::MULTIPLEX_TAIL_DEPTH {
+            3 * bdpt::stream_dims(group.min(self.max_depth).min(STORED_DEPTH))
         } else {
             self.dims()
         }
@@ -229,9 +262,14 @@ pub struct MltState {
     pub steps_left: u64,
     pub counters: MltCounters,
     pub splats: ChainSplats,
-    /// Splat sums per pixel, in chain order (f64).
+    /// Splat sums per group and pixel (slot `group x pixels + pixel`), in chain order (f64),
+    /// in units of the group's b_k.
     pub splat_sums: Vec<DVec3>,
+    /// The running b_k: the bootstrap's, then every large step's target too.
+    pub normalisation: Normalisation,
     pub nonfinite: u64,
+    /// When the render began (the report gives the bootstrap's share of the wall time).
+    pub started: std::time::Instant,
 }
 
 impl MltState {
@@ -241,8 +279,23 @@ impl MltState {
         SampleKey::new(mix64(seed ^ BOOTSTRAP_DOMAIN), item, 0).get(dim)
     }
 
-    /// b = sum of b_k (0 before the bootstrap, or for a black scene).
+    /// The tail seed of bootstrap evaluation `item` (its numbers past the stored ones).
+    #[inline]
+    pub fn bootstrap_tail(seed: u64, item: u64) -> u64 {
+        SampleKey::new(mix64(seed ^ BOOTSTRAP_DOMAIN), item, 1).bits()
+    }
+
+    /// b = sum of b_k as the render stands: the bootstrap's, refined by every large step
+    /// since (0 before the bootstrap, or for a black scene).
     pub fn normalisation(&self) -> f64 {
+        if self.selection.is_none() {
+            return 0.0;
+        }
+        self.normalisation.total()
+    }
+
+    /// b as the bootstrap alone estimated it.
+    pub fn bootstrap_normalisation(&self) -> f64 {
         self.selection
             .as_ref()
             .map_or(0.0, SeedSelection::total_normalisation)
@@ -260,19 +313,32 @@ impl MltState {
         image
     }
 
-    /// The image of the steps taken: splat sums x pixels / steps per chain.
+    /// The image of the steps taken: per group, b_k x its splat sums x pixels / steps per
+    /// chain, summed over the groups.
     pub fn image_film(&self) -> Film {
         let (w, h) = (self.bdpt.film.width, self.bdpt.film.height);
-        let scale = if self.step == 0 {
-            0.0
-        } else {
-            self.pixels as f64 / self.step as f64
-        };
-        let sums = self.splat_sums.iter().map(|v| *v * scale).collect();
+        let n = self.pixels as usize;
+        let mut sums = vec![DVec3::ZERO; n];
+        if self.step > 0 && self.selection.is_some() {
+            let per_step = self.pixels as f64 / self.step as f64;
+            for (g, group) in self.splat_sums.chunks(n).enumerate() {
+                let scale = self.normalisation.group(g) * per_step;
+                if scale > 0.0 {
+                    for (out, v) in sums.iter_mut().zip(group) {
+                        *out += *v * scale;
+                    }
+                }
+            }
+        }
         let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), self.nonfinite)
             .expect("the image's size");
         film.nonfinite = self.nonfinite;
         film
+    }
+
+    /// The bootstrap's share of the time since the render began.
+    pub fn bootstrap_share(&self) -> f64 {
+        self.bootstrap.time.as_secs_f64() / self.started.elapsed().as_secs_f64().max(1e-9)
     }
 
     /// Lines for the render report.
@@ -308,13 +374,25 @@ impl MltState {
             (
                 "bootstrap",
                 format!(
-                    "{} evaluations in {:.3} s, b = {:.6}",
+                    "{} evaluations in {:.3} s ({:.1}% of the wall time), b = {:.6}",
                     self.bootstrap.evaluated,
                     self.bootstrap.time.as_secs_f64(),
-                    self.normalisation()
+                    100.0 * self.bootstrap_share(),
+                    self.bootstrap_normalisation()
+                ),
+            ),
+            (
+                "normalisation",
+                format!(
+                    "b = {:.6} from the bootstrap and {} large steps",
+                    self.normalisation(),
+                    self.normalisation.large_steps
                 ),
             ),
         ];
+        if self.bootstrap_share() > BOOTSTRAP_SHARE_WARNING {
+            lines.push(("warning", bootstrap_warning(self.bootstrap_share())));
+        }
         if let Some(sel) = &self.selection {
             let seeds = sel.distinct_seeds();
             lines.push((
@@ -333,7 +411,10 @@ impl MltState {
                     .zip(&seeds)
                     .enumerate()
                     .filter(|(_, ((b, _), _))| **b > 0.0)
-                    .map(|(k, ((b, n), s))| format!("{k}: {b:.4}/{n}/{s}"))
+                    .map(|(k, ((b, n), s))| {
+                        let tail = k as u32 >= bdpt::MULTIPLEX_TAIL_DEPTH;
+                        format!("{k}{}: {b:.4}/{n}/{s}", if tail { "+" } else { "" })
+                    })
                     .collect();
                 lines.push(("b_k/chains/seeds by depth", per_depth.join(", ")));
             }
@@ -399,6 +480,7 @@ pub fn graph() -> Graph<MltState> {
                     evaluation(),
                     Node::system(gather::chain_contributions::GatherChainContributions),
                     Node::system(accept::AcceptOrReject),
+                    Node::system(accept::EstimateNormalisation),
                     Node::system(accept::SplatExpectedValues),
                     Node::system(accept::CommitAccepted),
                 ],
@@ -423,7 +505,9 @@ impl IntegratorState for MltState {
         "counters",
         "splats",
         "splat_sums",
+        "normalisation",
         "nonfinite",
+        "started",
     ];
     fn graph(_: &SceneData, _: &MltSettings) -> Graph<MltState> {
         graph()
@@ -452,7 +536,7 @@ impl PassState for MltState {
         let stride = if settings.multiplexed {
             1
         } else {
-            settings.max_depth as usize + 3
+            settings.max_depth.min(STORED_DEPTH) as usize + 3
         };
         let groups = settings.groups();
         MltState {
@@ -476,8 +560,10 @@ impl PassState for MltState {
             steps_left: 0,
             counters: MltCounters::default(),
             splats: ChainSplats::new(),
-            splat_sums: vec![DVec3::ZERO; pixels as usize],
+            splat_sums: vec![DVec3::ZERO; groups * pixels as usize],
+            normalisation: Normalisation::default(),
             nonfinite: 0,
+            started: std::time::Instant::now(),
         }
     }
 
@@ -528,11 +614,16 @@ pub fn render_chains<S: PassState>(
             mlt.mutations_per_pixel = Some(m);
             Budget::SamplesPerPixel(mlt.passes_for(pixels, m))
         }
-        b => b,
+        Budget::Seconds(t) => {
+            mlt.time_budget = Some(t);
+            Budget::Seconds(t)
+        }
     };
-    let mutations_per_pass = mlt.steps_per_pass(pixels) * mlt.chain_count(pixels) as u64;
     let mut outcome = render_passes::<S>(data, settings, budget, control);
-    outcome.samples = outcome.passes * mutations_per_pass;
+    // The chains the render ran (a time budget may have fitted them to its pace), each
+    // taking steps_per_pass steps a pass.
+    let chains = outcome.wavefront as u64;
+    outcome.samples = outcome.passes * pixels.div_ceil(chains.max(1)).max(1) * chains;
     let wall = outcome.wall.as_secs_f64().max(1e-9);
     outcome.notes.insert(
         0,

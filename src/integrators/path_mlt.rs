@@ -66,6 +66,8 @@ impl PathMltSettings {
             mutations.enabled = m;
         }
         let mut bootstrap = MltSettings::from_render(s, false);
+        // Path-space chains store at most `MAX_VERTICES` vertices (for now).
+        bootstrap.max_depth = bootstrap.max_depth.min(mlt::STORED_DEPTH);
         bootstrap.mis = MisHeuristic::Balance;
         bootstrap.bootstrap_wave = mlt::BOOTSTRAP_WAVE;
         bootstrap.chain_rule = mlt::ChainRule::SqrtOfMutations(mlt::PATH_CHAINS_PER_SQRT_MUTATION);

@@ -63,6 +63,39 @@ pub fn accept_or_reject(chains: &mut ChainStates) -> MltCounters {
         .reduce(MltCounters::default, |a, b| a + b)
 }
 
+/// System `estimate_normalisation`'s sums: per group, the usable targets of this step's large
+/// steps and their count (fresh uniform vectors: independent samples of b_k), summed per
+/// `CHUNK` of chains in parallel and the chunks in order, so the same bits for any thread
+/// count.
+pub fn large_step_targets(chains: &ChainStates, groups: usize) -> Vec<(f64, u64)> {
+    let target = &chains.proposal_contributions.target;
+    let per_chunk: Vec<Vec<(f64, u64)>> = chains
+        .large_step
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(c, large)| {
+            let mut sums = vec![(0.0, 0); groups];
+            for (local, &l) in large.iter().enumerate() {
+                let i = c * CHUNK + local;
+                if l {
+                    let s = &mut sums[chains.group[i] as usize];
+                    s.0 += super::seeds::usable_weight(target[i]);
+                    s.1 += 1;
+                }
+            }
+            sums
+        })
+        .collect();
+    let mut total = vec![(0.0, 0); groups];
+    for chunk in per_chunk {
+        for (t, (sum, count)) in total.iter_mut().zip(chunk) {
+            t.0 += sum;
+            t.1 += count;
+        }
+    }
+    total
+}
+
 /// One weighted contribution for the film's splat sums.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Splat {
@@ -164,8 +197,10 @@ pub fn add_splats(chunks: &[Vec<Splat>], sums: &mut [DVec3]) -> (u64, u64) {
 /// a / c_prop and the current state's with (1 - a) / c_cur, both times the chain's
 /// `splat_scale` (Veach's expected values: every step deposits `splat_scale` units of target
 /// whatever it decides, and rejected proposals still count). Zero weights emit nothing.
+/// A splat of a chain of group g goes to film slot `g x group_stride + pixel` (one film per
+/// group, so each can be scaled by its own b_k at the end; `group_stride` 0: one film).
 /// Replaces `splats`' lists; per chain the proposal's splats come first.
-pub fn splat_expected_values(chains: &ChainStates, splats: &mut ChainSplats) {
+pub fn splat_expected_values(chains: &ChainStates, splats: &mut ChainSplats, group_stride: u32) {
     let n_chunks = chains.chains().div_ceil(CHUNK);
     splats.chunks.resize_with(n_chunks, Vec::new);
     let (current, proposal) = (
@@ -181,24 +216,25 @@ pub fn splat_expected_values(chains: &ChainStates, splats: &mut ChainSplats) {
             out.clear();
             let end = ((c + 1) * CHUNK).min(chains.chains());
             for i in c * CHUNK..end {
+                let offset = chains.group[i] * group_stride;
                 let a = acceptance[i];
                 if a > 0.0 {
-                    emit(out, proposal, i, scale[i] * a / proposal.target[i]);
+                    emit(out, proposal, i, offset, scale[i] * a / proposal.target[i]);
                 }
                 let c_cur = current.target[i];
                 if a < 1.0 && c_cur.is_finite() && c_cur > 0.0 {
-                    emit(out, current, i, scale[i] * (1.0 - a) / c_cur);
+                    emit(out, current, i, offset, scale[i] * (1.0 - a) / c_cur);
                 }
             }
         });
 }
 
 #[inline]
-fn emit(out: &mut Vec<Splat>, state: &Contributions, chain: usize, weight: f32) {
+fn emit(out: &mut Vec<Splat>, state: &Contributions, chain: usize, offset: u32, weight: f32) {
     for (pixel, value) in state.entries(chain) {
         if value != Vec3::ZERO {
             out.push(Splat {
-                pixel,
+                pixel: offset + pixel,
                 value: value * weight,
             });
         }
@@ -229,7 +265,21 @@ pub fn commit_accepted(chains: &mut ChainStates) {
                 }
             }
         });
+    for ((tail, &proposed), &accepted) in chains
+        .current
+        .tails_mut()
+        .iter_mut()
+        .zip(chains.proposal.tails())
+        .zip(accepted)
+    {
+        if accepted {
+            *tail = proposed;
+        }
+    }
     let proposal = &chains.proposal_contributions;
+    chains
+        .current_contributions
+        .ensure_stride(proposal.stride());
     let stride = proposal.stride();
     chains
         .current_contributions
@@ -279,7 +329,7 @@ mod tests {
         assert!(s.acceptance.iter().all(|&a| a == 0.0));
         // Only the current states are splatted, each with its whole unit of target.
         let mut splats = ChainSplats::new();
-        splat_expected_values(&s, &mut splats);
+        splat_expected_values(&s, &mut splats, 0);
         assert_eq!(splats.len(), chains);
         assert!(splats.iter().all(|s| s.pixel == 7));
         let before = s.current_contributions.target.clone();

@@ -71,6 +71,27 @@ impl Contributions {
         self.stride
     }
 
+    /// Makes room for at least `stride` contributions per chain, keeping every chain's
+    /// entries (a full BDPT sample lands in one pixel per light vertex, and subpaths have no
+    /// length cap: the rare deep sample widens the columns once).
+    pub fn ensure_stride(&mut self, stride: usize) {
+        if stride <= self.stride {
+            return;
+        }
+        let chains = self.chains();
+        let mut pixel = vec![0; chains * stride];
+        let mut value = vec![Vec3::ZERO; chains * stride];
+        for i in 0..chains {
+            let n = self.count[i] as usize;
+            let (from, to) = (i * self.stride, i * stride);
+            pixel[to..to + n].copy_from_slice(&self.pixel[from..from + n]);
+            value[to..to + n].copy_from_slice(&self.value[from..from + n]);
+        }
+        self.stride = stride;
+        self.pixel = pixel;
+        self.value = value;
+    }
+
     /// Chain `chain` contributed nothing (target 0).
     pub fn clear(&mut self, chain: usize) {
         self.target[chain] = 0.0;

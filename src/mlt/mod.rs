@@ -29,13 +29,16 @@
 //!    (`Contributions::par_chunks_mut` for parallel writers);
 //! 3. `accept_or_reject(&mut chains)` -> the step's `MltCounters`: a = min(1, c_prop / c_cur)
 //!    and the decision u < a, per chain;
-//! 4. `splat_expected_values(&chains, &mut splats)`: proposal x a / c_prop and current x
-//!    (1 - a) / c_cur, times the chain's splat scale; the renderer adds `splats.iter()` (chain
-//!    order) to the f64 splat film;
-//! 5. `commit_accepted(&mut chains)`: accepted chains take their proposal.
+//! 4. `large_step_targets(&chains, groups)`: the targets of the step's large steps, per group,
+//!    into the running `Normalisation` (b_k from the bootstrap and every large step since);
+//! 5. `splat_expected_values(&chains, &mut splats, pixels)`: proposal x a / c_prop and current
+//!    x (1 - a) / c_cur, times the chain's splat scale; the renderer adds `splats.iter()`
+//!    (chain order) to the f64 splat film of the chain's group;
+//! 6. `commit_accepted(&mut chains)`: accepted chains take their proposal.
 //!
-//! The image is the film's splat sums x (pixel count) / (steps per chain): each step deposits
-//! b_k / chains_k units of luminance per chain of group k, so the image's mean luminance is b.
+//! The image is the sum over groups of b_k x the group's splat sums x (pixel count) / (steps
+//! per chain): each step deposits 1 / chains_k units of luminance per chain of group k, and
+//! b_k is the running estimate at the end, so the image's mean luminance is b.
 
 mod accept;
 mod chains;
@@ -46,12 +49,12 @@ mod seeds;
 
 pub use accept::{
     ChainSplats, Splat, accept_or_reject, acceptance_probability, add_splats, commit_accepted,
-    splat_expected_values,
+    large_step_targets, splat_expected_values,
 };
 pub use chains::{ChainStates, Contributions, ContributionsChunk, MltCounters};
 pub use mutate::{MutationSettings, SmallStep, propose_mutations, step_key, wrap_unit};
 pub use seeds::{
-    BOOTSTRAP_NOISE_FRACTION, BootstrapError, MIN_BOOTSTRAP_SAMPLES, SeedSelection,
+    BOOTSTRAP_NOISE_FRACTION, BootstrapError, MIN_BOOTSTRAP_SAMPLES, Normalisation, SeedSelection,
     allocate_largest_remainder, bootstrap_error, bootstrap_samples_needed, group_normalisation,
     needs_more_bootstrap, resample_stratified, select_seeds, usable_weight,
 };

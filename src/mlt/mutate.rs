@@ -32,6 +32,15 @@ pub fn step_key(seed: u64, chain: usize, step: u64) -> SampleKey {
     SampleKey::new(mix64(seed ^ MUTATION_DOMAIN), chain as u64, step)
 }
 
+/// Separates the proposals' tail seeds from every other use of the seed.
+const TAIL_DOMAIN: u64 = 0x6d6c_745f_7461_696c;
+
+/// The tail seed of chain `chain`'s proposal at step `step`.
+#[inline]
+pub fn tail_seed(seed: u64, chain: usize, step: u64) -> u64 {
+    SampleKey::new(mix64(seed ^ TAIL_DOMAIN), chain as u64, step).bits()
+}
+
 /// How a small step perturbs one number; both are symmetric (T(x -> y) = T(y -> x) on the
 /// wrapped unit interval), so acceptance needs no Hastings correction.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -145,6 +154,17 @@ pub fn propose_mutations(
 ) {
     let p_large = settings.large_step_probability;
     let small = PreparedSmallStep::new(settings.small_step);
+    // Every proposal's numbers past the stored ones are fresh (see `PrimarySamples`).
+    chains
+        .proposal
+        .tails_mut()
+        .par_chunks_mut(VECTOR_BLOCK)
+        .enumerate()
+        .for_each(|(b, tails)| {
+            for (local, tail) in tails.iter_mut().enumerate() {
+                *tail = tail_seed(seed, b * VECTOR_BLOCK + local, step);
+            }
+        });
     let current = &chains.current;
     chains
         .proposal

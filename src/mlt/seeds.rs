@@ -172,12 +172,13 @@ impl SeedSelection {
         seeds
     }
 
-    /// The factor on every splat of group `group`'s chains: b_k / chains_k. With it, the image
-    /// is the film's splat sums x pixels / steps per chain, and its mean luminance is b.
+    /// The factor on every splat of group `group`'s chains: 1 / chains_k. With it, group k's
+    /// splat sums x pixels / steps per chain are its image in units of b_k (each step deposits
+    /// one unit of target per group in all), which `Normalisation` scales at the end.
     pub fn splat_scale(&self, group: usize) -> f64 {
         match self.chains_per_group[group] {
             0 => 0.0,
-            n => self.normalisation[group] / n as f64,
+            n => 1.0 / n as f64,
         }
     }
 
@@ -189,6 +190,58 @@ impl SeedSelection {
             chains.group[i] = g;
             chains.splat_scale[i] = self.splat_scale(g as usize) as f32;
         }
+    }
+}
+
+/// The running estimate of every b_k: the mean target of group k over its bootstrap
+/// evaluations and over every large step its chains have proposed since (a large step is a
+/// fresh uniform vector, so its target is one more independent sample of b_k: Kelemen et
+/// al.'s estimator). The image is scaled by it when it is developed, so one heavy bootstrap
+/// evaluation is averaged away as the render goes on instead of frozen into the image.
+/// Sums are f64 added in chain order, so the estimate is the same for any thread count.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Normalisation {
+    /// Per group, the sum of the usable targets seen.
+    pub sums: Vec<f64>,
+    /// Per group, how many targets were seen (zeros included).
+    pub counts: Vec<u64>,
+    /// How many of them were large steps.
+    pub large_steps: u64,
+}
+
+impl Normalisation {
+    /// The estimate from the bootstrap's weights alone.
+    pub fn from_bootstrap(groups: &[&[f32]]) -> Normalisation {
+        Normalisation {
+            sums: groups
+                .iter()
+                .map(|w| w.iter().map(|&x| usable_weight(x)).sum())
+                .collect(),
+            counts: groups.iter().map(|w| w.len() as u64).collect(),
+            large_steps: 0,
+        }
+    }
+
+    /// Adds the targets of one step's large steps, per group: `(sum, count)` each.
+    pub fn add_large_steps(&mut self, per_group: &[(f64, u64)]) {
+        for (g, &(sum, count)) in per_group.iter().enumerate() {
+            self.sums[g] += sum;
+            self.counts[g] += count;
+            self.large_steps += count;
+        }
+    }
+
+    /// b_k (0 for a group with no samples).
+    pub fn group(&self, group: usize) -> f64 {
+        match self.counts[group] {
+            0 => 0.0,
+            n => self.sums[group] / n as f64,
+        }
+    }
+
+    /// b = sum of b_k.
+    pub fn total(&self) -> f64 {
+        (0..self.sums.len()).map(|g| self.group(g)).sum()
     }
 }
 
@@ -392,12 +445,17 @@ mod tests {
         let picks = |c: u32| s.candidate[10..].iter().filter(|&&x| x == c).count();
         assert_eq!((picks(10), picks(50)), (10, 20));
         assert!(s.group[..10].iter().all(|&g| g == 0));
-        assert_eq!(s.splat_scale(1), 0.1);
+        assert_eq!(s.splat_scale(1), 1.0 / 30.0);
         assert_eq!(s.total_normalisation(), 4.0);
         let mut chains = ChainStates::new(40, 1, 1, 0);
         s.apply(&mut chains);
         assert_eq!(chains.group[39], 1);
         assert_eq!(chains.splat_scale[0], 0.1);
+        // The running b_k starts at the bootstrap's and takes large steps in.
+        let mut b = Normalisation::from_bootstrap(&[&g0, &g1, &g2]);
+        assert_eq!((b.group(0), b.group(1), b.total()), (1.0, 3.0, 4.0));
+        b.add_large_steps(&[(0.0, 0), (100.0, 100), (0.0, 0)]);
+        assert_eq!((b.group(1), b.large_steps), (2.0, 100));
         assert!(select_seeds(&[&g2], 4, 5).is_none());
     }
 

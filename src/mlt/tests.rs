@@ -184,7 +184,7 @@ fn run_toy(
         }
         evaluate_proposals(toy, &mut chains);
         counters += accept_or_reject(&mut chains);
-        splat_expected_values(&chains, &mut splats);
+        splat_expected_values(&chains, &mut splats, 0);
         for s in splats.iter() {
             film[s.pixel as usize] += s.value.as_dvec3();
             deposited += luminance(s.value) as f64;

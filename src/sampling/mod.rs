@@ -49,6 +49,12 @@ impl SampleKey {
         SampleKey(mix64(b ^ sample.wrapping_mul(0x8cb9_2ba7_2f3d_8dd7)))
     }
 
+    /// The key's 64 bits, as a seed for further keys.
+    #[inline]
+    pub fn bits(self) -> u64 {
+        self.0
+    }
+
     /// A uniform number in [0, 1) for dimension `dim`.
     #[inline]
     pub fn get(self, dim: u32) -> f32 {

@@ -10,12 +10,19 @@
 /// (in MMLT, those of a path of the chain's depth). Mutations and copies stop there, so a
 /// chain of depth 1 costs 24 numbers per step rather than the 294 of depth 16; reading past
 /// a slot's length is a bug, checked in debug builds.
+///
+/// A vector is infinite: past its stored numbers, number d of a slot is the hash of the slot's
+/// `tail` seed and d (`Sampler::Primary`), so a path may be of any depth. A mutation gives the
+/// proposal a fresh tail seed every step (an independent uniform proposal for the unstored
+/// numbers: symmetric, so acceptance needs no correction), and an accepted proposal's seed
+/// becomes the chain's, so the current state's whole vector is known and replayable.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct PrimarySamples {
     slots: usize,
     dims: u32,
     values: Vec<f32>,
     used: Vec<u32>,
+    tails: Vec<u64>,
 }
 
 impl PrimarySamples {
@@ -26,7 +33,24 @@ impl PrimarySamples {
             dims,
             values: vec![0.0; slots * dims as usize],
             used: vec![dims; slots],
+            tails: vec![0; slots],
         }
+    }
+
+    /// The seed of slot `slot`'s numbers past the stored ones.
+    #[inline]
+    pub fn tail(&self, slot: usize) -> u64 {
+        self.tails[slot]
+    }
+
+    /// Every slot's tail seed.
+    pub fn tails(&self) -> &[u64] {
+        &self.tails
+    }
+
+    /// Every slot's tail seed, to write.
+    pub fn tails_mut(&mut self) -> &mut [u64] {
+        &mut self.tails
     }
 
     pub fn slots(&self) -> usize {
@@ -66,6 +90,7 @@ impl PrimarySamples {
             .zip(other.values.par_chunks(PIECE))
             .for_each(|(to, from)| to.copy_from_slice(from));
         self.used.clone_from(&other.used);
+        self.tails.clone_from(&other.tails);
     }
 
     /// Number `dim` of slot `slot`.

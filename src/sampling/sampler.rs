@@ -232,10 +232,10 @@ pub enum Sampler<'a> {
     /// Numbers come from a primary-sample column (MLT): slot = the key's index (the sample is
     /// ignored). Camera, Light and Connection dimension d read store dimension
     /// `d * PRIMARY_STREAMS + ordinal` (pbrt-v4's interleaving: a number keeps its meaning
-    /// when a subpath's length changes); dimensions beyond `store.dims()`, and every
-    /// dimension of Photon, FinalGather and DirectLight, are the hash of (fallback_seed,
-    /// stream, slot, dimension): a chain that passes a fresh fallback seed per step draws
-    /// those tail numbers anew, a symmetric independence proposal.
+    /// when a subpath's length changes); dimensions beyond `store.dims()` are the hash of
+    /// (the slot's tail seed, stream, dimension) (`PrimarySamples`: fresh every proposal, a
+    /// symmetric independence proposal), and every dimension of Photon, FinalGather and
+    /// DirectLight the hash of (fallback_seed, stream, slot, dimension).
     Primary {
         store: &'a PrimarySamples,
         fallback_seed: u64,
@@ -536,6 +536,9 @@ fn primary_get(store: &PrimarySamples, fallback_seed: u64, key: SampleKey, dim: 
         if d < store.dims() as u64 {
             return store.get(slot as usize, d as u32);
         }
+        // Past the stored numbers: the hash of (the slot's tail seed, stream, dim), the same
+        // in whichever slot the vector is evaluated (a seed's replay).
+        return SampleKey::new(store.tail(slot as usize), ordinal, 0).get(dim);
     }
     // The key holds (stream, slot): the hash of (fallback_seed, stream, slot, dim).
     SampleKey::new(fallback_seed, key.0, 0).get(dim)

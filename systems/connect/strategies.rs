@@ -236,7 +236,7 @@ pub fn connect_wave(
                 let k = first_sample + local;
                 let pixel = sample_pixel[k];
                 let strategy_count = if multiplexed {
-                    multiplex[k] as f32 + 2.0
+                    crate::integrators::bdpt::multiplexed_factor(multiplex[k], settings.max_depth)
                 } else {
                     1.0
                 };

@@ -149,7 +149,10 @@ pub fn weigh_wave(
                     let strategy_count = if multiplex.is_empty() {
                         1.0
                     } else {
-                        multiplex[k] as f32 + 2.0
+                        crate::integrators::bdpt::multiplexed_factor(
+                            multiplex[k],
+                            settings.max_depth,
+                        )
                     };
                     let weight = connection_weight(
                         &ctx,

@@ -21,6 +21,19 @@ crate::system! {
     }
     run {
         let n = wave.len;
+        // The sample's own pixel and one per light-tracing splat: widen the columns for the
+        // rare deep sample that has more than they hold.
+        let most = (0..n)
+            .into_par_iter()
+            .with_min_len(crate::components::CHUNK)
+            .map(|k| {
+                1 + (starts[k]..starts[k + 1])
+                    .filter(|&slot| connections.t[slot] == 1 && shadow.unoccluded[slot])
+                    .count()
+            })
+            .max()
+            .unwrap_or(0);
+        out.ensure_stride(most);
         let made: usize = out
             .par_chunks_mut()
             .map(|mut chunk| {

@@ -6,12 +6,14 @@
 //! numbers over the whole film, and a multiplexed sample (MMLT) first picks its strategy s
 //! from its connection stream: its camera subpath then walks to exactly t = depth + 2 - s
 //! vertices and its light subpath to s (none for s = 0, the light vertex alone for s = 1).
+//! A multiplexed sample comes with its group in `multiplex` and leaves with its depth there
+//! (the tail group's depth drawn from its connection stream: `bdpt::multiplexed_depth`).
 
 use crate::components::{CAMERA_VERTEX, PathVertex};
 use crate::geometry::offset_ray_origin;
 use crate::integrators::bdpt::{
-    BdptState, CAMERA_DIM_PIXEL, CONNECTION_DIM_STRATEGY, LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK,
-    LIGHT_DIM_POINT,
+    BdptState, CAMERA_DIM_PIXEL, CONNECTION_DIM_STRATEGY, CONNECTION_DIM_TAIL_DEPTH,
+    LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT, multiplexed_depth,
 };
 use crate::math::Frame;
 use crate::pipeline::Flow;
@@ -25,8 +27,8 @@ pub struct StartSubpaths;
 crate::system! {
     StartSubpaths = "start_subpaths";
     on BdptState {
-        read wave, data, pixels, numbers = sampler, capacity, multiplex;
-        write vertices, walkers, rays, subpath_len, active, depth, sample_pixel, chosen_s;
+        read wave, data, pixels, numbers = sampler, capacity, settings;
+        write vertices, walkers, rays, subpath_len, active, depth, sample_pixel, chosen_s, multiplex;
     }
     run {
         let n = wave.len;
@@ -57,17 +59,22 @@ crate::system! {
         };
         let multiplexed = !multiplex.is_empty();
         if multiplexed {
+            // The group each sample came with becomes its depth (the tail group's drawn).
+            let max_depth = settings.max_depth;
             chosen_s[..n]
                 .par_iter_mut()
+                .zip(multiplex[..n].par_iter_mut())
                 .enumerate()
                 .with_min_len(crate::components::CHUNK)
-                .for_each(|(k, s)| {
-                    let strategies = multiplex[k] + 2;
+                .for_each(|(k, (s, depth))| {
                     let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
+                    *depth = multiplexed_depth(*depth, sampler.get(key, CONNECTION_DIM_TAIL_DEPTH), max_depth);
+                    let strategies = *depth + 2;
                     let u = sampler.get(key, CONNECTION_DIM_STRATEGY);
                     *s = ((u * strategies as f32) as u32).min(strategies - 1) as u16;
                 });
         }
+        let multiplex = &*multiplex;
         // Vertices each subpath of sample k may have (camera, light) for a multiplexed one.
         let lengths = |k: usize| {
             let s = chosen_s[k] as u32;

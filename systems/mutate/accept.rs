@@ -1,7 +1,9 @@
 //! Acceptance and Veach's expected values: `accept_or_reject` (takes the proposal vectors back
-//! from the BDPT state, a = min(1, c_prop / c_cur), u < a), `splat_expected_values` (both
-//! states weighted, added to the f64 splat sums in chain order: the image does not depend on
-//! the thread count), `commit_accepted` (accepted chains take their proposal; the step ends).
+//! from the BDPT state, a = min(1, c_prop / c_cur), u < a), `estimate_normalisation` (the
+//! large steps' targets into the running b_k), `splat_expected_values` (both states weighted,
+//! added to the f64 splat sums of the chain's group in chain order: the image does not depend
+//! on the thread count), `commit_accepted` (accepted chains take their proposal; the step
+//! ends).
 
 use crate::integrators::bdpt::Numbers;
 use crate::integrators::mlt::MltState;
@@ -25,16 +27,32 @@ crate::system! {
     }
 }
 
+pub struct EstimateNormalisation;
+
+crate::system! {
+    EstimateNormalisation = "estimate_normalisation";
+    on MltState {
+        read chains;
+        write normalisation;
+    }
+    run {
+        let per_group = crate::mlt::large_step_targets(chains, normalisation.sums.len());
+        normalisation.add_large_steps(&per_group);
+        let large = per_group.iter().map(|&(_, n)| n as usize).sum();
+        Flow::new(chains.chains(), large)
+    }
+}
+
 pub struct SplatExpectedValues;
 
 crate::system! {
     SplatExpectedValues = "splat_expected_values";
     on MltState {
-        read chains;
+        read chains, pixels;
         write splats, splat_sums, nonfinite;
     }
     run {
-        crate::mlt::splat_expected_values(chains, splats);
+        crate::mlt::splat_expected_values(chains, splats, *pixels as u32);
         let (added, dropped) = splats.add_to(splat_sums);
         *nonfinite += dropped;
         Flow::new(chains.chains(), (added + dropped) as usize)

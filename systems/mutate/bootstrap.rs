@@ -9,8 +9,9 @@
 //!   mutations, then until b's relative error is below half the
 //!   image's expected noise at M mutations per pixel (`crate::mlt::needs_more_bootstrap`; M =
 //!   --spp, or `TIMED_MUTATIONS_PER_PIXEL` under --time), but never more evaluations than
-//!   the M x pixels mutations asked for nor `MAX_BOOTSTRAP_EVALUATIONS`; `--bootstrap N`
-//!   sets N per group instead.
+//!   the M x pixels mutations asked for nor `MAX_BOOTSTRAP_EVALUATIONS`; under a time budget
+//!   it also ends once it has taken `BOOTSTRAP_TIME_SHARE` of the budget and found some
+//!   light; `--bootstrap N` sets N per group instead.
 //! - `select_seeds`: b_k, chains per group by largest remainder, seeds by stratified
 //!   resampling (`crate::mlt::select_seeds`).
 //! - `replay_seeds`: each chain's seed vector rebuilt from its evaluation index, evaluated
@@ -21,10 +22,11 @@ use crate::components::CHUNK;
 use crate::integrators::Wave;
 use crate::integrators::bdpt::Numbers;
 use crate::integrators::mlt::{
-    BOOTSTRAP_PER_CHAIN, MAX_BOOTSTRAP_EVALUATIONS, MUTATIONS_PER_BOOTSTRAP_EVALUATION,
-    MltSettings, MltState, NONZERO_SEEDS_PER_CHAIN, TIMED_MUTATIONS_PER_PIXEL,
+    BOOTSTRAP_PER_CHAIN, BOOTSTRAP_TIME_SHARE, Bootstrap, ChainRule, MAX_BOOTSTRAP_EVALUATIONS,
+    MIN_CHAINS, MUTATIONS_PER_BOOTSTRAP_EVALUATION, MltSettings, MltState, NONZERO_SEEDS_PER_CHAIN,
+    STEPS_PER_CHAIN, TIMED_MUTATIONS_PER_PIXEL,
 };
-use crate::mlt::{MIN_BOOTSTRAP_SAMPLES, bootstrap_error, needs_more_bootstrap};
+use crate::mlt::{ChainStates, MIN_BOOTSTRAP_SAMPLES, bootstrap_error, needs_more_bootstrap};
 use crate::pipeline::Flow;
 use crate::sampling::PrimarySamples;
 use rayon::prelude::*;
@@ -36,6 +38,7 @@ fn fill_vectors(store: &mut PrimarySamples, settings: &MltSettings, items: &[u64
     let groups = settings.groups() as u64;
     for (slot, &item) in items.iter().enumerate() {
         store.set_used(slot, settings.dims_of_group((item % groups) as u32));
+        store.tails_mut()[slot] = MltState::bootstrap_tail(settings.seed, item);
     }
     store
         .blocks_mut(CHUNK)
@@ -62,7 +65,7 @@ pub struct BeginBootstrapWave;
 crate::system! {
     BeginBootstrapWave = "begin_bootstrap_wave";
     on MltState {
-        read settings;
+        read settings, pixels;
         write bootstrap, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
     }
     run {
@@ -73,6 +76,10 @@ crate::system! {
         let mut len = store.slots() as u64;
         if let Some(n) = settings.bootstrap {
             len = len.min(n * settings.groups() as u64 - bootstrap.evaluated);
+        } else if let Some(budget) = settings.time_budget {
+            let pace = BootstrapPace::of(bootstrap);
+            let chains = timed_chains(pace, settings, *pixels, budget) as u64;
+            len = len.min(timed_wave_len(pace, budget, chains));
         }
         let first = bootstrap.evaluated;
         let items: Vec<u64> = (first..first + len).collect();
@@ -84,6 +91,131 @@ crate::system! {
         }
         *wave = Wave { first: 0, len: len as usize };
         Flow::new(len as usize, len as usize)
+    }
+}
+
+/// Under a time budget, the first wave's size: it times the evaluations.
+const FIRST_TIMED_WAVE: u64 = 4096;
+
+/// The waves are planned to fill this fraction of the bootstrap's share: the pace varies
+/// from wave to wave (measured: up to 2% of the budget over when planned to the full share).
+const TIMED_PLAN: f64 = 0.85;
+
+/// How far the bootstrap has got: seconds since it began and evaluations made.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BootstrapPace {
+    pub spent: f64,
+    pub evaluated: u64,
+}
+
+impl BootstrapPace {
+    pub fn of(bootstrap: &Bootstrap) -> BootstrapPace {
+        BootstrapPace {
+            spent: bootstrap.started.map_or(0.0, |s| s.elapsed().as_secs_f64()),
+            evaluated: bootstrap.evaluated,
+        }
+    }
+
+    /// Evaluations per second so far.
+    fn rate(self) -> f64 {
+        self.evaluated as f64 / self.spent.max(1e-9)
+    }
+}
+
+/// Under a time budget, a mutation costs about this many bootstrap evaluations (the same
+/// BDPT evaluation, plus the proposal and the splats: measured 1.5-2 on door_ajar and
+/// torus_glass).
+const EVALUATIONS_PER_MUTATION: f64 = 2.0;
+
+/// The chains for a time budget of `budget` seconds (pssmlt, mmlt, unless `--chains` is
+/// given): as many as can each take `STEPS_PER_CHAIN` steps in the chains' share of the budget
+/// at the bootstrap's pace (the rule for `--spp` assumes `TIMED_MUTATIONS_PER_PIXEL`, which
+/// a short budget does not reach: at 5 s on door_ajar pssmlt took 14 steps per chain with
+/// the 32768 chains it gave). Before the pace is known (no wave yet), that rule's count.
+pub fn timed_chains(
+    pace: BootstrapPace,
+    settings: &MltSettings,
+    pixels: u64,
+    budget: f64,
+) -> usize {
+    let rule = settings.chain_count(pixels);
+    if settings.chains.is_some()
+        || !matches!(settings.chain_rule, ChainRule::StepsPerChain(_))
+        || pace.evaluated == 0
+    {
+        return rule;
+    }
+    let mutations = pace.rate() / EVALUATIONS_PER_MUTATION * (1.0 - BOOTSTRAP_TIME_SHARE) * budget;
+    ((mutations / STEPS_PER_CHAIN as f64) as usize).clamp(MIN_CHAINS, rule)
+}
+
+/// Under a time budget of `budget` seconds, the next wave: as many evaluations as fit in the
+/// bootstrap's share of the budget at the pace so far, less the seeds' replay (`chains`
+/// evaluations); the first wave is small, to time them.
+pub fn timed_wave_len(pace: BootstrapPace, budget: f64, chains: u64) -> u64 {
+    if pace.evaluated == 0 {
+        return FIRST_TIMED_WAVE;
+    }
+    let left =
+        pace.rate() * (TIMED_PLAN * BOOTSTRAP_TIME_SHARE * budget - pace.spent) - chains as f64;
+    (left.max(0.0) as u64).max(CHUNK as u64)
+}
+
+/// Under a time budget, whether the share is spent: not even a wave of `CHUNK` evaluations
+/// and the seeds' replay fit in it at the pace so far.
+pub fn timed_waves_done(pace: BootstrapPace, budget: f64, chains: u64) -> bool {
+    pace.spent + (CHUNK as u64 + chains) as f64 / pace.rate()
+        > TIMED_PLAN * BOOTSTRAP_TIME_SHARE * budget
+}
+
+#[cfg(test)]
+mod timed_tests {
+    use super::*;
+
+    #[test]
+    fn a_timed_bootstrap_stays_within_its_share() {
+        let budget = 10.0;
+        // 100k evaluations a second: the share (1 s, planned to 0.85 s) holds about 85k
+        // evaluations with the replay of the chains.
+        let pace = |spent: f64| BootstrapPace {
+            spent,
+            evaluated: (spent * 1e5) as u64,
+        };
+        assert_eq!(timed_wave_len(pace(0.0), budget, 1000), FIRST_TIMED_WAVE);
+        let first = pace(0.04096);
+        let next = timed_wave_len(first, budget, 1000);
+        assert!((79_000..81_000).contains(&next), "{next}");
+        // After that wave the share is spent (the replay no longer fits with another wave).
+        let after = pace(0.04096 + next as f64 / 1e5);
+        assert!(after.spent + 1000.0 / 1e5 <= 0.1 * budget);
+        assert!(timed_waves_done(after, budget, 1000));
+        assert!(!timed_waves_done(first, budget, 1000));
+        // Chains that cannot all be replayed in the share: one more wave of the least size.
+        assert_eq!(timed_wave_len(first, budget, 200_000), CHUNK as u64);
+        assert!(timed_waves_done(first, budget, 200_000));
+    }
+
+    #[test]
+    fn timed_chains_take_their_steps_in_the_budget() {
+        let s = MltSettings::from_render(&crate::integrators::RenderSettings::default(), false);
+        let pixels = 256 * 256;
+        let pace = BootstrapPace {
+            spent: 0.1,
+            evaluated: 40_000,
+        };
+        // 400k evaluations/s, 200k mutations/s, 0.9 x 5 s: 900k mutations, 64 steps each.
+        assert_eq!(timed_chains(pace, &s, pixels, 5.0), 900_000 / 64);
+        // Never more than the rule's, never fewer than MIN_CHAINS, and the rule's until timed.
+        assert_eq!(timed_chains(pace, &s, pixels, 1e6), s.chain_count(pixels));
+        assert_eq!(timed_chains(pace, &s, pixels, 0.01), MIN_CHAINS);
+        let untimed = BootstrapPace {
+            spent: 0.0,
+            evaluated: 0,
+        };
+        assert_eq!(
+            timed_chains(untimed, &s, pixels, 5.0),
+            s.chain_count(pixels)
+        );
     }
 }
 
@@ -99,7 +231,7 @@ crate::system! {
         let n = wave.len;
         let pixels = *pixels;
         let groups = settings.groups() as u64;
-        let chains = settings.chain_count(pixels) as u64;
+
         // Per group in parallel (item k of the wave is in group (evaluated + k) % groups;
         // each group's weights and image take its items in order, as one loop over the
         // wave would): serial, this loop was a serial stretch of every bootstrap wave.
@@ -128,12 +260,20 @@ crate::system! {
             });
         let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
         bootstrap.evaluated += n as u64;
+        let chains = match settings.time_budget {
+            Some(budget) => timed_chains(BootstrapPace::of(bootstrap), settings, pixels, budget),
+            None => settings.chain_count(pixels),
+        } as u64;
         let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
         bootstrap.done = match settings.bootstrap {
             Some(per_group) => bootstrap.evaluated >= per_group * groups,
             None => {
                 let m = settings.mutations_per_pixel.unwrap_or(TIMED_MUTATIONS_PER_PIXEL);
                 automatic_bootstrap_done(&weights, chains, m, pixels)
+                    || settings.time_budget.is_some_and(|budget| {
+                        timed_waves_done(BootstrapPace::of(bootstrap), budget, chains)
+                            && weights.iter().any(|w| w.iter().any(|&x| x > 0.0))
+                    })
             }
         };
         Flow::new(n, found)
@@ -226,11 +366,25 @@ pub struct SelectSeeds;
 crate::system! {
     SelectSeeds = "select_seeds";
     on MltState {
-        read settings, bootstrap;
-        write selection, chains;
+        read settings, bootstrap, pixels;
+        write selection, chains, normalisation, steps_per_pass;
     }
     run {
+        if let Some(budget) = settings.time_budget {
+            // Fewer chains where the budget cannot give each its steps.
+            let n = timed_chains(BootstrapPace::of(bootstrap), settings, *pixels, budget);
+            if n < chains.chains() {
+                *chains = ChainStates::new(
+                    n,
+                    chains.dims(),
+                    chains.current_contributions.stride(),
+                    chains.proposal_contributions.chains(),
+                );
+                *steps_per_pass = pixels.div_ceil(n as u64).max(1);
+            }
+        }
         let weights: Vec<&[f32]> = bootstrap.weights.iter().map(Vec::as_slice).collect();
+        *normalisation = crate::mlt::Normalisation::from_bootstrap(&weights);
         *selection = crate::mlt::select_seeds(&weights, chains.chains(), settings.seed);
         if let Some(s) = selection.as_ref() {
             s.apply(chains);

@@ -1,8 +1,9 @@
 //! Records the vertex each subpath's ray found and scatters the subpath on: a BSDF sample
 //! (radiance transport for camera subpaths, importance for light subpaths), the densities the
 //! ratio walk needs (this vertex's forward density, the previous vertex's reverse one), and
-//! Russian roulette. A subpath ends when its ray leaves the scene, at the depth cap, when its
-//! sample carries nothing, or by roulette.
+//! Russian roulette (not for multiplexed samples, whose lengths are fixed in advance). A
+//! subpath ends when its ray leaves the scene, at the depth cap, when its sample carries
+//! nothing, or by roulette.
 
 use crate::bsdf::{TransportMode, sample_direction};
 use crate::components::{MISS, PathVertex, PathVertices, split_ranges};
@@ -123,7 +124,10 @@ crate::system! {
                     let Some(next) = next else { continue };
                     pv.items[j].pdf_rev = next.pdf_rev_prev;
                     let mut beta = wk.beta[i] * next.weight;
-                    if d >= ROULETTE_DEPTH as usize {
+                    // A multiplexed sample's lengths are drawn in advance (its depth's
+                    // probability is in its weight): no roulette, which would end most deep
+                    // ones with nothing.
+                    if d >= ROULETTE_DEPTH as usize && multiplex.is_empty() {
                         let q = survival(beta, wk.roulette_scale[i]);
                         let u = sampler.get(
                             wk.key[i],

@@ -16,6 +16,14 @@ pub fn scene_path(name: &str) -> std::path::PathBuf {
         .join(name)
 }
 
+/// Loads one of the test's own scenes (tests/scenes/), at its own size.
+pub fn load_test_scene(name: &str) -> stagelight::scene::PreparedScene {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/scenes")
+        .join(name);
+    stagelight::scene::load(&path).expect("scene loads")
+}
+
 /// Loads a scene from scenes/ and shrinks its image to `size` x `size`.
 pub fn load_small(name: &str, size: u32) -> stagelight::scene::PreparedScene {
     let mut scene = stagelight::scene::load(&scene_path(name)).expect("scene loads");
