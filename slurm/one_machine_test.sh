@@ -17,7 +17,10 @@
 #      merged image must equal the single render. Should this machine turn out faster than
 #      measured, so that no job was stopped, it runs again with twice the work (at most
 #      twice); every job is signalled before its limit, so none times out however slow;
-#   5. stops every daemon it started, by its PID (also on failure).
+#   5. whatever happens (success, a failed step, INT, TERM or HUP): cancels the jobs left in
+#      its Slurm, stops every daemon it started by its PID (SIGTERM, SIGKILL after 15 s),
+#      prints the tails of the daemons' and jobs' logs to stderr if it failed, and removes
+#      its temporary folder (KEEP_TMP=1 keeps it, logs included).
 #
 #   slurm/one_machine_test.sh [STAGELIGHT]      (default target/release/stagelight)
 #
@@ -45,22 +48,79 @@ done
 [ -x "$bin" ] || { echo "one_machine_test: no stagelight binary at $bin (cargo build --release)" >&2; exit 2; }
 
 tmp=$(mktemp -d /tmp/stagelight-slurm.XXXXXX)
+daemons=()
+step="setting up"
+failed_command=""
+# Cancels what is left in this script's own Slurm (its controller, its jobs only), stops the
+# daemons it started, only those, by the PIDs it got when it started them, shows the logs
+# if it failed, and removes the temporary folder.
+clean_up() {
+    local status=$? pid waited f logs
+    trap - EXIT ERR
+    trap "" INT TERM HUP # (cleaning up is bounded: about a minute at most)
+    set +e
+    cd /
+    if [ "$status" -ne 0 ]; then
+        echo "one_machine_test: FAILED (exit status $status) in step: $step" >&2
+        [ -z "$failed_command" ] || echo "one_machine_test: failing command: $failed_command" >&2
+    fi
+    if [ "${#daemons[@]}" -ge 2 ] && [ -n "$(timeout 10 squeue -h -o %i 2>/dev/null)" ]; then
+        echo "cancelling the jobs left: $(timeout 10 squeue -h -o %i | tr '\n' ' ')" >&2
+        # Again while any is left: a cancelled shard may have submitted its next job.
+        for _ in $(seq 30); do
+            timeout 10 scancel --user=root 2>/dev/null
+            sleep 1
+            [ -z "$(timeout 10 squeue -h -o %i 2>/dev/null)" ] && break
+        done
+    fi
+    for pid in "${daemons[@]}"; do
+        kill "$pid" 2>/dev/null
+    done
+    for pid in "${daemons[@]}"; do
+        waited=0
+        while kill -0 "$pid" 2>/dev/null && [ "$waited" -lt 150 ]; do
+            sleep 0.1
+            waited=$((waited + 1))
+        done
+        if kill -0 "$pid" 2>/dev/null; then
+            echo "daemon $pid still running after 15 s: SIGKILL" >&2
+            kill -KILL "$pid" 2>/dev/null
+        fi
+        wait "$pid" 2>/dev/null
+    done
+    echo "stopped daemons ${daemons[*]:-(none)}"
+    if [ "$status" -ne 0 ]; then
+        # A daemon's log file, or its stderr where it failed before it opened that file.
+        logs=("$tmp"/log/munged.out "$tmp"/munge/munged.log)
+        for f in slurmctld slurmd; do
+            if [ -s "$tmp/log/$f.log" ]; then logs+=("$tmp/log/$f.log"); else logs+=("$tmp/log/$f.out"); fi
+        done
+        for f in "${logs[@]}" "$tmp"/work/*/logs/*; do
+            [ -s "$f" ] || continue
+            echo "--- ${f#"$tmp"/} (last 15 lines)" >&2
+            tail -n 15 "$f" >&2
+        done
+    fi
+    if [ "${KEEP_TMP:-0}" = 1 ]; then
+        echo "kept $tmp (KEEP_TMP=1)"
+    else
+        rm -rf "$tmp"
+        echo "removed $tmp"
+    fi
+    exit "$status"
+}
+trap clean_up EXIT
+# A signal ends the script through its EXIT trap, so it cleans up as on failure.
+trap 'exit 129' HUP
+trap 'exit 130' INT
+trap 'exit 143' TERM
+set -E
+trap 'failed_command="$BASH_COMMAND (line $LINENO)"' ERR
 chmod 755 "$tmp"
 mkdir -p "$tmp/munge" "$tmp/state" "$tmp/spool" "$tmp/log" "$tmp/work"
-daemons=()
-stop_daemons() {
-    # Only the daemons this script started, by the PIDs it got when it started them.
-    for pid in "${daemons[@]}"; do
-        kill "$pid" 2>/dev/null || true
-    done
-    for pid in "${daemons[@]}"; do
-        wait "$pid" 2>/dev/null || true
-    done
-    echo "stopped daemons ${daemons[*]:-}; logs in $tmp/log"
-}
-trap stop_daemons EXIT
 
 # --- munge: a fresh key, the daemon as the munge user, its socket in the temporary folder
+step="1. starting munged"
 chown munge: "$tmp/munge"
 chmod 700 "$tmp/munge"
 mungekey --create --keyfile="$tmp/munge/munge.key"
@@ -114,6 +174,7 @@ export SLURM_CONF=$tmp/slurm.conf
 # Seconds from $1 to $2 (default now), both `date +%s.%N`.
 elapsed() { awk -v a="$1" -v b="${2:-$(date +%s.%N)}" 'BEGIN { printf "%.1f", b - a }'; }
 
+step="1. starting slurmctld and slurmd"
 started=$(date +%s.%N)
 slurmctld -D -i >"$tmp/log/slurmctld.out" 2>&1 &
 daemons+=($!)
@@ -144,6 +205,7 @@ sed "0,/camera: (/s//camera: (\n        width: $SIZE,\n        height: $SIZE,/" 
     "$repo/scenes/$SCENE.ron" >scene.ron
 
 # --- 2. a sharded reference against one process
+step="2. the sharded reference (array + merge) against one process"
 echo "== $SHARDS shards of a $SPP-spp reference of $SCENE at ${SIZE}x$SIZE"
 "$bin" slurm --shards "$SHARDS" --cpus-per-task 1 -o job -- \
     reference scene.ron --spp "$SPP" -o merged.exr
@@ -152,6 +214,7 @@ sh job/submit.sh
 wait_for_queue 600
 t1=$(date +%s.%N)
 cat job/logs/merge.out
+[ -f merged.exr ] || { echo "the merge job wrote no merged.exr (its log above)" >&2; exit 1; }
 echo "array + merge: $(elapsed "$t0" "$t1") s wall"
 t0=$(date +%s.%N)
 "$bin" reference scene.ron --spp "$SPP" -o single.exr --quiet
@@ -163,6 +226,8 @@ echo "cmp: identical"
 
 # --- 3. a sharded comparison against one process
 if [ "${SKIP_COMPARE:-0}" != 1 ]; then
+    step="3. the sharded comparison against one process"
+    # shellcheck disable=SC2054 # (pt,bdpt,sppm is one argument)
     compare_args=(compare scene.ron --integrators pt,bdpt,sppm --budgets 16,64 --budget-unit spp
         --reference-spp "$SPP" --photons-per-pass 5000)
     echo "== a comparison of pt, bdpt and sppm at 16 and 64 spp as a plan of $SHARDS tasks"
@@ -189,6 +254,7 @@ fi
 
 # --- 4. stop and resume under a time limit
 if [ "${SKIP_RESUME:-0}" != 1 ]; then
+    step="4. stop and resume under a time limit"
     # Passes per second on one thread, from a short render, size each shard's work.
     "$bin" reference scene.ron --time 3 --threads 1 -o rate.exr --quiet >rate.txt
     passes=$(sed -n 's/.* at \([0-9]*\) spp (\([0-9.]*\) s of rendering).*/\1 \2/p' rate.txt)
@@ -206,6 +272,7 @@ if [ "${SKIP_RESUME:-0}" != 1 ]; then
         echo "array + next jobs + merge: $(elapsed "$t0" "$t1") s wall"
         grep -h "exit\|resumed\|made\|continues" resume/logs/shard-*.out || true
         cat resume/logs/merge.out
+        [ -f resumed.exr ] || { echo "the merge job wrote no resumed.exr (its log above)" >&2; exit 1; }
         grep -q "continues in job" resume/logs/shard-*.out && break
         if [ "$attempt" -eq 3 ]; then
             echo "no shard was stopped by its time limit, even with $work s of work" >&2
@@ -219,4 +286,5 @@ if [ "${SKIP_RESUME:-0}" != 1 ]; then
     cmp resumed_single.exr resumed.exr
     echo "cmp: identical"
 fi
+step="done"
 echo "one_machine_test: all comparisons identical"
