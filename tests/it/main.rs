@@ -20,6 +20,7 @@ mod kernels;
 mod light_vertex_cache;
 mod mlt;
 mod path_mlt;
+mod path_mlt_split;
 mod photon_checkpoint;
 mod photon_mapping;
 mod photons;

@@ -465,14 +465,23 @@ fn primary_reads_the_interleaved_store_then_falls_back_to_the_hash() {
             if store_dim < dims {
                 assert_eq!(got, store.get(slot as usize, store_dim), "{stream:?} {d}");
             } else {
-                // The hash of (fallback seed, stream, slot, dim).
-                let expect = SampleKey::new(99, (ordinal as u64) << 61 | slot, 0).get(d);
+                // The hash of (the slot's tail seed, stream, dim): the same in any slot that
+                // holds the same tail seed (a seed's replay), anew with a new tail seed.
+                let expect = SampleKey::new(store.tail(slot as usize), ordinal as u64, 0).get(d);
                 assert_eq!(got, expect);
-                let other = Sampler::Primary {
-                    store: &store,
+                let mut moved = store.clone();
+                moved.tails_mut()[0] = store.tail(slot as usize);
+                let elsewhere = Sampler::Primary {
+                    store: &moved,
                     fallback_seed: 100,
                 };
-                assert_ne!(other.get(key, d), got, "a new fallback seed draws anew");
+                assert_eq!(elsewhere.get(elsewhere.key(stream, 0, 0), d), got);
+                moved.tails_mut()[slot as usize] = 7;
+                let fresh = Sampler::Primary {
+                    store: &moved,
+                    fallback_seed: 99,
+                };
+                assert_ne!(fresh.get(key, d), got, "a new tail seed draws anew");
             }
             let pair = sampler.get2(key, d);
             assert_eq!(
