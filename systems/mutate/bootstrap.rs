@@ -458,3 +458,71 @@ crate::system! {
         Flow::new(n, live)
     }
 }
+
+pub struct BeginNormalisationWave;
+
+crate::system! {
+    BeginNormalisationWave = "begin_normalisation_wave";
+    on MltState {
+        read settings;
+        write bootstrap, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
+    }
+    run {
+        // More evaluations like the bootstrap's (the items after its last), to refine b.
+        let Numbers::Primary { store, .. } = numbers else {
+            unreachable!("MLT evaluates primary samples")
+        };
+        let len = (bootstrap.refine_len as u64).min(store.slots() as u64);
+        let first = bootstrap.evaluated;
+        let items: Vec<u64> = (first..first + len).collect();
+        fill_vectors(store, settings, &items);
+        let groups = settings.groups() as u64;
+        multiplex.clear();
+        if settings.multiplexed {
+            multiplex.extend(items.iter().map(|&i| (i % groups) as u32));
+        }
+        *wave = Wave { first: 0, len: len as usize };
+        Flow::new(len as usize, len as usize)
+    }
+}
+
+pub struct AddNormalisationWeights;
+
+crate::system! {
+    AddNormalisationWeights = "add_normalisation_weights";
+    on MltState {
+        read settings, wave = bdpt.wave, contributions = chains.proposal_contributions;
+        write bootstrap, normalisation;
+    }
+    run {
+        let n = wave.len;
+        let groups = settings.groups() as u64;
+        let first = bootstrap.evaluated;
+        // Per CHUNK in parallel, the chunks in order: the same sums for any thread count.
+        let per_chunk: Vec<Vec<(f64, u64)>> = contributions.target[..n]
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(c, targets)| {
+                let mut sums = vec![(0.0, 0); groups as usize];
+                for (local, &t) in targets.iter().enumerate() {
+                    let g = ((first + (c * CHUNK + local) as u64) % groups) as usize;
+                    sums[g].0 += crate::mlt::usable_weight(t);
+                    sums[g].1 += 1;
+                }
+                sums
+            })
+            .collect();
+        let mut total = vec![(0.0, 0); groups as usize];
+        for chunk in per_chunk {
+            for (t, (sum, count)) in total.iter_mut().zip(chunk) {
+                t.0 += sum;
+                t.1 += count;
+            }
+        }
+        normalisation.add_evaluations(&total);
+        bootstrap.evaluated += n as u64;
+        bootstrap.refine_len = 0;
+        let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
+        Flow::new(n, found)
+    }
+}
