@@ -11,8 +11,8 @@ use stagelight::integrators::bdpt::BdptSettings;
 use stagelight::integrators::driver::{PassState, run_passes};
 use stagelight::integrators::path_mlt::{PathMltSettings, PathMltState};
 use stagelight::integrators::{RenderSettings, SceneData};
-use stagelight::mlt::path_chains::{MutationKind, load_path};
-use stagelight::mlt::path_space::{MAX_VERTICES, PathSpace, StepNumbers};
+use stagelight::mlt::path_chains::MutationKind;
+use stagelight::mlt::path_space::{PathSpace, StepNumbers};
 use stagelight::sampling::SampleKey;
 use stagelight::systems::mutate::{bidirectional, path_mutation};
 use std::sync::Arc;
@@ -74,14 +74,13 @@ fn path_mlt_mutations_sample_the_density_they_report_and_can_be_undone() {
         let ps = PathSpace::new(&state.data);
         let set = state.settings.mutations;
         let chains = &state.chains;
-        let store = chains.current.view(0..chains.chains() * MAX_VERTICES);
         let (mut proposed, mut by_kind) = (0, [0usize; 4]);
         for chain in 0..chains.chains().min(2000) {
             let len = chains.current_len[chain] as usize;
             if len < 2 {
                 continue;
             }
-            let x = load_path(&store, chain, len);
+            let x = chains.current_path(chain);
             let fx = ps.contribution(&x).expect("a chain's path carries light");
             assert!(fx.0.is_finite());
             for kind in path_mutation::suitable(&ps, &set, &x) {
