@@ -47,6 +47,11 @@ use crate::systems::mutate::{
 use glam::DVec3;
 use std::sync::Arc;
 
+/// PROVISIONAL (revert when the bootstrap's own cap goes, issue 27 item 2): the deepest path
+/// of the BDPT bootstrap that seeds the chains and estimates b. `MltSettings::from_render`
+/// still caps it at `MLT_MAX_DEPTH` (16); this lets the seeds and b reach deeper light.
+pub const PROVISIONAL_BOOTSTRAP_DEPTH: u32 = 256;
+
 /// Mitsuba's samples per pixel for the direct illumination rendered apart.
 pub const DEFAULT_DIRECT_SPP: u32 = 16;
 
@@ -72,6 +77,7 @@ impl PathMltSettings {
             mutations.enabled = m;
         }
         let mut bootstrap = MltSettings::from_render(s, false);
+        bootstrap.max_depth = s.max_depth.min(PROVISIONAL_BOOTSTRAP_DEPTH);
         bootstrap.mis = MisHeuristic::Balance;
         bootstrap.bootstrap_wave = mlt::BOOTSTRAP_WAVE;
         bootstrap.chain_rule = mlt::ChainRule::SqrtOfMutations(mlt::PATH_CHAINS_PER_SQRT_MUTATION);
