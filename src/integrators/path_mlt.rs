@@ -22,8 +22,13 @@
 //! ```
 //!
 //! The caustic and multi-chain perturbations are in the graph only for scenes with a specular
-//! material (they apply to nothing else). Paths are at most `MLT_MAX_DEPTH` deep, as in the
-//! primary-sample MLTs (the bootstrap's bound).
+//! material (they apply to nothing else).
+//!
+//! No depth cap but the user's (`--max-depth`, unlimited by default, as for PT): the seeds are
+//! the bootstrap's BDPT paths, which Russian roulette ends, the bidirectional mutation's length
+//! distributions are Mitsuba's unbounded two-tailed geometric ones, and a chain stores a path
+//! of any length (`crate::mlt::path_chains`: fixed slots per chain, the rest of a long path in
+//! the chain's overflow list).
 
 use crate::bsdf::MaterialKind;
 use crate::film::Film;
@@ -53,6 +58,7 @@ pub const DEFAULT_DIRECT_SPP: u32 = 16;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathMltSettings {
     pub seed: u64,
+    /// The user's depth cap (`u32::MAX`: none).
     pub max_depth: u32,
     pub mutations: MutationSet,
     /// Direct illumination rendered apart at this many samples per pixel (0: none).
@@ -71,8 +77,6 @@ impl PathMltSettings {
             mutations.enabled = m;
         }
         let mut bootstrap = MltSettings::from_render(s, false);
-        // Path-space chains store at most `MAX_VERTICES` vertices (for now).
-        bootstrap.max_depth = bootstrap.max_depth.min(mlt::STORED_DEPTH);
         bootstrap.mis = MisHeuristic::Balance;
         bootstrap.bootstrap_wave = mlt::BOOTSTRAP_WAVE;
         bootstrap.chain_rule = mlt::ChainRule::SqrtOfMutations(mlt::PATH_CHAINS_PER_SQRT_MUTATION);
@@ -81,10 +85,10 @@ impl PathMltSettings {
         } else {
             bootstrap.min_depth = 2;
         }
-        mutations.max_vertices = bootstrap.max_depth as usize + 2;
+        mutations.max_vertices = MutationSet::max_vertices_for_depth(s.max_depth);
         PathMltSettings {
             seed: s.seed,
-            max_depth: bootstrap.max_depth,
+            max_depth: s.max_depth,
             mutations,
             direct_spp,
             bootstrap,

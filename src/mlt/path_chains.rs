@@ -1,10 +1,16 @@
 //! The chains of Veach's MLT: each chain's current path and the step's proposal, stored as
-//! path-vertex columns (`PathVertices`, `MAX_VERTICES` slots per chain), with per chain the
-//! path's f, pixel and target, the mutation chosen, and the proposal's Hastings ratio
-//! T(y -> x) / T(x -> y).
+//! path-vertex columns (`PathVertices`, `INLINE_VERTICES` slots per chain) and, for a path
+//! longer than that, the rest in the chain's own overflow list; with per chain the path's f,
+//! pixel and target, the mutation chosen, and the proposal's Hastings ratio T(y -> x) / T(x -> y).
+//!
+//! Paths have no length bound but the user's `--max-depth`: most are short and live in the
+//! columns alone (no allocation per step), and the rare long one (a box of mirrors, light
+//! trapped in glass) spills its vertices past `INLINE_VERTICES` into `current_overflow` /
+//! `proposal_overflow`, which are chain-indexed like every other column, so the chunks of
+//! chains the systems work on in parallel own their overflow too.
 
-use super::path_space::{MAX_VERTICES, Path, PathSpace};
-use crate::components::{PathVertices, PathVerticesChunk, PathVerticesView};
+use super::path_space::{Path, PathSpace};
+use crate::components::{PathVertex, PathVertices, PathVerticesChunk, PathVerticesView};
 use crate::path::Vertex;
 use crate::sampling::SampleKey;
 use glam::DVec3;
@@ -52,7 +58,8 @@ pub struct MutationSet {
     pub angle_min: f32,
     pub angle_max: f32,
     /// Fewest and most vertices of a path the chains visit (4 with direct lighting rendered
-    /// apart: paths of depth >= 2).
+    /// apart: paths of depth >= 2); `usize::MAX` most: no bound (the default; `--max-depth D`
+    /// makes it D + 2).
     pub min_vertices: usize,
     pub max_vertices: usize,
 }
@@ -70,14 +77,27 @@ impl MutationSet {
             angle_min: 1e-4,
             angle_max: 0.1,
             min_vertices: 4,
-            max_vertices: MAX_VERTICES,
+            max_vertices: usize::MAX,
         }
     }
 
     pub fn has(&self, k: MutationKind) -> bool {
         self.enabled & (1 << k as u8) != 0
     }
+
+    /// The most vertices for a depth cap (`u32::MAX`: none).
+    pub fn max_vertices_for_depth(max_depth: u32) -> usize {
+        if max_depth == u32::MAX {
+            usize::MAX
+        } else {
+            max_depth as usize + 2
+        }
+    }
 }
+
+/// Vertices of a chain's path kept in the path-vertex columns (slots per chain); a longer
+/// path keeps its vertices from this one on in the chain's overflow list.
+pub const INLINE_VERTICES: usize = 16;
 
 /// A proposed path and its Hastings ratio T(y -> x) / T(x -> y).
 #[derive(Clone, Debug)]
@@ -93,13 +113,18 @@ pub struct Proposal {
 
 /// The chains' columns.
 pub struct PathChains {
+    /// Vertices 0..`INLINE_VERTICES` of each chain's path (slots `chain x INLINE_VERTICES..`).
     pub current: PathVertices,
-    pub current_len: Vec<u8>,
+    /// Per chain its path's vertices from `INLINE_VERTICES` on (empty for a shorter path).
+    pub current_overflow: Vec<Vec<PathVertex>>,
+    /// Vertices per path (any number).
+    pub current_len: Vec<u32>,
     pub current_f: Vec<DVec3>,
     pub current_pixel: Vec<u32>,
     pub current_target: Vec<f64>,
     pub proposal: PathVertices,
-    pub proposal_len: Vec<u8>,
+    pub proposal_overflow: Vec<Vec<PathVertex>>,
+    pub proposal_len: Vec<u32>,
     pub proposal_f: Vec<DVec3>,
     pub proposal_pixel: Vec<u32>,
     pub proposal_target: Vec<f64>,
@@ -116,12 +141,14 @@ pub struct PathChains {
 impl PathChains {
     pub fn new(chains: usize) -> PathChains {
         PathChains {
-            current: PathVertices::new(chains * MAX_VERTICES),
+            current: PathVertices::new(chains * INLINE_VERTICES),
+            current_overflow: vec![Vec::new(); chains],
             current_len: vec![0; chains],
             current_f: vec![DVec3::ZERO; chains],
             current_pixel: vec![0; chains],
             current_target: vec![0.0; chains],
-            proposal: PathVertices::new(chains * MAX_VERTICES),
+            proposal: PathVertices::new(chains * INLINE_VERTICES),
+            proposal_overflow: vec![Vec::new(); chains],
             proposal_len: vec![0; chains],
             proposal_f: vec![DVec3::ZERO; chains],
             proposal_pixel: vec![0; chains],
@@ -139,25 +166,97 @@ impl PathChains {
         self.current_len.len()
     }
 
-    /// Bytes per chain.
+    /// Bytes per chain (the overflow lists' vertices not counted: most chains have none).
     pub fn bytes_per_chain() -> usize {
-        2 * MAX_VERTICES * PathVertices::bytes_per_item() + 2 * (1 + 24 + 4 + 8) + 8 + 1 + 1 + 8
+        2 * INLINE_VERTICES * PathVertices::bytes_per_item()
+            + 2 * (std::mem::size_of::<Vec<PathVertex>>() + 4 + 24 + 4 + 8)
+            + 8
+            + 1
+            + 1
+            + 8
+    }
+
+    /// Chain `chain`'s current path.
+    pub fn current_path(&self, chain: usize) -> Path {
+        let store = self.current.view(0..self.chains() * INLINE_VERTICES);
+        load_path(
+            &store,
+            &self.current_overflow[chain],
+            chain,
+            self.current_len[chain] as usize,
+        )
+    }
+
+    /// Makes `path` chain `chain`'s current path (its f, pixel and target left as they are).
+    pub fn set_current_path(&mut self, chain: usize, path: &[Vertex]) {
+        let mut stores = self
+            .current
+            .split_mut(&[chain * INLINE_VERTICES], (chain + 1) * INLINE_VERTICES);
+        store_path(&mut stores[0], &mut self.current_overflow[chain], 0, path);
+        self.current_len[chain] = path_len(path.len());
     }
 }
 
-/// Chain `local`'s path (of `len` vertices) from a view of whole chains' columns.
-pub fn load_path(store: &PathVerticesView, local: usize, len: usize) -> Path {
-    let mut path: Path = (0..len)
-        .map(|i| Vertex::from_store(store, local * MAX_VERTICES + i, 1))
-        .collect();
+/// A path's vertex count as the length columns hold it.
+#[inline]
+pub fn path_len(n: usize) -> u32 {
+    u32::try_from(n).expect("a path of fewer than 2^32 vertices")
+}
+
+/// Chain `local`'s path (of `len` vertices) from a view of whole chains' columns and the
+/// chain's overflow list.
+pub fn load_path(
+    store: &PathVerticesView,
+    overflow: &[PathVertex],
+    local: usize,
+    len: usize,
+) -> Path {
+    let inline = len.min(INLINE_VERTICES);
+    let mut path: Path = Vec::with_capacity(len);
+    path.extend((0..inline).map(|i| Vertex::from_store(store, local * INLINE_VERTICES + i, 1)));
+    if len > INLINE_VERTICES {
+        let rest = PathVerticesView {
+            items: &overflow[..len - INLINE_VERTICES],
+        };
+        path.extend((0..len - INLINE_VERTICES).map(|i| Vertex::from_store(&rest, i, 1)));
+    }
     PathSpace::fix_kinds(&mut path);
     path
 }
 
-/// Writes `path` as chain `local` of a column chunk.
-pub fn store_path(store: &mut PathVerticesChunk, local: usize, path: &[Vertex]) {
-    for (i, v) in path.iter().enumerate() {
-        store.set(local * MAX_VERTICES + i, v.stored());
+/// Writes `path` as chain `local` of a column chunk, its vertices past `INLINE_VERTICES` into
+/// the chain's overflow list (emptied first, its allocation kept).
+pub fn store_path(
+    store: &mut PathVerticesChunk,
+    overflow: &mut Vec<PathVertex>,
+    local: usize,
+    path: &[Vertex],
+) {
+    let (inline, rest) = path.split_at(path.len().min(INLINE_VERTICES));
+    for (i, v) in inline.iter().enumerate() {
+        store.set(local * INLINE_VERTICES + i, v.stored());
+    }
+    overflow.clear();
+    overflow.extend(rest.iter().map(Vertex::stored));
+}
+
+/// Copies chain `local`'s path of `len` vertices from one store (columns and overflow) to
+/// another.
+pub fn copy_path(
+    from: &PathVerticesChunk,
+    from_overflow: &[PathVertex],
+    to: &mut PathVerticesChunk,
+    to_overflow: &mut Vec<PathVertex>,
+    local: usize,
+    len: usize,
+) {
+    let first = local * INLINE_VERTICES;
+    for v in first..first + len.min(INLINE_VERTICES) {
+        to.set(v, from.get(v));
+    }
+    to_overflow.clear();
+    if len > INLINE_VERTICES {
+        to_overflow.extend_from_slice(&from_overflow[..len - INLINE_VERTICES]);
     }
 }
 
@@ -165,6 +264,6 @@ pub fn store_path(store: &mut PathVerticesChunk, local: usize, path: &[Vertex]) 
 pub fn chunk_starts(chains: usize) -> Vec<usize> {
     (0..chains)
         .step_by(crate::components::CHUNK)
-        .map(|c| c * MAX_VERTICES)
+        .map(|c| c * INLINE_VERTICES)
         .collect()
 }

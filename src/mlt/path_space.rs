@@ -27,9 +27,6 @@ use crate::scene::SceneData;
 use glam::{DVec3, Vec2, Vec3};
 use std::f32::consts::PI;
 
-/// Most vertices a path may have (storage per chain): depth `MLT_MAX_DEPTH` plus both ends.
-pub const MAX_VERTICES: usize = crate::integrators::mlt::STORED_DEPTH as usize + 2;
-
 /// A path, light first.
 pub type Path = Vec<Vertex>;
 

@@ -11,31 +11,69 @@ use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
 use crate::mlt::path_space::{Path, PathSpace, StepNumbers, dir};
 use crate::path::{VertexKind, to_area};
 
-/// The unnormalised weight 2^-|k - center| of a two-tailed geometric distribution (exact: a
-/// power of two; paths are far shorter than 64 vertices).
-fn two_tailed_weight(center: usize, k: usize) -> f64 {
-    1.0 / (1u64 << k.abs_diff(center).min(63)) as f64
+/// 2^-j, exact (0 below f64's normal range, where no sum here can tell).
+#[inline]
+fn pow2_neg(j: usize) -> f64 {
+    if j > 1022 {
+        0.0
+    } else {
+        f64::from_bits((1023 - j as u64) << 52)
+    }
 }
 
-/// P(k) of a two-tailed geometric distribution about `center` (ratio 1/2), on [lo, hi].
+/// sum of 2^-j for j in p..=q (q may be `usize::MAX`: the whole tail), p <= q.
+#[inline]
+fn geometric_sum(p: usize, q: usize) -> f64 {
+    2.0 * pow2_neg(p) - pow2_neg(q)
+}
+
+/// The unnormalised weight 2^-|k - center| of a two-tailed geometric distribution.
+#[inline]
+fn two_tailed_weight(center: usize, k: usize) -> f64 {
+    pow2_neg(k.abs_diff(center))
+}
+
+/// The weights' sum over [lo, hi] (hi may be `usize::MAX`: no upper bound), in closed form:
+/// the geometric sums below and above the center.
+fn two_tailed_mass(center: usize, lo: usize, hi: usize) -> f64 {
+    let mut mass = 0.0;
+    // k in [lo, min(hi, center)]: 2^-(center - k).
+    let below = hi.min(center);
+    if lo <= below {
+        mass += geometric_sum(center - below, center - lo);
+    }
+    // k in [max(lo, center + 1), hi]: 2^-(k - center).
+    let above = lo.max(center + 1);
+    if above <= hi {
+        mass += geometric_sum(above - center, hi - center);
+    }
+    mass
+}
+
+/// P(k) of a two-tailed geometric distribution about `center` (ratio 1/2), on [lo, hi]; `hi`
+/// may be `usize::MAX` (Mitsuba's unbounded tail: only a user's `--max-depth` bounds it).
+/// Both directions of a move take their length probabilities from here.
 pub fn two_tailed(center: usize, lo: usize, hi: usize, k: usize) -> f64 {
     if k < lo || k > hi {
         return 0.0;
     }
-    let norm: f64 = (lo..=hi).map(|j| two_tailed_weight(center, j)).sum();
-    two_tailed_weight(center, k) / norm
+    two_tailed_weight(center, k) / two_tailed_mass(center, lo, hi)
 }
 
-/// A draw from `two_tailed(center, lo, hi, .)` (lo <= hi); the normaliser summed once.
+/// A draw from `two_tailed(center, lo, hi, .)` (lo <= hi) by its inverse CDF: at most a few
+/// dozen terms past the center, where the tail's mass falls below u's resolution.
 pub fn sample_two_tailed(center: usize, lo: usize, hi: usize, u: f32) -> usize {
-    let norm: f64 = (lo..=hi).map(|j| two_tailed_weight(center, j)).sum();
-    let mut acc = 0.0;
+    let norm = two_tailed_mass(center, lo, hi);
     let u = f64::from(u);
-    for k in lo..hi {
+    let mut acc = 0.0;
+    let mut k = lo;
+    while k < hi {
         acc += two_tailed_weight(center, k) / norm;
-        if u < acc {
+        // Past 2^-64 of the mass the sum cannot grow towards u (rounding): the last term.
+        if u < acc || k > center.saturating_add(64) {
             return k;
         }
+        k += 1;
     }
     hi
 }
@@ -51,10 +89,11 @@ pub struct Change {
 }
 
 /// The added lengths allowed when `kept` vertices stay: the new path's vertex count
-/// kept + added - 1 within the set's limits.
+/// kept + added - 1 within the set's limits (no upper one unless the user gave a depth cap:
+/// then hi is `usize::MAX`, or near it).
 fn added_range(set: &MutationSet, kept: usize) -> Option<(usize, usize)> {
     let lo = (set.min_vertices + 1).saturating_sub(kept).max(1);
-    let hi = (set.max_vertices + 1).checked_sub(kept)?;
+    let hi = set.max_vertices.saturating_add(1).checked_sub(kept)?;
     (lo <= hi).then_some((lo, hi))
 }
 

@@ -7,8 +7,7 @@ use super::path_mutation::LANE_ACCEPT;
 use crate::components::CHUNK;
 use crate::integrators::path_mlt::{MutationCounts, PathMltState};
 use crate::mlt::Splat;
-use crate::mlt::path_chains::chunk_starts;
-use crate::mlt::path_space::MAX_VERTICES;
+use crate::mlt::path_chains::{INLINE_VERTICES, chunk_starts, copy_path};
 use crate::pipeline::Flow;
 use rayon::prelude::*;
 
@@ -108,29 +107,28 @@ crate::system! {
         *steps_left -= 1;
         let n = chains.chains();
         let starts = chunk_starts(n);
-        let end = n * MAX_VERTICES;
+        let end = n * INLINE_VERTICES;
         let current = chains.current.split_mut(&starts, end);
         let proposal = chains.proposal.split_mut(&starts, end);
         let accepted = &chains.accepted;
-        let (plen, pf, ppix, ptarget) = (&chains.proposal_len, &chains.proposal_f, &chains.proposal_pixel, &chains.proposal_target);
+        let (plen, pf, ppix, ptarget, poverflow) = (&chains.proposal_len, &chains.proposal_f, &chains.proposal_pixel, &chains.proposal_target, &chains.proposal_overflow);
         let taken: usize = current
             .into_par_iter()
             .zip(proposal)
+            .zip(chains.current_overflow.par_chunks_mut(CHUNK))
             .zip(chains.current_len.par_chunks_mut(CHUNK))
             .zip(chains.current_f.par_chunks_mut(CHUNK))
             .zip(chains.current_pixel.par_chunks_mut(CHUNK))
             .zip(chains.current_target.par_chunks_mut(CHUNK))
             .enumerate()
-            .map(|(c, (((((mut cur, prop), len), f), pix), target))| {
+            .map(|(c, ((((((mut cur, prop), overflow), len), f), pix), target))| {
                 let mut taken = 0;
                 for local in 0..len.len() {
                     let i = c * CHUNK + local;
                     if !accepted[i] {
                         continue;
                     }
-                    for v in local * MAX_VERTICES..local * MAX_VERTICES + plen[i] as usize {
-                        cur.set(v, prop.get(v));
-                    }
+                    copy_path(&prop, &poverflow[i], &mut cur, &mut overflow[local], local, plen[i] as usize);
                     len[local] = plen[i];
                     f[local] = pf[i];
                     pix[local] = ppix[i];

@@ -5,7 +5,8 @@
 use crate::components::CHUNK;
 use crate::integrators::path_mlt::{PathMltSettings, PathMltState};
 use crate::mlt::path_chains::{
-    MutationKind, MutationSet, PathChains, Proposal, chunk_starts, load_path, store_path,
+    INLINE_VERTICES, MutationKind, MutationSet, PathChains, Proposal, chunk_starts, load_path,
+    path_len, store_path,
 };
 use crate::mlt::path_space::{PathSpace, StepNumbers};
 use crate::path::Vertex;
@@ -75,22 +76,21 @@ fn choose(
     let ps = PathSpace::new(data);
     let n = chains.chains();
     let starts = chunk_starts(n);
-    let stores = chains
-        .current
-        .split_mut(&starts, n * crate::mlt::path_space::MAX_VERTICES);
+    let stores = chains.current.split_mut(&starts, n * INLINE_VERTICES);
     let set = &settings.mutations;
     stores
         .into_par_iter()
+        .zip(chains.current_overflow.par_chunks(CHUNK))
         .zip(chains.kind.par_chunks_mut(CHUNK))
         .zip(chains.suitable.par_chunks_mut(CHUNK))
         .zip(chains.step_key.par_chunks_mut(CHUNK))
         .zip(chains.current_len.par_chunks(CHUNK))
         .enumerate()
-        .for_each(|(c, ((((store, kind), count), key), len))| {
+        .for_each(|(c, (((((store, overflow), kind), count), key), len))| {
             for local in 0..kind.len() {
                 let chain = c * CHUNK + local;
                 key[local] = crate::mlt::step_key(settings.seed, chain, step);
-                let x = load_path(&store.view(), local, len[local] as usize);
+                let x = load_path(&store.view(), &overflow[local], local, len[local] as usize);
                 let options = if x.len() >= 2 {
                     suitable(&ps, set, &x)
                 } else {
@@ -116,18 +116,20 @@ pub fn run(
     let ps = PathSpace::new(data);
     let n = chains.chains();
     let starts = chunk_starts(n);
-    let end = n * crate::mlt::path_space::MAX_VERTICES;
+    let end = n * INLINE_VERTICES;
     let current = chains.current.split_mut(&starts, end);
     let proposal = chains.proposal.split_mut(&starts, end);
-    let (kinds, suitable_counts, keys, lens) = (
+    let (kinds, suitable_counts, keys, lens, current_overflow) = (
         &chains.kind,
         &chains.suitable,
         &chains.step_key,
         &chains.current_len,
+        &chains.current_overflow,
     );
     let made: usize = current
         .into_par_iter()
         .zip(proposal)
+        .zip(chains.proposal_overflow.par_chunks_mut(CHUNK))
         .zip(chains.proposal_len.par_chunks_mut(CHUNK))
         .zip(chains.proposal_f.par_chunks_mut(CHUNK))
         .zip(chains.proposal_pixel.par_chunks_mut(CHUNK))
@@ -135,7 +137,7 @@ pub fn run(
         .zip(chains.ratio.par_chunks_mut(CHUNK))
         .enumerate()
         .map(
-            |(c, ((((((cur, mut prop), plen), pf), ppix), ptarget), ratio))| {
+            |(c, (((((((cur, mut prop), poverflow), plen), pf), ppix), ptarget), ratio))| {
                 let mut made = 0;
                 for local in 0..plen.len() {
                     let chain = c * CHUNK + local;
@@ -146,7 +148,12 @@ pub fn run(
                     pf[local] = DVec3::ZERO;
                     ptarget[local] = 0.0;
                     ratio[local] = 0.0;
-                    let x = load_path(&cur.view(), local, lens[chain] as usize);
+                    let x = load_path(
+                        &cur.view(),
+                        &current_overflow[chain],
+                        local,
+                        lens[chain] as usize,
+                    );
                     if x.len() < 2 {
                         continue;
                     }
@@ -161,8 +168,8 @@ pub fn run(
                     if back == 0 {
                         continue;
                     }
-                    store_path(&mut prop, local, &p.path);
-                    plen[local] = p.path.len() as u8;
+                    store_path(&mut prop, &mut poverflow[local], local, &p.path);
+                    plen[local] = path_len(p.path.len());
                     pf[local] = f;
                     ppix[local] = pixel;
                     ptarget[local] = PathSpace::target(f);

@@ -19,8 +19,8 @@ use crate::integrators::bdpt::BdptState;
 use crate::integrators::bdpt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, camera_vertex_dim};
 use crate::integrators::path_mlt::PathMltState;
 use crate::math::luminance;
-use crate::mlt::path_chains::{chunk_starts, store_path};
-use crate::mlt::path_space::{MAX_VERTICES, Path, PathSpace};
+use crate::mlt::path_chains::{INLINE_VERTICES, chunk_starts, path_len, store_path};
+use crate::mlt::path_space::{Path, PathSpace};
 use crate::path::{Vertex, VertexKind};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Stream, mix64};
@@ -94,13 +94,13 @@ crate::system! {
         }
         *seed_mismatches = mismatches;
         let starts = chunk_starts(n);
-        let mut stores = chains.current.split_mut(&starts, n * MAX_VERTICES);
+        let mut stores = chains.current.split_mut(&starts, n * INLINE_VERTICES);
         let mut live = 0;
         for (i, path) in paths.iter().enumerate() {
             let c = i / crate::components::CHUNK;
             let local = i % crate::components::CHUNK;
-            store_path(&mut stores[c], local, path);
-            chains.current_len[i] = path.len() as u8;
+            store_path(&mut stores[c], &mut chains.current_overflow[i], local, path);
+            chains.current_len[i] = path_len(path.len());
             match ps.contribution(path) {
                 Some((f, pixel)) => {
                     chains.current_f[i] = f;
