@@ -246,6 +246,8 @@ pub struct Bootstrap {
     pub replay_mismatches: usize,
     /// Evaluations the next normalisation wave makes (0: none pending; path-space MLT).
     pub refine_len: usize,
+    /// Evaluations made by normalisation waves so far (numbered after the bootstrap's).
+    pub refined: u64,
 }
 
 /// The state of a Metropolis render: the chains and the BDPT state that evaluates them.

@@ -473,7 +473,7 @@ crate::system! {
             unreachable!("MLT evaluates primary samples")
         };
         let len = (bootstrap.refine_len as u64).min(store.slots() as u64);
-        let first = bootstrap.evaluated;
+        let first = bootstrap.evaluated + bootstrap.refined;
         let items: Vec<u64> = (first..first + len).collect();
         fill_vectors(store, settings, &items);
         let groups = settings.groups() as u64;
@@ -497,7 +497,7 @@ crate::system! {
     run {
         let n = wave.len;
         let groups = settings.groups() as u64;
-        let first = bootstrap.evaluated;
+        let first = bootstrap.evaluated + bootstrap.refined;
         // Per CHUNK in parallel, the chunks in order: the same sums for any thread count.
         let per_chunk: Vec<Vec<(f64, u64)>> = contributions.target[..n]
             .par_chunks(CHUNK)
@@ -520,7 +520,7 @@ crate::system! {
             }
         }
         normalisation.add_evaluations(&total);
-        bootstrap.evaluated += n as u64;
+        bootstrap.refined += n as u64;
         bootstrap.refine_len = 0;
         let found = contributions.target[..n].iter().filter(|&&t| t > 0.0).count();
         Flow::new(n, found)
