@@ -244,10 +244,6 @@ pub struct Bootstrap {
     pub started: Option<std::time::Instant>,
     /// Seeds whose replay did not give their bootstrap weight (0: the numbers replay exactly).
     pub replay_mismatches: usize,
-    /// Evaluations the next normalisation wave makes (0: none pending; path-space MLT).
-    pub refine_len: usize,
-    /// Evaluations made by normalisation waves so far (numbered after the bootstrap's).
-    pub refined: u64,
 }
 
 /// The state of a Metropolis render: the chains and the BDPT state that evaluates them.
@@ -388,9 +384,8 @@ impl MltState {
             (
                 "normalisation",
                 format!(
-                    "b = {:.6} from {} evaluations ({} of them large steps)",
+                    "b = {:.6} from the bootstrap and {} large steps",
                     self.normalisation(),
-                    self.normalisation.counts.iter().sum::<u64>(),
                     self.normalisation.large_steps
                 ),
             ),
@@ -457,18 +452,6 @@ pub fn bootstrap_nodes() -> Vec<Node<MltState>> {
         evaluation(),
         Node::system(gather::chain_contributions::GatherChainContributions),
         Node::system(bootstrap::AdoptSeeds),
-    ]
-}
-
-/// One wave of further bootstrap-like evaluations whose targets refine b (path-space MLT:
-/// its chains have no large steps), `bootstrap.refine_len` of them.
-pub fn normalisation_nodes() -> Vec<Node<MltState>> {
-    use mutate::bootstrap;
-    vec![
-        Node::system(bootstrap::BeginNormalisationWave),
-        evaluation(),
-        Node::system(gather::chain_contributions::GatherChainContributions),
-        Node::system(bootstrap::AddNormalisationWeights),
     ]
 }
 

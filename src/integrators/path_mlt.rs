@@ -47,11 +47,6 @@ use crate::systems::mutate::{
 use glam::DVec3;
 use std::sync::Arc;
 
-/// Each pass after the seeding evaluates one BDPT sample like the bootstrap's per this many
-/// pixels, and b is the mean over them and the bootstrap (measured on torus_glass at 256x256:
-/// 4096 evaluations a pass cost about a tenth of a pass of 65536 mutations).
-pub const PIXELS_PER_NORMALISATION_EVALUATION: u64 = 16;
-
 /// Mitsuba's samples per pixel for the direct illumination rendered apart.
 pub const DEFAULT_DIRECT_SPP: u32 = 16;
 
@@ -128,7 +123,7 @@ pub struct PathMltState {
     pub seeded: bool,
     pub seed_mismatches: usize,
     pub chains: PathChains,
-    /// What every splat of a step is worth, in units of b: 1 / chains with a seed.
+    /// What every splat of a step is worth: b / chains.
     pub splat_scale: f32,
     pub step: u64,
     pub steps_left: u64,
@@ -227,16 +222,6 @@ pub fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState
         queue_len: |s: &PathMltState| s.steps_left as usize,
         body: step,
     });
-    nodes.push(Node::Loop {
-        name: "normalisation_waves",
-        queue_len: |s: &PathMltState| s.seeding.bootstrap.refine_len,
-        body: vec![Node::nested(
-            Graph::new("normalisation", mlt::normalisation_nodes()),
-            "seeding",
-            |s: &mut PathMltState| &mut s.seeding,
-            <MltState as IntegratorState>::INPUTS,
-        )],
-    });
     Graph::new("mlt", nodes)
 }
 
@@ -293,13 +278,6 @@ impl PassState for PathMltState {
 
     fn begin_pass(&mut self, _pass: u64) {
         self.steps_left = self.steps_per_pass;
-        if self.seeded {
-            // b is refined as the render goes on (one heavy bootstrap evaluation is averaged
-            // away, not frozen): a wave of bootstrap-like evaluations per pass, one per
-            // `PIXELS_PER_NORMALISATION_EVALUATION` pixels (about a tenth of a pass's time).
-            self.seeding.bootstrap.refine_len =
-                (self.pixels / PIXELS_PER_NORMALISATION_EVALUATION).max(256) as usize;
-        }
     }
 
     fn report(&self) -> Vec<(&'static str, String)> {
@@ -334,7 +312,7 @@ impl PassState for PathMltState {
             ("acceptance by mutation", per_kind.join(", ")),
         ];
         let mut inner = self.seeding.report_lines();
-        inner.retain(|(k, _)| *k == "bootstrap" || *k == "seeds" || *k == "normalisation");
+        inner.retain(|(k, _)| *k == "bootstrap" || *k == "seeds");
         lines.extend(inner);
         lines.push((
             "seed paths",
@@ -356,11 +334,10 @@ impl PassState for PathMltState {
             self.data.scene.camera.width as usize,
             self.data.scene.camera.height as usize,
         );
-        // The splats are in units of b: scaled by b as the render left it.
         let scale = if self.step == 0 {
             0.0
         } else {
-            self.seeding.normalisation() * self.pixels as f64 / self.step as f64
+            self.pixels as f64 / self.step as f64
         };
         let mut sums: Vec<DVec3> = self.splat_sums.iter().map(|v| *v * scale).collect();
         let mut nonfinite = self.nonfinite;

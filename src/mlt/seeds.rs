@@ -231,15 +231,6 @@ impl Normalisation {
         }
     }
 
-    /// Adds further evaluations like the bootstrap's, per group: `(sum, count)` each
-    /// (path-space MLT, which has no large steps, refines b with them).
-    pub fn add_evaluations(&mut self, per_group: &[(f64, u64)]) {
-        for (g, &(sum, count)) in per_group.iter().enumerate() {
-            self.sums[g] += sum;
-            self.counts[g] += count;
-        }
-    }
-
     /// b_k (0 for a group with no samples).
     pub fn group(&self, group: usize) -> f64 {
         match self.counts[group] {

@@ -115,8 +115,8 @@ crate::system! {
             }
         }
         // Chains without a seed (none, in practice: `seed_mismatches` says) never splat, so the
-        // others share b (applied when the image is developed: b is refined as it renders).
-        *splat_scale = (1.0 / live.max(1) as f64) as f32;
+        // others share b.
+        *splat_scale = (selection.total_normalisation() / live.max(1) as f64) as f32;
         Flow::new(n, live)
     }
 }
