@@ -1,9 +1,12 @@
 //! Veach's bidirectional mutation: delete a subpath of the current path (its length from a
-//! two-tailed geometric distribution about 2 edges, its place uniform), regrow a new one of a
-//! length drawn about the deleted one's, s vertices from the light end and the rest from the
-//! camera end, and join them by one edge. Its transition density sums the densities of every
-//! split s that could have made the new vertices (each chosen with probability 1 / (added
-//! edges)), times the discrete probabilities of the deletion and the added length.
+//! two-tailed geometric distribution about 2 edges, at most the path's, its place uniform),
+//! regrow a new one of a length drawn about the deleted one's (two-tailed geometric with no
+//! upper bound, as Mitsuba's, unless the user gave `--max-depth`: paths of any length are
+//! reachable), s vertices from the light end and the rest from the camera end, and join them
+//! by one edge. Its transition density sums the densities of every split s that could have
+//! made the new vertices (each chosen with probability 1 / (added edges)), times the discrete
+//! probabilities of the deletion and the added length, which both directions of a move take
+//! from `two_tailed`.
 
 use crate::bsdf::TransportMode;
 use crate::integrators::path_mlt::PathMltState;

@@ -110,6 +110,35 @@ pub fn block_luminance_stats_of(images: &[Image], block: usize) -> Vec<(f64, f64
         .collect()
 }
 
+/// Asserts that every block of `images` (one render per seed) agrees with the same block of
+/// `reference` (`block_luminance_stats` of the reference's renders) within `z` combined standard
+/// errors, and that each block's standard error is below `max_error` of its value (so the test
+/// can fail). Seeds are compared, not pixels: MLT's pixels are correlated within a render.
+pub fn assert_blocks_agree(
+    what: &str,
+    images: &[Image],
+    reference: &[(f64, f64)],
+    max_error: f64,
+    z: f64,
+) {
+    for (i, ((m, s), (rm, rs))) in block_luminance_stats(images)
+        .into_iter()
+        .zip(reference)
+        .enumerate()
+    {
+        let se = (s * s + rs * rs).sqrt();
+        assert!(
+            se < max_error * rm,
+            "{what} block {i}: standard error {se} too large ({m} vs {rm})"
+        );
+        assert!(
+            (m - rm).abs() <= z * se,
+            "{what} block {i}: {m} against {rm}, {:.2} standard errors",
+            (m - rm).abs() / se
+        );
+    }
+}
+
 pub fn render_bdpt(
     scene: stagelight::scene::PreparedScene,
     spp: u64,

@@ -5,7 +5,8 @@
 //! accepted.
 
 use crate::common::{
-    block_luminance_stats, block_means, load_small, load_test_scene, render_bdpt, render_pt,
+    assert_blocks_agree, block_luminance_stats, block_means, load_small, load_test_scene,
+    render_bdpt, render_pt,
 };
 use stagelight::film::Image;
 use stagelight::integrators::bdpt::BdptSettings;
@@ -177,22 +178,7 @@ fn mlt_block_means_agree_with_bdpt() {
             let images: Vec<Image> = (0..SEEDS)
                 .map(|seed| image(&run(scene, SIZE, settings(multiplexed, seed, DEPTH, 32))))
                 .collect();
-            for (i, ((m, s), (rm, rs))) in block_luminance_stats(&images)
-                .into_iter()
-                .zip(&reference)
-                .enumerate()
-            {
-                let se = (s * s + rs * rs).sqrt();
-                assert!(
-                    se < 0.35 * rm,
-                    "{scene} {name} block {i}: standard error {se} too large ({m} vs {rm})"
-                );
-                assert!(
-                    (m - rm).abs() <= 5.0 * se,
-                    "{scene} {name} block {i}: {m} vs {rm}, {:.2} standard errors",
-                    (m - rm).abs() / se
-                );
-            }
+            assert_blocks_agree(&format!("{scene} {name}"), &images, &reference, 0.35, 5.0);
         }
     }
 }

@@ -9,7 +9,8 @@
 //! the old cap of 16).
 
 use crate::common::{
-    block_luminance_stats, block_luminance_stats_of, load_small, render_bdpt, render_pt,
+    assert_blocks_agree, block_luminance_stats, block_luminance_stats_of, load_small, render_bdpt,
+    render_pt,
 };
 use stagelight::components::CHUNK;
 use stagelight::film::Image;
@@ -253,22 +254,7 @@ fn path_mlt_block_means_agree_with_bdpt() {
             let images: Vec<Image> = (0..SEEDS)
                 .map(|seed| image(run(scene, SIZE, seed, DEPTH, 4, mutations, 32)))
                 .collect();
-            for (i, ((m, s), (rm, rs))) in block_luminance_stats(&images)
-                .into_iter()
-                .zip(&reference)
-                .enumerate()
-            {
-                let se = (s * s + rs * rs).sqrt();
-                assert!(
-                    se < 0.35 * rm,
-                    "{scene} {name} block {i}: standard error {se} too large ({m} vs {rm})"
-                );
-                assert!(
-                    (m - rm).abs() <= 5.0 * se,
-                    "{scene} {name} block {i}: {m} vs {rm}, {:.2} standard errors",
-                    (m - rm).abs() / se
-                );
-            }
+            assert_blocks_agree(&format!("{scene} {name}"), &images, &reference, 0.35, 5.0);
         }
     }
 }

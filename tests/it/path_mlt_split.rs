@@ -4,7 +4,7 @@
 //! every 16x16 block agrees with PT's within the spread of their seeds. MLT's pixels are
 //! correlated within a seed, so seeds are compared, not pixels.
 
-use crate::common::{block_luminance_stats, load_test_scene, render_pt};
+use crate::common::{assert_blocks_agree, block_luminance_stats, load_test_scene, render_pt};
 use stagelight::film::Image;
 use stagelight::integrators::driver::{PassState, run_passes};
 use stagelight::integrators::path_mlt::{PathMltSettings, PathMltState};
@@ -48,21 +48,7 @@ fn path_mlt_direct_split_agrees_with_pt_per_block_through_glass() {
     let reference = block_luminance_stats(&pt);
     for direct_spp in [16, 0] {
         let images: Vec<Image> = (0..SEEDS).map(|seed| mlt(seed, direct_spp, 32)).collect();
-        for (i, ((m, s), (rm, rs))) in block_luminance_stats(&images)
-            .into_iter()
-            .zip(&reference)
-            .enumerate()
-        {
-            let se = (s * s + rs * rs).sqrt();
-            assert!(
-                se < 0.1 * rm,
-                "direct spp {direct_spp}, block {i}: standard error {se} too large ({m} vs {rm})"
-            );
-            assert!(
-                (m - rm).abs() <= 5.0 * se,
-                "direct spp {direct_spp}, block {i}: {m} against PT's {rm}, {:.2} standard errors",
-                (m - rm).abs() / se
-            );
-        }
+        let what = format!("direct spp {direct_spp}");
+        assert_blocks_agree(&what, &images, &reference, 0.1, 5.0);
     }
 }
