@@ -312,7 +312,7 @@ impl PassState for PathMltState {
             ("acceptance by mutation", per_kind.join(", ")),
         ];
         let mut inner = self.seeding.report_lines();
-        inner.retain(|(k, _)| *k == "bootstrap" || *k == "seeds");
+        inner.retain(|(k, _)| matches!(*k, "bootstrap" | "seeds" | "warning"));
         lines.extend(inner);
         lines.push((
             "seed paths",

@@ -16,14 +16,14 @@ pub struct GatherChainContributions;
 crate::system! {
     GatherChainContributions = "gather_chain_contributions";
     on MltState {
-        read wave = bdpt.wave, shadow = bdpt.shadow, connections = bdpt.connections, starts = bdpt.connection_start, radiance = bdpt.sample_radiance, sample_pixel = bdpt.sample_pixel;
+        read wave = bdpt.wave, shadow = bdpt.shadow, connections = bdpt.connections, starts = bdpt.connection_start, radiance = bdpt.sample_radiance, sample_pixel = bdpt.sample_pixel, multiplex = bdpt.multiplex;
         write out = chains.proposal_contributions;
     }
     run {
         let n = wave.len;
         // The sample's own pixel and one per light-tracing splat: widen the columns for the
-        // rare deep sample that has more than they hold.
-        let most = (0..n)
+        // rare deep sample that has more than they hold (a multiplexed sample has one).
+        let most = if !multiplex.is_empty() { 1 } else { (0..n)
             .into_par_iter()
             .with_min_len(crate::components::CHUNK)
             .map(|k| {
@@ -32,7 +32,7 @@ crate::system! {
                     .count()
             })
             .max()
-            .unwrap_or(0);
+            .unwrap_or(0) };
         out.ensure_stride(most);
         let made: usize = out
             .par_chunks_mut()

@@ -168,57 +168,6 @@ pub fn timed_waves_done(pace: BootstrapPace, budget: f64, chains: u64) -> bool {
         > TIMED_PLAN * BOOTSTRAP_TIME_SHARE * budget
 }
 
-#[cfg(test)]
-mod timed_tests {
-    use super::*;
-
-    #[test]
-    fn a_timed_bootstrap_stays_within_its_share() {
-        let budget = 10.0;
-        // 100k evaluations a second: the share (1 s, planned to 0.85 s) holds about 85k
-        // evaluations with the replay of the chains.
-        let pace = |spent: f64| BootstrapPace {
-            spent,
-            evaluated: (spent * 1e5) as u64,
-        };
-        assert_eq!(timed_wave_len(pace(0.0), budget, 1000), FIRST_TIMED_WAVE);
-        let first = pace(0.04096);
-        let next = timed_wave_len(first, budget, 1000);
-        assert!((79_000..81_000).contains(&next), "{next}");
-        // After that wave the share is spent (the replay no longer fits with another wave).
-        let after = pace(0.04096 + next as f64 / 1e5);
-        assert!(after.spent + 1000.0 / 1e5 <= 0.1 * budget);
-        assert!(timed_waves_done(after, budget, 1000));
-        assert!(!timed_waves_done(first, budget, 1000));
-        // Chains that cannot all be replayed in the share: one more wave of the least size.
-        assert_eq!(timed_wave_len(first, budget, 200_000), CHUNK as u64);
-        assert!(timed_waves_done(first, budget, 200_000));
-    }
-
-    #[test]
-    fn timed_chains_take_their_steps_in_the_budget() {
-        let s = MltSettings::from_render(&crate::integrators::RenderSettings::default(), false);
-        let pixels = 256 * 256;
-        let pace = BootstrapPace {
-            spent: 0.1,
-            evaluated: 40_000,
-        };
-        // 400k evaluations/s, 200k mutations/s, 0.9 x 5 s: 900k mutations, 64 steps each.
-        assert_eq!(timed_chains(pace, &s, pixels, 5.0), 900_000 / 64);
-        // Never more than the rule's, never fewer than MIN_CHAINS, and the rule's until timed.
-        assert_eq!(timed_chains(pace, &s, pixels, 1e6), s.chain_count(pixels));
-        assert_eq!(timed_chains(pace, &s, pixels, 0.01), MIN_CHAINS);
-        let untimed = BootstrapPace {
-            spent: 0.0,
-            evaluated: 0,
-        };
-        assert_eq!(
-            timed_chains(untimed, &s, pixels, 5.0),
-            s.chain_count(pixels)
-        );
-    }
-}
-
 pub struct CollectBootstrapWeights;
 
 crate::system! {
@@ -317,6 +266,52 @@ pub fn automatic_bootstrap_done(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_timed_bootstrap_stays_within_its_share() {
+        let budget = 10.0;
+        // 100k evaluations a second: the share (1 s, planned to 0.85 s) holds about 85k
+        // evaluations with the replay of the chains.
+        let pace = |spent: f64| BootstrapPace {
+            spent,
+            evaluated: (spent * 1e5) as u64,
+        };
+        assert_eq!(timed_wave_len(pace(0.0), budget, 1000), FIRST_TIMED_WAVE);
+        let first = pace(0.04096);
+        let next = timed_wave_len(first, budget, 1000);
+        assert!((79_000..81_000).contains(&next), "{next}");
+        // After that wave the share is spent (the replay no longer fits with another wave).
+        let after = pace(0.04096 + next as f64 / 1e5);
+        assert!(after.spent + 1000.0 / 1e5 <= 0.1 * budget);
+        assert!(timed_waves_done(after, budget, 1000));
+        assert!(!timed_waves_done(first, budget, 1000));
+        // Chains that cannot all be replayed in the share: one more wave of the least size.
+        assert_eq!(timed_wave_len(first, budget, 200_000), CHUNK as u64);
+        assert!(timed_waves_done(first, budget, 200_000));
+    }
+
+    #[test]
+    fn timed_chains_take_their_steps_in_the_budget() {
+        let s = MltSettings::from_render(&crate::integrators::RenderSettings::default(), false);
+        let pixels = 256 * 256;
+        let pace = BootstrapPace {
+            spent: 0.1,
+            evaluated: 40_000,
+        };
+        // 400k evaluations/s, 200k mutations/s, 0.9 x 5 s: 900k mutations, 64 steps each.
+        assert_eq!(timed_chains(pace, &s, pixels, 5.0), 900_000 / 64);
+        // Never more than the rule's, never fewer than MIN_CHAINS, and the rule's until timed.
+        assert_eq!(timed_chains(pace, &s, pixels, 1e6), s.chain_count(pixels));
+        assert_eq!(timed_chains(pace, &s, pixels, 0.01), MIN_CHAINS);
+        let untimed = BootstrapPace {
+            spent: 0.0,
+            evaluated: 0,
+        };
+        assert_eq!(
+            timed_chains(untimed, &s, pixels, 5.0),
+            s.chain_count(pixels)
+        );
+    }
 
     /// `n` weights per group, one in `every` of them 1, the rest 0.
     fn weights(groups: usize, n: usize, every: usize) -> Vec<Vec<f32>> {
