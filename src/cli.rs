@@ -45,6 +45,19 @@ pub enum Command {
     Slurm(SlurmArgs),
     /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
     Diff { image: PathBuf, reference: PathBuf },
+    /// Writes the report's interactive viewer for any EXRs of one size: flip to the reference,
+    /// error maps, synchronised zoom, exposure, pixel readout. PAGE.html opens from the disk;
+    /// the images' floats go into PAGE_data/ beside it.
+    View {
+        /// The images; the first is the reference unless --reference names one.
+        #[arg(required = true, value_name = "IMAGE.exr")]
+        images: Vec<PathBuf>,
+        /// The image flips go to and error maps are measured against.
+        #[arg(long, value_name = "REF.exr")]
+        reference: Option<PathBuf>,
+        #[arg(short, long, value_name = "PAGE.html")]
+        output: PathBuf,
+    },
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
     Bench {
         #[arg(required_unless_present = "big", conflicts_with = "big")]
@@ -773,6 +786,18 @@ fn run(cli: Cli) -> Result<i32> {
             no_final_gather,
         } => {
             crate::commands::graph(&scene, integrator, !no_final_gather)?;
+            Ok(0)
+        }
+        Command::View {
+            images,
+            reference,
+            output,
+        } => {
+            crate::viewer::view::view(&crate::viewer::view::ViewOptions {
+                images,
+                reference,
+                output,
+            })?;
             Ok(0)
         }
         Command::Diff { image, reference } => {

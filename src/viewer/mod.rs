@@ -12,6 +12,8 @@
 //! zlib-compressed and written as base64. The page inflates it with the browser's
 //! `DecompressionStream`. Lossless: the floats are the image's, bit for bit.
 
+pub mod view;
+
 use crate::film::Image;
 use serde::Serialize;
 use std::path::{Path, PathBuf};

@@ -591,18 +591,28 @@
       width + "×" + height + ", decoded from their float32 data." +
       (window.stagelightErrors.length ? " Errors: " + window.stagelightErrors.join("; ") : "");
     statusLine.dataset.decoded = floatsById.size;
+    // From navigation to every image decoded and drawn.
+    statusLine.dataset.loadMs = Math.round(performance.now());
+    statusLine.title = "loaded in " + Math.round(performance.now()) + " ms";
     statusLine.dataset.ready = "1";
     if (new URLSearchParams(location.search).has("selftest")) runSelfTest();
     else if (new URLSearchParams(location.search).has("demo")) demo();
   }).catch((error) => reportError(String(error && error.message ? error.message : error)));
 
-  // ---- The state of the browser test's screenshot: zoomed in, cursor on a pixel.
+  // ---- A state to show (?demo=ZOOM, with group, method, exposure, error=1, flip=1): the
+  // browser test's screenshot and the README's.
 
   function demo() {
     const params = new URLSearchParams(location.search);
     const group = params.get("group");
     if (group !== null && groups.includes(group)) selectGroup(group);
     if (params.has("method")) selectMethod(params.get("method"));
+    if (params.has("exposure")) {
+      exposureInput.value = params.get("exposure");
+      exposureInput.dispatchEvent(new Event("input"));
+    }
+    if (params.get("error") === "1") setErrorMode(true);
+    if (params.get("flip") === "1") setFlipped(true);
     zoomAtCentre(parseFloat(params.get("demo")) || 2);
     const box = mainPane.canvas.getBoundingClientRect();
     mainPane.canvas.dispatchEvent(new MouseEvent("mousemove", {

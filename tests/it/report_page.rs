@@ -154,12 +154,14 @@ fn probe_pixels(image: &Image) -> Vec<(usize, usize)> {
     chosen
 }
 
-/// Everything the page must have done, checked against the report folder `dir` (a compare
-/// of pt and bdpt at 1 and 2 spp). Err names the first problem.
-fn check_page(chromium: &Path, dir: &Path) -> Result<(), String> {
-    let shown = Image::read_exr(&dir.join("runs/pt_1_spp.exr")).map_err(|e| e.to_string())?;
-    let reference = Image::read_exr(&dir.join("reference.exr")).map_err(|e| e.to_string())?;
-    let probes = probe_pixels(&shown);
+/// Opens `html` in Chromium with the self-test reading out `probes`; checks that no script
+/// failed and that the page decoded `images` images. Returns what the self-test saw.
+fn self_test(
+    chromium: &Path,
+    html: &Path,
+    probes: &[(usize, usize)],
+    images: usize,
+) -> Result<serde_json::Value, String> {
     let query = format!(
         "selftest={}",
         probes
@@ -168,13 +170,8 @@ fn check_page(chromium: &Path, dir: &Path) -> Result<(), String> {
             .collect::<Vec<_>>()
             .join(";")
     );
-    let run = run_chromium(
-        chromium,
-        &dir.join("browser-profile"),
-        &dir.join("index.html"),
-        &query,
-        &["--dump-dom"],
-    );
+    let profile = html.with_file_name("browser-profile");
+    let run = run_chromium(chromium, &profile, html, &query, &["--dump-dom"]);
     if let Some(line) = run.stderr.lines().find(|l| l.contains("Uncaught")) {
         return Err(format!("a script error in the browser's console: {line}"));
     }
@@ -186,7 +183,7 @@ fn check_page(chromium: &Path, dir: &Path) -> Result<(), String> {
     if attribute(status_tag, "data-ready") != Some("1") {
         return Err(format!("the page never finished loading: {status_text}"));
     }
-    if attribute(status_tag, "data-decoded") != Some("5") {
+    if attribute(status_tag, "data-decoded") != Some(images.to_string().as_str()) {
         return Err(format!("not every image decoded: {status_tag}"));
     }
     let (_, json) = element_text(&run.stdout, "<pre id=\"selftest\"", "</pre>")
@@ -196,6 +193,45 @@ fn check_page(chromium: &Path, dir: &Path) -> Result<(), String> {
     if seen["errors"].as_array().is_none_or(|e| !e.is_empty()) {
         return Err(format!("script errors: {}", seen["errors"]));
     }
+    Ok(seen)
+}
+
+/// Checks that the readout at `probes` showed `image`'s floats, bit for bit.
+fn check_readout(
+    seen: &serde_json::Value,
+    probes: &[(usize, usize)],
+    image: &Image,
+    name: &str,
+) -> Result<(), String> {
+    let shown = seen["probes"].as_array().ok_or("no probes")?;
+    if shown.len() != probes.len() {
+        return Err(format!(
+            "{} readouts for {} pixels",
+            shown.len(),
+            probes.len()
+        ));
+    }
+    for ((x, y), probe) in probes.iter().zip(shown) {
+        let exr = image.pixels[y * image.width + x];
+        let expected = vec![exr.x, exr.y, exr.z];
+        if (probe["x"].as_u64(), probe["y"].as_u64()) != (Some(*x as u64), Some(*y as u64))
+            || readout_floats(probe) != expected
+        {
+            return Err(format!(
+                "readout at ({x}, {y}): {probe}, but {name} has {expected:?}"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Everything the page must have done, checked against the report folder `dir` (a compare
+/// of pt and bdpt at 1 and 2 spp). Err names the first problem.
+fn check_page(chromium: &Path, dir: &Path) -> Result<(), String> {
+    let shown = Image::read_exr(&dir.join("runs/pt_1_spp.exr")).map_err(|e| e.to_string())?;
+    let reference = Image::read_exr(&dir.join("reference.exr")).map_err(|e| e.to_string())?;
+    let probes = probe_pixels(&shown);
+    let seen = self_test(chromium, &dir.join("index.html"), &probes, 5)?;
 
     // Every image decoded to its full float array, with the relMSE of results.csv: the page's
     // floats are the runs' own.
@@ -224,17 +260,7 @@ fn check_page(chromium: &Path, dir: &Path) -> Result<(), String> {
     }
 
     // The readout at the three pixels: the EXR's floats, bit for bit.
-    for ((x, y), probe) in probes.iter().zip(seen["probes"].as_array().unwrap()) {
-        let exr = shown.pixels[y * shown.width + x];
-        let expected = vec![exr.x, exr.y, exr.z];
-        if (probe["x"].as_u64(), probe["y"].as_u64()) != (Some(*x as u64), Some(*y as u64))
-            || readout_floats(probe) != expected
-        {
-            return Err(format!(
-                "readout at ({x}, {y}): {probe}, but runs/pt_1_spp.exr has {expected:?}"
-            ));
-        }
-    }
+    check_readout(&seen, &probes, &shown, "runs/pt_1_spp.exr")?;
 
     // The flip shows the reference, with its floats, and the button flips back.
     let flip = &seen["flip"];
@@ -397,4 +423,74 @@ fn broken_report_pages_fail_the_browser_check() {
     let problem = check_page(&chromium, &report).expect_err("a script error passes");
     eprintln!("script error: {problem}");
     assert!(problem.contains("no_such"), "{problem}");
+}
+
+#[test]
+fn view_writes_the_viewer_for_any_images() {
+    let Some(chromium) = chromium() else { return };
+    let report = small_report("view-page");
+    let html = report.join("pages/view.html");
+    let out = stagelight(&[
+        "view",
+        report.join("runs/bdpt_2_spp.exr").to_str().unwrap(),
+        report.join("runs/pt_2_spp.exr").to_str().unwrap(),
+        "--reference",
+        report.join("reference.exr").to_str().unwrap(),
+        "-o",
+        html.to_str().unwrap(),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(report.join("pages/view_data/reference.js").is_file());
+    let bdpt = Image::read_exr(&report.join("runs/bdpt_2_spp.exr")).unwrap();
+    let probes = probe_pixels(&bdpt);
+    let seen = self_test(&chromium, &html, &probes, 3).unwrap_or_else(|e| panic!("{e}"));
+    check_readout(&seen, &probes, &bdpt, "runs/bdpt_2_spp.exr").unwrap();
+    assert_eq!(seen["flip"]["shownWhenFlipped"], "reference", "{seen}");
+    assert_eq!(
+        seen["zoom"]["strip"],
+        serde_json::json!(["image-000", "image-001", "reference"])
+    );
+}
+
+#[test]
+fn view_refuses_bad_input_naming_the_file() {
+    let dir = temp_dir("view-bad-input");
+    let small = dir.join("small.exr");
+    let big = dir.join("big.exr");
+    Image::new(4, 3).write_exr(&small).unwrap();
+    Image::new(5, 3).write_exr(&big).unwrap();
+    std::fs::write(dir.join("junk.exr"), b"not an exr").unwrap();
+    let page = dir.join("page.html");
+    let page_arg = page.to_str().unwrap();
+    let cases: [(&[&str], &str); 4] = [
+        (&[small.to_str().unwrap()], "two images at least"),
+        (
+            &[small.to_str().unwrap(), big.to_str().unwrap()],
+            "big.exr: 5x3, but the reference",
+        ),
+        (
+            &[
+                small.to_str().unwrap(),
+                dir.join("junk.exr").to_str().unwrap(),
+            ],
+            "junk.exr",
+        ),
+        (
+            &[
+                small.to_str().unwrap(),
+                dir.join("missing.exr").to_str().unwrap(),
+            ],
+            "missing.exr",
+        ),
+    ];
+    for (images, message) in cases {
+        let mut args = vec!["view"];
+        args.extend(images);
+        args.extend(["-o", page_arg]);
+        let out = stagelight(&args);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {}", stderr(&out));
+        assert!(stderr(&out).contains(message), "{args:?}: {}", stderr(&out));
+        assert!(!stderr(&out).contains("panicked"), "{}", stderr(&out));
+    }
+    assert!(!page.exists());
 }
