@@ -162,7 +162,13 @@ pub fn results_table(c: &Comparison, labels: &[RunLabel]) -> ResultsTable {
                 image: Some(i),
                 cells: vec![
                     TableCell::text(label.method.clone()),
-                    TableCell::number(label.group.clone(), r.budget),
+                    // Sorted by the budget's number where the group is the budget (a preset's
+                    // photon groups sort as text).
+                    if label.group == format!("{} {}", r.budget, c.unit.suffix()) {
+                        TableCell::number(label.group.clone(), r.budget)
+                    } else {
+                        TableCell::text(label.group.clone())
+                    },
                     TableCell::number(sci(r.metrics.relmse), r.metrics.relmse),
                     TableCell::number(secs(r.wall), r.wall),
                     TableCell::number(r.passes.to_string(), r.passes as f64),

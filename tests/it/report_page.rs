@@ -460,6 +460,7 @@ fn view_refuses_bad_input_naming_the_file() {
     Image::new(4, 3).write_exr(&small).unwrap();
     Image::new(5, 3).write_exr(&big).unwrap();
     std::fs::write(dir.join("junk.exr"), b"not an exr").unwrap();
+    let (junk, missing) = (dir.join("junk.exr"), dir.join("missing.exr"));
     let page = dir.join("page.html");
     let page_arg = page.to_str().unwrap();
     let cases: [(&[&str], &str); 4] = [
@@ -469,17 +470,11 @@ fn view_refuses_bad_input_naming_the_file() {
             "big.exr: 5x3, but the reference",
         ),
         (
-            &[
-                small.to_str().unwrap(),
-                dir.join("junk.exr").to_str().unwrap(),
-            ],
+            &[small.to_str().unwrap(), junk.to_str().unwrap()],
             "junk.exr",
         ),
         (
-            &[
-                small.to_str().unwrap(),
-                dir.join("missing.exr").to_str().unwrap(),
-            ],
+            &[small.to_str().unwrap(), missing.to_str().unwrap()],
             "missing.exr",
         ),
     ];
