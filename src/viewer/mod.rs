@@ -294,12 +294,13 @@ pub fn escape_html(text: &str) -> String {
     out
 }
 
-/// JSON inside a `<script>`: "</" written as "<\/" so no string in it ends the element.
+/// JSON inside a `<script>`: "</" written as "<\/" and "<!--" as "<\u0021--" (both still JSON),
+/// so that no string in it ends the element.
 fn script_json(value: &impl Serialize) -> String {
     serde_json::to_string(value)
         .unwrap_or_else(|_| "null".into())
         .replace("</", "<\\/")
-        .replace("<!--", "<\\!--")
+        .replace("<!--", "<\\u0021--")
 }
 
 /// An SVG document as an element of the page: its XML declaration and doctype dropped.
