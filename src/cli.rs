@@ -1,4 +1,4 @@
-//! The `stagelight` command line: render, reference, merge, compare, diff and bench.
+//! The `stagelight` command line: render, reference, merge, compare, view, diff and bench.
 
 use crate::commands::bench::BenchOptions;
 use crate::commands::reference::ReferenceOptions;
@@ -34,7 +34,8 @@ pub enum Command {
     /// Renders a long reference, checkpointed: run it again to resume or extend it.
     Reference(ReferenceArgs),
     /// Renders each integrator at each budget and writes a report folder of speed against
-    /// error: results.csv, error_vs_time.png/.svg, grid.png, summary.md.
+    /// error: results.csv, error_vs_time.png/.svg, grid.png, summary.md, and index.html (an
+    /// interactive page over every run; open it from the disk in a browser).
     Compare(CompareArgs),
     /// Adds the partial films of shards (`render` or `reference` with --shard) into the
     /// image one machine would have made; each PART.exr's film is PART.exr.checkpoint.

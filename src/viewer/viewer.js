@@ -288,35 +288,40 @@
     drawAll();
   }
 
+  // One drag at a time, over whichever view it started in; the window follows it so that a
+  // drag may leave the view.
+  let drag = null;
+  window.addEventListener("mousemove", (event) => {
+    if (!drag) return;
+    const dx = event.clientX - drag.x;
+    const dy = event.clientY - drag.y;
+    if (Math.abs(dx) + Math.abs(dy) > 0) drag.moved = true;
+    view.centerX -= dx / view.zoom;
+    view.centerY -= dy / view.zoom;
+    drag.x = event.clientX;
+    drag.y = event.clientY;
+    drawSoon();
+  });
+  window.addEventListener("mouseup", () => {
+    if (!drag) return;
+    // A click (no drag) on a side-by-side view picks its method.
+    if (!drag.moved && !drag.pane.isMain) {
+      const entry = drag.pane.shownEntry();
+      if (entry !== reference) selectMethod(entry.method);
+    }
+    drag.pane.element.classList.remove("dragging");
+    drag = null;
+  });
+
   function attachPointer(pane) {
-    let drag = null;
     pane.canvas.addEventListener("wheel", (event) => {
       event.preventDefault();
       const lines = event.deltaMode === 1 ? 40 : event.deltaMode === 2 ? 400 : 1;
       zoomAbout(pane, event.clientX, event.clientY, Math.exp(-event.deltaY * lines * 0.002));
     }, { passive: false });
     pane.canvas.addEventListener("mousedown", (event) => {
-      drag = { x: event.clientX, y: event.clientY, moved: false };
+      drag = { pane, x: event.clientX, y: event.clientY, moved: false };
       pane.element.classList.add("dragging");
-    });
-    window.addEventListener("mousemove", (event) => {
-      if (!drag) return;
-      const dx = event.clientX - drag.x;
-      const dy = event.clientY - drag.y;
-      if (Math.abs(dx) + Math.abs(dy) > 0) drag.moved = true;
-      view.centerX -= dx / view.zoom;
-      view.centerY -= dy / view.zoom;
-      drag.x = event.clientX;
-      drag.y = event.clientY;
-      drawSoon();
-    });
-    window.addEventListener("mouseup", () => {
-      if (drag && !drag.moved && !pane.isMain) {
-        const entry = pane.shownEntry();
-        if (entry !== reference) selectMethod(entry.method);
-      }
-      drag = null;
-      pane.element.classList.remove("dragging");
     });
     pane.canvas.addEventListener("mousemove", (event) => {
       const point = imagePoint(pane, event.clientX, event.clientY);
@@ -691,6 +696,17 @@
       }),
       strip: panes.filter((p) => !p.isMain).map((p) => p.element.dataset.image),
     };
+    // A drag pans every view; a click on a side-by-side view shows its method.
+    const centreBefore = [view.centerX, view.centerY];
+    mainPane.canvas.dispatchEvent(new MouseEvent("mousedown", { clientX: 300, clientY: 300, bubbles: true }));
+    window.dispatchEvent(new MouseEvent("mousemove", { clientX: 340, clientY: 320 }));
+    window.dispatchEvent(new MouseEvent("mouseup", {}));
+    result.pan = { zoom: view.zoom, before: centreBefore, after: [view.centerX, view.centerY] };
+    const second = panes.filter((p) => !p.isMain)[1];
+    second.canvas.dispatchEvent(new MouseEvent("mousedown", { clientX: 5, clientY: 5, bubbles: true }));
+    window.dispatchEvent(new MouseEvent("mouseup", {}));
+    result.stripClick = { clicked: second.element.dataset.image, shown: mainPane.element.dataset.image };
+    selectMethod(imagesOfGroup(groups[0])[0].method);
     fit();
     const th = Array.from(document.querySelectorAll("#results-table th"));
     const relmseColumn = th.findIndex((h) => h.textContent.startsWith("relMSE"));

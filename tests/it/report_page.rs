@@ -1,7 +1,8 @@
 //! The report page in a real browser: headless Chromium opens a small comparison's
 //! index.html from the disk, the page's self-test (`?selftest=`) drives it as a user would
-//! (hover, F, the flip button, E, the exposure slider, the wheel, a column heading), and this
-//! test checks what it saw against the EXRs, read here with the exr crate.
+//! (hover, F, the flip button, E, the exposure slider, the wheel, a drag, a click on a
+//! side-by-side view, a column heading), and this test checks what it saw against the EXRs,
+//! read here with the exr crate, and that a screenshot of it is not blank.
 //!
 //! Chromium is Debian's `chromium` (`.ci/run` installs it). Where it is missing the test
 //! fails, saying so, unless STAGELIGHT_SKIP_BROWSER_TEST=1 skips it on purpose;
@@ -313,6 +314,21 @@ fn check_page(chromium: &Path, dir: &Path) -> Result<(), String> {
         return Err(format!(
             "the side-by-side views are not pt, bdpt and the reference: {zoom}"
         ));
+    }
+
+    // A drag of (40, 20) screen pixels moved the centre back by that many image pixels over
+    // the zoom; a click on bdpt's side-by-side view showed bdpt.
+    let pan = &seen["pan"];
+    let zoom_now = pan["zoom"].as_f64().unwrap_or(0.0);
+    let moved = |k: usize| {
+        pan["after"][k].as_f64().unwrap_or(0.0) - pan["before"][k].as_f64().unwrap_or(0.0)
+    };
+    if (moved(0) + 40.0 / zoom_now).abs() > 1e-9 || (moved(1) + 20.0 / zoom_now).abs() > 1e-9 {
+        return Err(format!("the drag did not pan: {pan}"));
+    }
+    let click = &seen["stripClick"];
+    if click["clicked"] != "image-002" || click["shown"] != "image-002" {
+        return Err(format!("a click on bdpt's view did not show it: {click}"));
     }
 
     // The relMSE column sorts ascending on a click.
