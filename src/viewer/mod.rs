@@ -170,10 +170,10 @@ pub fn write_page(page: &Page, html: &Path) -> Result<Vec<PathBuf>, PageError> {
         written.push(data_dir.join(&entry.script));
         entries.push(entry);
     }
-    // The page names each script relative to itself.
+    // The page names each script relative to itself, as a URL ("my page#2_data" is a name).
     let mut reference_entry = reference_entry;
     for entry in std::iter::once(&mut reference_entry).chain(entries.iter_mut()) {
-        entry.script = format!("{data_name}/{}", entry.script);
+        entry.script = format!("{}/{}", url_escape(&data_name), entry.script);
     }
     let manifest = Manifest {
         title: &page.title,
@@ -273,6 +273,20 @@ fn base64(bytes: &[u8]) -> String {
             } else {
                 out.push('=');
             }
+        }
+    }
+    out
+}
+
+/// A file name as a relative URL's path segment: bytes other than letters, digits and
+/// `-._~` percent-encoded.
+fn url_escape(name: &str) -> String {
+    let mut out = String::new();
+    for byte in name.bytes() {
+        if byte.is_ascii_alphanumeric() || b"-._~".contains(&byte) {
+            out.push(byte as char);
+        } else {
+            out.push_str(&format!("%{byte:02X}"));
         }
     }
     out
@@ -430,6 +444,12 @@ mod tests {
         assert_eq!(base64(b"foo"), "Zm9v");
         assert_eq!(base64(b"foobar"), "Zm9vYmFy");
         assert_eq!(base64(&[0xff, 0xfe, 0x00]), "//4A");
+    }
+
+    #[test]
+    fn data_folders_are_named_as_urls() {
+        assert_eq!(url_escape("index_data"), "index_data");
+        assert_eq!(url_escape("my page#2é_data"), "my%20page%232%C3%A9_data");
     }
 
     #[test]
