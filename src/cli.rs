@@ -1,4 +1,4 @@
-//! The `stagelight` command line: render, reference, merge, compare, diff and bench.
+//! The `stagelight` command line: render, reference, merge, compare, view, diff and bench.
 
 use crate::commands::bench::BenchOptions;
 use crate::commands::reference::ReferenceOptions;
@@ -34,7 +34,8 @@ pub enum Command {
     /// Renders a long reference, checkpointed: run it again to resume or extend it.
     Reference(ReferenceArgs),
     /// Renders each integrator at each budget and writes a report folder of speed against
-    /// error: results.csv, error_vs_time.png/.svg, grid.png, summary.md.
+    /// error: results.csv, error_vs_time.png/.svg, grid.png, summary.md, and index.html (an
+    /// interactive page over every run; open it from the disk in a browser).
     Compare(CompareArgs),
     /// Adds the partial films of shards (`render` or `reference` with --shard) into the
     /// image one machine would have made; each PART.exr's film is PART.exr.checkpoint.
@@ -45,6 +46,19 @@ pub enum Command {
     Slurm(SlurmArgs),
     /// Prints the error of an image against a reference: relMSE, RMSE, MAE, channel means.
     Diff { image: PathBuf, reference: PathBuf },
+    /// Writes the report's interactive viewer for any EXRs of one size: flip to the reference,
+    /// error maps, synchronised zoom, exposure, pixel readout. PAGE.html opens from the disk;
+    /// the images' floats go into PAGE_data/ beside it.
+    View {
+        /// The images; the first is the reference unless --reference names one.
+        #[arg(required = true, value_name = "IMAGE.exr")]
+        images: Vec<PathBuf>,
+        /// The image flips go to and error maps are measured against.
+        #[arg(long, value_name = "REF.exr")]
+        reference: Option<PathBuf>,
+        #[arg(short, long, value_name = "PAGE.html")]
+        output: PathBuf,
+    },
     /// Renders a scene several times at a fixed budget and prints throughput as a table.
     Bench {
         #[arg(required_unless_present = "big", conflicts_with = "big")]
@@ -773,6 +787,18 @@ fn run(cli: Cli) -> Result<i32> {
             no_final_gather,
         } => {
             crate::commands::graph(&scene, integrator, !no_final_gather)?;
+            Ok(0)
+        }
+        Command::View {
+            images,
+            reference,
+            output,
+        } => {
+            crate::viewer::view::view(&crate::viewer::view::ViewOptions {
+                images,
+                reference,
+                output,
+            })?;
             Ok(0)
         }
         Command::Diff { image, reference } => {

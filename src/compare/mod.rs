@@ -1,8 +1,9 @@
 //! Speed against error (../METRICS.md): render each integrator at each budget, measure its
 //! error against a reference, and write a report folder: results.csv, error_vs_time.png and
-//! .svg, grid.png and summary.md.
+//! .svg, grid.png, summary.md, and index.html (the interactive page, with runs/*.exr).
 
 pub mod format;
+pub mod page;
 pub mod plot;
 pub mod report;
 pub mod run;

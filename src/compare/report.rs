@@ -34,23 +34,42 @@ pub const CSV_HEADER: [&str; 17] = [
     "mean_b",
 ];
 
-/// Writes every file of the report into `dir` (created if missing).
+/// Writes every file of the report into `dir` (created if missing), the page's runs named by
+/// integrator and budget.
 pub fn write_report(c: &Comparison, dir: &Path) -> Result<(), ReportError> {
+    write_report_labelled(c, dir, &super::page::budget_labels(c), Vec::new())
+}
+
+/// `write_report` with the page's own names for the runs, and links at its top.
+pub fn write_report_labelled(
+    c: &Comparison,
+    dir: &Path,
+    labels: &[super::page::RunLabel],
+    links: Vec<(String, String)>,
+) -> Result<(), ReportError> {
     std::fs::create_dir_all(dir).map_err(|e| report_error(dir, e))?;
     write_csv(&c.results, c.unit, &dir.join(RESULTS_CSV))?;
     super::plot::write_error_plot(c, &dir.join(PLOT_PNG), &dir.join(PLOT_SVG))?;
     super::plot::write_grid(c, &dir.join(GRID_PNG))?;
     let summary = dir.join(SUMMARY_MD);
     crate::film::output::write_bytes(&summary, summary_markdown(c).as_bytes())
-        .map_err(|e| report_error(&summary, e.message))
+        .map_err(|e| report_error(&summary, e.message))?;
+    super::page::write_page(c, dir, labels, links)
 }
 
 /// The files of a report folder, to check before the runs that fill them.
 pub fn report_files(dir: &Path) -> Vec<std::path::PathBuf> {
-    [RESULTS_CSV, PLOT_PNG, PLOT_SVG, GRID_PNG, SUMMARY_MD]
-        .iter()
-        .map(|f| dir.join(f))
-        .collect()
+    [
+        RESULTS_CSV,
+        PLOT_PNG,
+        PLOT_SVG,
+        GRID_PNG,
+        SUMMARY_MD,
+        super::page::INDEX_HTML,
+    ]
+    .iter()
+    .map(|f| dir.join(f))
+    .collect()
 }
 
 /// Writes runs as CSV with `CSV_HEADER`.

@@ -121,7 +121,7 @@ pub fn compare(o: &CompareOptions) -> Result<i32> {
     }
     report::write_report(&comparison, out_dir)?;
     let mut text = format!(
-        "{} runs of {} on {}; reference {} ({})\nwrote {}/{{{}, {}, {}, {}, {}}}\n",
+        "{} runs of {} on {}; reference {} ({})\nwrote {}/{{{}, {}, {}, {}, {}, {}}}\n",
         comparison.results.len(),
         comparison
             .integrators
@@ -137,7 +137,8 @@ pub fn compare(o: &CompareOptions) -> Result<i32> {
         report::PLOT_PNG,
         report::PLOT_SVG,
         report::GRID_PNG,
-        report::SUMMARY_MD
+        report::SUMMARY_MD,
+        crate::compare::page::INDEX_HTML
     );
     if comparison.interrupted {
         text += "interrupted: the report holds the runs finished before the stop\n";

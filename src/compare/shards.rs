@@ -975,7 +975,12 @@ fn write_sharded_report(
     for ((_, c), study) in comparisons.iter_mut().zip(studies) {
         c.threads = most_threads;
         c.sharded = Some(note.clone());
-        report::write_report(c, &study.report_dir)?;
+        match &request {
+            CompareRequest::Thesis(o) => {
+                thesis::write_scene_report(c, &study.report_dir, &o.photon_budgets)?
+            }
+            CompareRequest::Plain(_) => report::write_report(c, &study.report_dir)?,
+        }
     }
     let mut text = String::new();
     for ((key, c), study) in comparisons.iter().zip(studies) {
@@ -1009,6 +1014,7 @@ fn write_sharded_report(
         let all: Vec<(&str, &Comparison)> =
             comparisons.iter().map(|(k, c)| (k.as_str(), c)).collect();
         thesis::write_csv(&all, &csv)?;
+        thesis::write_index(&o.output, &scenes)?;
         text += &format!(
             "thesis preset: wrote {} and {}\n",
             summary.display(),

@@ -10,7 +10,7 @@
 
 use super::format::{sci, secs};
 use super::run::{ComparePlan, SceneRun, compare_scene};
-use super::{BudgetUnit, CompareJob, Comparison, RunResult, report};
+use super::{BudgetUnit, CompareJob, Comparison, RunResult, page, report};
 use crate::commands::{exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool};
 use crate::film::Image;
 use crate::integrators::{IntegratorKind, PhotonSettings, RenderSettings};
@@ -103,6 +103,97 @@ fn display_name(integrator: &str) -> String {
 
 fn thousands(photons: u64) -> String {
     format!("{}k", photons / 1000)
+}
+
+/// How the report page names a scene's runs: the unbiased ones by integrator and spp, the
+/// biased ones by their row of `BIASED` and their photons per pass (the k-th biased run is
+/// the k-th of `biased_runs_of`).
+pub fn page_labels(c: &Comparison, photon_budgets: &[u64]) -> Vec<page::RunLabel> {
+    let mut biased = 0;
+    c.results
+        .iter()
+        .map(|r| {
+            if UNBIASED.contains(&r.integrator.as_str()) {
+                return page::RunLabel {
+                    method: display_name(r.integrator.as_str()),
+                    group: format!("{} spp", r.budget),
+                };
+            }
+            let row = BIASED[biased % BIASED.len()].2;
+            let photons = photon_budgets
+                .get(biased / BIASED.len())
+                .map_or("? photons".to_string(), |p| {
+                    format!("{} photons", thousands(*p))
+                });
+            biased += 1;
+            page::RunLabel {
+                method: row.to_string(),
+                group: photons,
+            }
+        })
+        .collect()
+}
+
+/// Writes the report of one scene of the preset, its page linking back to the index.
+pub(crate) fn write_scene_report(
+    c: &Comparison,
+    dir: &Path,
+    photon_budgets: &[u64],
+) -> Result<(), super::ReportError> {
+    report::write_report_labelled(
+        c,
+        dir,
+        &page_labels(c, photon_budgets),
+        vec![("all scenes".into(), format!("../{}", page::INDEX_HTML))],
+    )
+}
+
+/// The preset's index.html: each scene's plot and grid, linking to its page.
+pub(crate) fn write_index(out_dir: &Path, scenes: &[SceneResult]) -> Result<()> {
+    use crate::viewer::escape_html;
+    let mut body = String::new();
+    for scene in scenes {
+        let label = escape_html(scene_label(scene.key));
+        let key = escape_html(scene.key);
+        let _ = match scene.comparison {
+            Some(c) => writeln!(
+                body,
+                "<section><h2><a href=\"{key}/{index}\">{label} ({key})</a></h2>\n\
+                 <p>{} runs at {}x{}; <a href=\"{key}/{index}\">open its viewer</a>, \
+                 <a href=\"{key}/{summary}\">summary.md</a>.</p>\n\
+                 <a href=\"{key}/{index}\"><img src=\"{key}/{plot}\" alt=\"relMSE against \
+                 time, {label}\"> <img src=\"{key}/{grid}\" alt=\"images and error maps, \
+                 {label}\"></a></section>",
+                c.results.len(),
+                c.width,
+                c.height,
+                index = page::INDEX_HTML,
+                summary = report::SUMMARY_MD,
+                plot = report::PLOT_SVG,
+                grid = report::GRID_PNG,
+            ),
+            None => writeln!(
+                body,
+                "<section><h2>{label} ({key})</h2><p>Not run.</p></section>"
+            ),
+        };
+    }
+    let html = format!(
+        "<!DOCTYPE html>\n<html lang=\"en\">\n<head>\n<meta charset=\"utf-8\">\n\
+         <title>Thesis preset</title>\n<style>\nbody {{ font: 14px/1.4 system-ui, sans-serif; \
+         margin: 1rem 2rem; background: #16181c; color: #e4e6ea; }}\na {{ color: #f0a640; }}\n\
+         img {{ max-height: 360px; max-width: 48%; vertical-align: top; background: #fff; }}\n\
+         </style>\n</head>\n<body>\n<h1>Thesis preset: three scenes</h1>\n<p>Each scene's \
+         page has the viewer over all its runs and its reference (flip, error maps, zoom, \
+         exposure, pixel readout), its sortable results and its plot. \
+         <a href=\"{summary}\">summary.md</a>, <a href=\"{csv}\">results.csv</a>.</p>\n\
+         {body}</body>\n</html>\n",
+        summary = report::SUMMARY_MD,
+        csv = report::RESULTS_CSV,
+    );
+    let path = out_dir.join(page::INDEX_HTML);
+    crate::film::output::write_bytes(&path, html.as_bytes())?;
+    Ok(())
 }
 
 /// One scene of the preset: its file stem and its comparison (None when it could not run).
@@ -385,7 +476,7 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
                     c.results.extend(runs);
                     c.interrupted |= stopped;
                 }
-                report::write_report(&c, &scene_dir)?;
+                write_scene_report(&c, &scene_dir, &o.photon_budgets)?;
                 interrupted |= c.interrupted;
                 comparisons.push((key, *c));
             }
@@ -413,11 +504,13 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
     let csv = out_dir.join(report::RESULTS_CSV);
     let all: Vec<(&str, &Comparison)> = comparisons.iter().map(|(k, c)| (*k, c)).collect();
     write_csv(&all, &csv)?;
+    write_index(out_dir, &scenes)?;
     let mut text = format!(
-        "thesis preset: {} of 3 scenes; wrote {} and {}\n",
+        "thesis preset: {} of 3 scenes; wrote {}, {} and {}\n",
         comparisons.len(),
         summary.display(),
-        csv.display()
+        csv.display(),
+        out_dir.join(page::INDEX_HTML).display()
     );
     if interrupted {
         text += "interrupted: the report holds the runs finished before the stop\n";

@@ -459,6 +459,30 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         assert_eq!(cells[4], "", "no thesis seconds at 2k: {line}");
         assert!(cells[5].parse::<f64>().is_ok(), "relMSE cell: {line}");
     }
+    // The report pages: one over the scenes, and one per scene with every run (named by the
+    // study's rows) and the reference, their floats beside it and their EXRs in runs/.
+    let index = std::fs::read_to_string(out.join("index.html")).unwrap();
+    for name in ["cornell_box", "torus_glass", "door_ajar"] {
+        assert!(
+            index.contains(&format!("href=\"{name}/index.html\"")),
+            "{index}"
+        );
+        let page = std::fs::read_to_string(out.join(name).join("index.html")).unwrap();
+        assert!(page.contains("href=\"../index.html\""), "no link back");
+        for entry in [
+            r#""method":"PT","group":"25 spp""#,
+            r#""method":"PPM, 75 passes","group":"4k photons""#,
+            r#""method":"PM","group":"2k photons""#,
+        ] {
+            assert!(page.contains(entry), "{name}: no {entry}");
+        }
+        let count = |folder: &str| {
+            std::fs::read_dir(out.join(name).join(folder))
+                .unwrap()
+                .count()
+        };
+        assert_eq!((count("index_data"), count("runs")), (16, 15), "{name}");
+    }
     let mut reader = csv::Reader::from_path(out.join("results.csv")).unwrap();
     assert_eq!(&reader.headers().unwrap()[0], "scene");
     assert_eq!(

@@ -27,6 +27,7 @@ mod photons;
 mod properties;
 mod pt_furnace;
 mod reference;
+mod report_page;
 mod scene_crosscheck;
 mod scene_errors;
 mod scene_loading;
