@@ -33,3 +33,4 @@ mod scene_errors;
 mod scene_loading;
 mod shards;
 mod stability;
+mod window_room;
