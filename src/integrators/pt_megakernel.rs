@@ -83,3 +83,21 @@ impl WaveState for MegakernelState {
         )]
     }
 }
+
+/// The systems of its graphs bound to the columns of `MegakernelState`.
+mod bindings {
+    use super::MegakernelState;
+    use crate::systems::*;
+
+    crate::bind! {
+        MegakernelState:
+        gather::film::AccumulateFilm {
+            read sample_radiance, wave, pixels;
+            write film;
+        }
+        trace::paths::TracePaths {
+            read data, settings, sampler, wave, pixels;
+            write sample_radiance, traced;
+        }
+    }
+}

@@ -5,6 +5,7 @@
 mod common;
 
 mod accel;
+mod assembled_integrator;
 mod bdpt;
 mod bsdf;
 mod cli;
