@@ -22,6 +22,10 @@ pub fn bounce_dim(depth: u32) -> u32 {
     2 + depth * DIMS_PER_BOUNCE
 }
 
+/// Paths in flight at once by default (the wavefront's and the megakernel's waves) (`--wavefront N` sets another): large enough to keep
+/// both cores busy between stage barriers, small enough to stay in a few tens of megabytes.
+pub const WAVEFRONT: usize = 1 << 18;
+
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PtSettings {
     pub seed: u64,

@@ -448,7 +448,7 @@ pub fn render_chains<S: PassState>(
         0,
         (
             "mutations/s",
-            crate::report::mega(outcome.samples as f64 / wall),
+            crate::units::mega(outcome.samples as f64 / wall),
         ),
     );
     outcome

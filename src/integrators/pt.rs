@@ -21,10 +21,6 @@ use std::sync::Arc;
 
 pub use crate::components::path_tracing::*;
 
-/// Paths in flight at once by default (`--wavefront N` sets another): large enough to keep
-/// both cores busy between stage barriers, small enough to stay in a few tens of megabytes.
-pub const WAVEFRONT: usize = 1 << 18;
-
 impl From<&RenderSettings> for PtSettings {
     fn from(s: &RenderSettings) -> PtSettings {
         PtSettings {
