@@ -4,7 +4,7 @@
 //! `crate::path`).
 //!
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator bdpt` prints it with
-//! each system's columns, and the README shows it for `door_ajar`.
+//! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 //!
 //! Subpath vertices are stored depth by depth (`PathVertices`, one store per depth, slot =
 //! subpath), so a bounce writes one store and a store is allocated only the first time any

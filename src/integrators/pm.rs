@@ -16,7 +16,7 @@
 //! does not fall with passes: only more photons shrink it.
 //!
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator pm` prints it with
-//! each system's columns, and the README shows it for `door_ajar`.
+//! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 
 use crate::components::ShadowRays;
 use crate::film::Film;

@@ -3,7 +3,7 @@
 //! capped.
 //!
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator pt` prints it with
-//! each system's columns, and the README shows it for `door_ajar`.
+//! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 
 use crate::bsdf::MaterialKind;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};

@@ -24,7 +24,7 @@
 //! choice at the glass showed stay in its image, whatever the number of passes.
 //!
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator sppm` prints it with
-//! each system's columns, and the README shows it for `door_ajar`.
+//! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 //!
 //! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
 //! nothing grows with the number of passes.

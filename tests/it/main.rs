@@ -11,6 +11,7 @@ mod bsdf;
 mod cli;
 mod compare;
 mod determinism;
+mod docs;
 mod film_precision;
 mod fuzz;
 #[path = "../fuzz/targets.rs"]
