@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The README's scaling table: one reference rendered whole, then as 1, 2 and 4 shards, the
+# The scaling table of docs/slurm.md: one reference rendered whole, then as 1, 2 and 4 shards, the
 # shards one after another on this machine, each standing in for a machine of its own (the
 # wall time of N machines is the slowest shard's plus the merge), and `cmp` of every merge
 # with the whole render.

@@ -1,4 +1,6 @@
 //! The `stagelight` command line: render, reference, merge, compare, view, diff and bench.
+//! This file holds what clap parses and the dispatch; `values` the value parsers, `options`
+//! the parsed arguments turned into each command's options.
 
 use crate::commands::bench::BenchOptions;
 use crate::commands::reference::ReferenceOptions;
@@ -15,6 +17,11 @@ use crate::sampling::SamplerKind;
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
+
+mod options;
+mod values;
+use values::*;
+pub use values::{MAX_CHECKPOINT_SECONDS, one_line};
 
 #[derive(Parser, Debug)]
 #[command(
@@ -103,45 +110,6 @@ pub enum Command {
     },
 }
 
-/// Parses an integrator name: unknown names and planned-but-unbuilt ones are clear errors.
-/// Parses an integrator name; `--help` lists the registry's integrators with their
-/// descriptions.
-#[derive(Clone)]
-struct IntegratorParser;
-
-impl clap::builder::TypedValueParser for IntegratorParser {
-    type Value = IntegratorKind;
-
-    fn parse_ref(
-        &self,
-        cmd: &clap::Command,
-        arg: Option<&clap::Arg>,
-        value: &std::ffi::OsStr,
-    ) -> std::result::Result<IntegratorKind, clap::Error> {
-        let name = value.to_string_lossy();
-        IntegratorKind::from_name(&name).map_err(|e| {
-            let arg = arg.map_or_else(|| "--integrator".to_string(), |a| a.to_string());
-            clap::Error::raw(
-                clap::error::ErrorKind::InvalidValue,
-                format!("invalid value '{name}' for '{arg}': {e}\n"),
-            )
-            .with_cmd(cmd)
-        })
-    }
-
-    fn possible_values(
-        &self,
-    ) -> Option<Box<dyn Iterator<Item = clap::builder::PossibleValue> + '_>> {
-        Some(Box::new(IntegratorKind::all().into_iter().map(|k| {
-            clap::builder::PossibleValue::new(k.as_str()).help(k.description())
-        })))
-    }
-}
-
-fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String> {
-    s.parse::<SamplerKind>().map_err(|e| e.to_string())
-}
-
 /// Which passes of a render this run makes (a shard); see `commands::ShardChoice`.
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct ShardArgs {
@@ -152,48 +120,6 @@ pub struct ShardArgs {
     /// Render passes FIRST..END (END excluded) of the --spp passes, as a shard.
     #[arg(long, value_name = "FIRST..END", value_parser = parse_pass_range, conflicts_with = "time")]
     pub pass_range: Option<(u64, u64)>,
-}
-
-impl ShardArgs {
-    pub fn choice(&self) -> Option<crate::commands::ShardChoice> {
-        use crate::commands::ShardChoice;
-        match (self.shard, self.pass_range) {
-            (Some((index, count)), _) => Some(ShardChoice::Shard { index, count }),
-            (None, Some((first, end))) => Some(ShardChoice::Range { first, end }),
-            (None, None) => None,
-        }
-    }
-}
-
-fn parse_shard(s: &str) -> std::result::Result<(u64, u64), String> {
-    let bad = || {
-        format!(
-            "expected I/N (shard I of N, 1 <= I <= N), not {}",
-            clip_word(s)
-        )
-    };
-    let (i, n) = s.split_once('/').ok_or_else(bad)?;
-    let (i, n): (u64, u64) = (
-        i.trim().parse().map_err(|_| bad())?,
-        n.trim().parse().map_err(|_| bad())?,
-    );
-    if i == 0 || i > n {
-        return Err(bad());
-    }
-    Ok((i, n))
-}
-
-fn parse_pass_range(s: &str) -> std::result::Result<(u64, u64), String> {
-    let bad = || format!("expected FIRST..END with FIRST < END, not {}", clip_word(s));
-    let (a, b) = s.split_once("..").ok_or_else(bad)?;
-    let (a, b): (u64, u64) = (
-        a.trim().parse().map_err(|_| bad())?,
-        b.trim().parse().map_err(|_| bad())?,
-    );
-    if a >= b {
-        return Err(bad());
-    }
-    Ok((a, b))
 }
 
 /// `stagelight merge`.
@@ -257,20 +183,6 @@ pub struct KernelArgs {
 pub enum KernelName {
     Wavefront,
     Megakernel,
-}
-
-impl KernelArgs {
-    /// `settings` with this kernel and wavefront.
-    pub fn apply(&self, settings: RenderSettings) -> RenderSettings {
-        RenderSettings {
-            kernel: match self.kernel {
-                KernelName::Wavefront => Kernel::Wavefront,
-                KernelName::Megakernel => Kernel::Megakernel,
-            },
-            wavefront: self.wavefront.map(|n| n as usize),
-            ..settings
-        }
-    }
 }
 
 #[derive(clap::Args, Debug)]
@@ -355,59 +267,6 @@ pub struct MltArgs {
     pub lens_min: Option<f32>,
 }
 
-impl MltArgs {
-    pub fn options(&self) -> crate::integrators::MltOptions {
-        crate::integrators::MltOptions {
-            large_step: self.large_step,
-            sigma: self.sigma,
-            bootstrap: self.bootstrap,
-            chains: self.chains,
-            direct_spp: self.direct_spp,
-            mutations: self.mutations,
-            lens_min: self.lens_min,
-        }
-    }
-}
-
-fn parse_probability(s: &str) -> std::result::Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
-        _ => Err(format!("expected a probability in [0, 1], not {s}")),
-    }
-}
-
-fn parse_mutations(s: &str) -> std::result::Result<u8, String> {
-    use crate::mlt::path_chains::MutationKind;
-    let mut bits = 0u8;
-    for name in s.split(',').map(str::trim) {
-        let kind = MutationKind::parse(name).ok_or_else(|| {
-            format!("unknown mutation {name:?}; expected bidir, lens, caustic or multichain")
-        })?;
-        bits |= 1 << kind as u8;
-    }
-    if bits & (1 << MutationKind::Bidirectional as u8) == 0 {
-        return Err(
-            "the mutations must include bidir: the perturbations alone cannot reach every path"
-                .into(),
-        );
-    }
-    Ok(bits)
-}
-
-fn parse_lens_min(s: &str) -> std::result::Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
-        _ => Err(format!("expected a positive number of pixels, not {s}")),
-    }
-}
-
-fn parse_sigma(s: &str) -> std::result::Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(v) if v > 0.0 && v.is_finite() => Ok(v),
-        _ => Err(format!("expected a positive sigma, not {s}")),
-    }
-}
-
 /// Options of the photon mappers.
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct PhotonArgs {
@@ -442,56 +301,12 @@ pub struct PhotonArgs {
     pub no_final_gather: bool,
 }
 
-impl PhotonArgs {
-    pub fn settings(&self) -> crate::integrators::PhotonSettings {
-        crate::integrators::PhotonSettings {
-            photons_per_pass: self.photons_per_pass,
-            alpha: self.alpha,
-            radius: self.radius,
-            eye_rays: self.eye_rays,
-            photons: self.photons,
-            k: self.k as usize,
-            max_radius: self.max_radius,
-            final_gather: !self.no_final_gather,
-        }
-    }
-}
-
-fn parse_alpha(s: &str) -> std::result::Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(v) if v > 0.0 && v < 1.0 => Ok(v),
-        _ => Err(format!(
-            "alpha must be a number in (0, 1), not {}",
-            clip_word(s)
-        )),
-    }
-}
-
-fn parse_radius(s: &str) -> std::result::Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(v) if v.is_finite() && v > 0.0 => Ok(v),
-        _ => Err(format!(
-            "the radius must be a positive number, not {}",
-            clip_word(s)
-        )),
-    }
-}
-
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]
 pub enum MisName {
     /// Veach's power heuristic (exponent 2).
     Power,
     /// The balance heuristic.
     Balance,
-}
-
-impl MisName {
-    pub fn heuristic(self) -> MisHeuristic {
-        match self {
-            MisName::Power => MisHeuristic::Power,
-            MisName::Balance => MisHeuristic::Balance,
-        }
-    }
 }
 
 /// Samples per pixel of a reference when neither --spp nor --time is given.
@@ -661,75 +476,6 @@ pub fn compare_request(command: &[String]) -> Result<crate::compare::shards::Com
     }
 }
 
-/// One budget of --budgets (the list as a whole is checked after parsing).
-fn parse_budget(s: &str) -> std::result::Result<f64, String> {
-    if s.trim().is_empty() {
-        return Err("the budget list is empty (or has an empty entry)".into());
-    }
-    let v: f64 = s
-        .trim()
-        .parse()
-        .map_err(|_| format!("'{}' is not a number", clip_word(s)))?;
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!("budget {} is not a positive number", clip_word(s)))
-    }
-}
-
-fn parse_seconds(s: &str) -> std::result::Result<f64, String> {
-    let v: f64 = s
-        .parse()
-        .map_err(|_| format!("'{}' is not a number of seconds", clip_word(s)))?;
-    if v.is_finite() && v > 0.0 {
-        Ok(v)
-    } else {
-        Err(format!(
-            "the time must be a positive number of seconds, not {}",
-            clip_word(s)
-        ))
-    }
-}
-
-/// The longest time between checkpoints (about 31 years; a Duration holds no more than
-/// 1.8e19 seconds).
-pub const MAX_CHECKPOINT_SECONDS: f64 = 1e9;
-
-fn parse_checkpoint_seconds(s: &str) -> std::result::Result<f64, String> {
-    let v = parse_seconds(s)?;
-    if v <= MAX_CHECKPOINT_SECONDS {
-        Ok(v)
-    } else {
-        Err(format!(
-            "at most {MAX_CHECKPOINT_SECONDS:e} seconds between checkpoints, not {}",
-            clip_word(s)
-        ))
-    }
-}
-
-/// Longest word of a message repeated whole: a longer one (a 300-digit number) is cut.
-const MAX_WORD: usize = 64;
-
-/// A word of the user's as a message repeats it: at most `MAX_WORD` characters.
-fn clip_word(s: &str) -> String {
-    if s.chars().count() <= MAX_WORD {
-        return s.to_string();
-    }
-    let head: String = s.chars().take(40).collect();
-    format!("{head}...({} characters)", s.chars().count())
-}
-
-/// An error message as printed: one line (line breaks become spaces), every overlong word
-/// cut (`clip_word`), and at most 2000 characters in all.
-pub fn one_line(message: &str) -> String {
-    let words: Vec<String> = message
-        .split([' ', '\n', '\r', '\t'])
-        .filter(|w| !w.is_empty())
-        .map(clip_word)
-        .collect();
-    crate::scene::clip(&words.join(" "), 2000)
-}
-
 /// Runs the command line; returns the process exit code (0 success, 1 error, 130 interrupted).
 pub fn main() -> i32 {
     let cli = match Cli::try_parse() {
@@ -772,6 +518,7 @@ fn run(cli: Cli) -> Result<i32> {
         Command::Merge(args) => crate::commands::merge::merge(&args.parts, &args.output),
         Command::Slurm(args) => crate::commands::slurm::write(&args.options()?),
         Command::Compare(args) if args.plan.is_some() => crate::compare::shards::run_plan(
+            compare_request,
             args.plan.as_deref().unwrap_or(std::path::Path::new("")),
             args.shard,
             args.threads.map(|t| t as usize),
@@ -830,207 +577,6 @@ fn run(cli: Cli) -> Result<i32> {
                 sweep,
             })?;
             Ok(0)
-        }
-    }
-}
-
-impl SlurmArgs {
-    /// The options, after checking the command to shard as `stagelight` would parse it.
-    fn options(&self) -> Result<crate::commands::slurm::SlurmOptions> {
-        let is_compare = crate::commands::slurm::check_command(&self.command)?.is_none();
-        let binary = match &self.stagelight {
-            Some(b) => b.clone(),
-            None => std::env::current_exe().context("cannot find this stagelight binary")?,
-        };
-        let workdir = std::env::current_dir().context("cannot read the current folder")?;
-        let dir = std::path::absolute(workdir.join(&self.output))
-            .context("cannot find the job folder")?;
-        let options = |name: String, plan| crate::commands::slurm::SlurmOptions {
-            shards: self.shards,
-            dir: dir.clone(),
-            command: self.command.clone(),
-            binary: binary.clone(),
-            workdir: workdir.clone(),
-            partition: self.partition.clone(),
-            time_limit: self.time_limit.clone(),
-            cpus_per_task: self.cpus_per_task,
-            signal_seconds: self.signal_seconds,
-            name: crate::commands::slurm::job_name(&name, &dir),
-            plan,
-        };
-        if is_compare {
-            let request = compare_request(&self.command)?;
-            let name = match &request {
-                crate::compare::shards::CompareRequest::Plain(o) => scene_stem(&o.scene),
-                crate::compare::shards::CompareRequest::Thesis(_) => "thesis".into(),
-            };
-            let plan = crate::compare::shards::make_plan(
-                &self.command,
-                &request,
-                self.shards,
-                &dir.join("parts"),
-                &workdir,
-            )?;
-            return Ok(options(name, Some(plan)));
-        }
-        let shard = format!("1/{}", self.shards);
-        let line = ["stagelight"]
-            .into_iter()
-            .chain(self.command.iter().map(String::as_str))
-            .chain(["--shard", &shard]);
-        let parsed = Cli::try_parse_from(line).map_err(|e| {
-            let text = e.render().to_string();
-            anyhow::anyhow!(
-                "the command to shard: {}",
-                text.lines()
-                    .next()
-                    .unwrap_or_default()
-                    .trim_start_matches("error: ")
-            )
-        })?;
-        let spp = match parsed.command {
-            Command::Render(a) => a.spp.unwrap_or(64),
-            Command::Reference(a) => a.spp.unwrap_or(DEFAULT_REFERENCE_SPP),
-            _ => unreachable!("check_command lets render and reference through"),
-        };
-        if self.shards > spp {
-            anyhow::bail!(
-                "--shards {}: more shards than the command's {spp} passes",
-                self.shards
-            );
-        }
-        let name = self
-            .command
-            .get(1)
-            .map(|scene| scene_stem(std::path::Path::new(scene)))
-            .unwrap_or_else(|| "stagelight".into());
-        Ok(options(name, None))
-    }
-}
-
-impl RenderArgs {
-    fn options(&self) -> RenderOptions {
-        let budget = match (self.spp, self.time) {
-            (_, Some(t)) => Budget::Seconds(t),
-            (Some(spp), None) => Budget::SamplesPerPixel(spp),
-            (None, None) => Budget::SamplesPerPixel(64),
-        };
-        let output = self.output.clone().unwrap_or_else(|| {
-            PathBuf::from("render").join(format!(
-                "{}_{}.exr",
-                scene_stem(&self.scene),
-                self.integrator.as_str()
-            ))
-        });
-        RenderOptions {
-            scene: self.scene.clone(),
-            integrator: self.integrator,
-            budget,
-            settings: self.kernel.apply(RenderSettings {
-                seed: self.seed,
-                sampler: self.sampler,
-                max_depth: self.max_depth.unwrap_or(u32::MAX),
-                mis: self.mis.heuristic(),
-                strategy_images: self.strategy_images.is_some(),
-                light_vertex_cache: self.light_vertex_cache.unwrap_or(0),
-                photons: self.photons.settings(),
-                mlt: self.mlt.options(),
-                ..RenderSettings::default()
-            }),
-            strategy_images: self.strategy_images.clone(),
-            output,
-            shard: self.shard.choice(),
-            threads: self.threads.map(|t| t as usize),
-            quiet: self.quiet,
-        }
-    }
-}
-
-impl ReferenceArgs {
-    fn options(&self) -> ReferenceOptions {
-        let output = self.output.clone().unwrap_or_else(|| {
-            PathBuf::from("reference").join(format!(
-                "{}_{}.exr",
-                scene_stem(&self.scene),
-                self.integrator
-            ))
-        });
-        let budget = match (self.spp, self.time) {
-            (_, Some(t)) => ReferenceBudget::Seconds(t),
-            (Some(spp), None) => ReferenceBudget::SamplesPerPixel(spp),
-            (None, None) => ReferenceBudget::SamplesPerPixel(DEFAULT_REFERENCE_SPP),
-        };
-        ReferenceOptions {
-            scene: self.scene.clone(),
-            integrator: self.integrator,
-            budget,
-            settings: self.kernel.apply(RenderSettings {
-                seed: self.seed,
-                sampler: self.sampler,
-                max_depth: self.max_depth.unwrap_or(u32::MAX),
-                photons: self.photons.settings(),
-                ..RenderSettings::default()
-            }),
-            output,
-            checkpoint_every: std::time::Duration::try_from_secs_f64(self.checkpoint_every)
-                .unwrap_or(std::time::Duration::from_secs(
-                    MAX_CHECKPOINT_SECONDS as u64,
-                )),
-            shard: self.shard.choice(),
-            threads: self.threads.map(|t| t as usize),
-            quiet: self.quiet,
-        }
-    }
-}
-
-impl CompareArgs {
-    fn options(&self) -> Result<CompareOptions> {
-        let scene = self
-            .scene
-            .clone()
-            .context("a scene file is needed (or --preset thesis)")?;
-        let output = self
-            .output
-            .clone()
-            .unwrap_or_else(|| PathBuf::from("compare").join(scene_stem(&scene)));
-        Ok(CompareOptions {
-            scene,
-            reference: self.reference.clone(),
-            integrators: self.integrators.clone(),
-            unit: match self.budget_unit {
-                BudgetUnitArg::Seconds => BudgetUnit::Seconds,
-                BudgetUnitArg::Spp => BudgetUnit::Spp,
-            },
-            budgets: self.budgets.clone(),
-            settings: self.kernel.apply(RenderSettings {
-                seed: self.seed,
-                sampler: self.sampler,
-                max_depth: self.max_depth.unwrap_or(u32::MAX),
-                photons: self.photons.settings(),
-                ..RenderSettings::default()
-            }),
-            reference_spp: self.reference_spp,
-            output,
-            threads: self.threads.map(|t| t as usize),
-            quiet: self.quiet,
-        })
-    }
-
-    fn thesis_options(&self) -> ThesisOptions {
-        ThesisOptions {
-            scenes_dir: self.scenes_dir.clone(),
-            output: self
-                .output
-                .clone()
-                .unwrap_or_else(|| PathBuf::from("compare").join("thesis")),
-            seed: self.seed,
-            max_depth: self.max_depth.unwrap_or(u32::MAX),
-            photons: self.photons.settings(),
-            photon_budgets: self.thesis_photons.clone(),
-            reference_spp: self.reference_spp,
-            references: self.references.clone(),
-            threads: self.threads.map(|t| t as usize),
-            quiet: self.quiet,
         }
     }
 }

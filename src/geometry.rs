@@ -6,6 +6,11 @@ use crate::math::gamma;
 use glam::{Vec3, Vec3A};
 
 /// Marks a triangle that emits nothing (`TriangleColumns::emitter`).
+/// Coordinates (of every vertex after its transforms, and of the camera) must stay below this
+/// magnitude: beyond it, bounding-box areas, squared distances and the tree's costs overflow
+/// f32 (a quad of half-size 1e19 broke the BVH build).
+pub const MAX_COORDINATE: f64 = 1e12;
+
 pub const NO_EMITTER: u32 = u32::MAX;
 /// Marks a flat-shaded triangle (`TriangleColumns::smooth`).
 pub const FLAT: u32 = u32::MAX;

@@ -27,6 +27,7 @@ pub mod report;
 pub mod sampling;
 pub mod scene;
 pub mod sysinfo;
+pub mod units;
 pub mod viewer;
 
 #[path = "../systems/mod.rs"]

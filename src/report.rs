@@ -7,16 +7,7 @@ use crate::sysinfo::peak_memory_bytes;
 use std::fmt::Write;
 use std::path::Path;
 
-/// A rate with a k or M prefix and three decimals; small rates (passes/s) plain with two.
-pub fn mega(x: f64) -> String {
-    if x >= 1e6 {
-        format!("{:.3} M", x / 1e6)
-    } else if x >= 1e3 {
-        format!("{:.3} k", x / 1e3)
-    } else {
-        format!("{x:.2}")
-    }
-}
+pub use crate::units::mega;
 
 /// The end-of-render report: passes, time, throughput, memory, and each system's share.
 pub fn render_report(

@@ -1,5 +1,6 @@
-//! Systems, one file per system, grouped by stage. Adding a system means adding a file here
-//! and naming it in an integrator's graph (`src/integrators/`).
+//! Systems, one file per system, grouped by stage. A system declares the columns it reads and
+//! writes by type, never an integrator's state: a state runs it once `bind!` maps those
+//! columns to its fields, and an integrator's graph (`src/integrators/`) names it.
 
 /// Making new work: camera rays (and later light paths and photons).
 pub mod generate {

@@ -74,12 +74,12 @@ fn finite_nonzero(origin: Vec3A, dir: Vec3A) -> bool {
 }
 
 /// Whether the triangle has exactly zero area, or a vertex that is not finite or lies beyond
-/// `scene::MAX_COORDINATE` (prepared scenes have none: this guards the tree's build, whose
+/// `geometry::MAX_COORDINATE` (prepared scenes have none: this guards the tree's build, whose
 /// box areas overflow f32 from about 1e19). The differences of f32 coordinates are exact in
 /// f64 for any realistic scene, so "zero" here means what it says.
 fn is_degenerate(p0: Vec3, p1: Vec3, p2: Vec3) -> bool {
     let within =
-        |p: Vec3| p.is_finite() && p.abs().max_element() < crate::scene::MAX_COORDINATE as f32;
+        |p: Vec3| p.is_finite() && p.abs().max_element() < crate::geometry::MAX_COORDINATE as f32;
     if !(within(p0) && within(p1) && within(p2)) {
         return true;
     }

@@ -516,9 +516,11 @@ fn stats_path(image: &Path) -> PathBuf {
 }
 
 /// `compare --plan PLAN [--shard I/N]`: a task of the plan, or (without `--shard`) the report
-/// from every task's shards. `threads` overrides the compare command's `--threads`. Returns
-/// the exit code.
+/// from every task's shards. `threads` overrides the compare command's `--threads`;
+/// `parse_command` reads the plan's compare command as the command line does (the CLI's
+/// parser, handed down so this layer needs none). Returns the exit code.
 pub fn run_plan(
+    parse_command: fn(&[String]) -> Result<CompareRequest>,
     plan_path: &Path,
     shard: Option<(u64, u64)>,
     threads: Option<usize>,
@@ -534,7 +536,7 @@ pub fn run_plan(
             plan.workdir.display()
         )
     })?;
-    let request = crate::cli::compare_request(&plan.command)
+    let request = parse_command(&plan.command)
         .map_err(|e| anyhow::anyhow!("{}: {e}", plan_path.display()))?;
     let studies = study_of(&request)?;
     check_plan_matches(&plan, &studies)

@@ -5,13 +5,19 @@
 //! of the same shape and swap, so systems run over plain slices split into fixed-size chunks,
 //! which rayon processes in parallel without any shared mutable state.
 
+pub mod camera_walk;
+pub mod metropolis;
+pub mod path_tracing;
 mod paths;
+pub mod photon_mapping;
 mod photons;
 mod rays;
 mod shadow;
+pub mod subpaths;
 mod surfaces;
 mod vertices;
 mod visible_points;
+pub mod wave;
 
 pub use paths::*;
 pub use photons::*;
@@ -20,6 +26,7 @@ pub use shadow::*;
 pub use surfaces::*;
 pub use vertices::*;
 pub use visible_points::*;
+pub use wave::Wave;
 
 /// Items per chunk of parallel work. Fixed, so the work split never depends on thread count.
 pub const CHUNK: usize = 1024;

@@ -73,13 +73,7 @@ pub trait PassState: IntegratorState {
     }
 }
 
-/// The samples a wave renders: global sample ids `first..first + len`, where global sample id
-/// g is pixel `g % pixels` at sample index `g / pixels`.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Wave {
-    pub first: u64,
-    pub len: usize,
-}
+pub use crate::components::Wave;
 
 /// Renders with a sample-based integrator until the budget is spent or a stop is asked for,
 /// continuing from `from` when given: a sample budget counts the passes already done

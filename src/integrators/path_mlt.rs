@@ -47,21 +47,7 @@ use crate::systems::mutate::{
 use glam::DVec3;
 use std::sync::Arc;
 
-/// Mitsuba's samples per pixel for the direct illumination rendered apart.
-pub const DEFAULT_DIRECT_SPP: u32 = 16;
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PathMltSettings {
-    pub seed: u64,
-    /// The user's depth cap (`u32::MAX`: none).
-    pub max_depth: u32,
-    pub mutations: MutationSet,
-    /// Direct illumination rendered apart at this many samples per pixel (0: none).
-    pub direct_spp: u32,
-    /// The bootstrap's settings (full BDPT, balance heuristic, depth >= 2 with direct
-    /// illumination apart).
-    pub bootstrap: MltSettings,
-}
+pub use crate::components::metropolis::{DEFAULT_DIRECT_SPP, MutationCounts, PathMltSettings};
 
 impl PathMltSettings {
     pub fn from_render(data: &SceneData, s: &RenderSettings) -> PathMltSettings {
@@ -88,27 +74,6 @@ impl PathMltSettings {
             direct_spp,
             bootstrap,
         }
-    }
-}
-
-/// Proposals and acceptances per mutation kind.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct MutationCounts {
-    pub proposed: [u64; 4],
-    pub accepted: [u64; 4],
-    /// Proposals with f = 0 (impossible or black paths).
-    pub zero: [u64; 4],
-}
-
-impl std::ops::Add for MutationCounts {
-    type Output = MutationCounts;
-    fn add(mut self, o: MutationCounts) -> MutationCounts {
-        for k in 0..4 {
-            self.proposed[k] += o.proposed[k];
-            self.accepted[k] += o.accepted[k];
-            self.zero[k] += o.zero[k];
-        }
-        self
     }
 }
 
@@ -140,10 +105,8 @@ struct RenderDirectIllumination;
 
 crate::system! {
     RenderDirectIllumination = "render_direct_illumination";
-    on PathMltState {
-        read data, settings;
-        write direct;
-    }
+    read data: Arc<SceneData>, settings: PathMltSettings;
+    write direct: Option<Film>;
     run {
         let pt = PtSettings {
             max_depth: 1,
@@ -365,4 +328,57 @@ pub fn render(
     control: &Control,
 ) -> RenderOutcome {
     mlt::render_chains::<PathMltState>(data, settings, |s| &mut s.bootstrap, budget, control)
+}
+
+/// The systems of its graphs bound to the columns of `PathMltState`.
+mod bindings {
+    use super::PathMltState;
+    use crate::systems::*;
+
+    crate::bind! {
+        PathMltState:
+        super::RenderDirectIllumination {
+            read data, settings;
+            write direct;
+        }
+        mutate::bidirectional::BidirectionalMutation {
+            read data, settings;
+            write chains;
+        }
+        mutate::caustic_perturbation::CausticPerturbation {
+            read data, settings;
+            write chains;
+        }
+        mutate::lens_perturbation::LensPerturbation {
+            read data, settings;
+            write chains;
+        }
+        mutate::multichain_perturbation::MultiChainPerturbation {
+            read data, settings;
+            write chains;
+        }
+        mutate::path_accept::AcceptPathProposals {
+            write chains, counts;
+        }
+        mutate::path_accept::SplatPathExpectedValues {
+            read chains, splat_scale;
+            write splats, splat_sums, nonfinite;
+        }
+        mutate::path_accept::CommitPathProposals {
+            write chains, step, steps_left;
+        }
+        mutate::path_mutation::ChooseMutations {
+            read data, settings, step;
+            write chains;
+        }
+        mutate::path_seeds::AdoptSeedPaths {
+            read data, pixels, selection = seeding.selection, seed = seeding.settings.seed,
+                targets = seeding.chains.current_contributions.target,
+                capacity = seeding.bdpt.capacity, numbers = seeding.bdpt.sampler,
+                wave = seeding.bdpt.wave, subpath_len = seeding.bdpt.subpath_len,
+                vertices = seeding.bdpt.vertices, connection_start = seeding.bdpt.connection_start,
+                shadow = seeding.bdpt.shadow, connections = seeding.bdpt.connections;
+            write chains, splat_scale, seeded, seed_mismatches;
+        }
+    }
 }

@@ -16,7 +16,7 @@
 //! does not fall with passes: only more photons shrink it.
 //!
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator pm` prints it with
-//! each system's columns, and the README shows it for `door_ajar`.
+//! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 
 use crate::components::ShadowRays;
 use crate::film::Film;
@@ -28,31 +28,14 @@ use crate::integrators::{
 use crate::photons::state::{self, StateReader, StateWriter};
 use crate::photons::{PhotonMaps, PhotonPass};
 use crate::pipeline::{Graph, Node};
-use crate::sampling::{Sampler, SamplerKind};
+use crate::sampling::Sampler;
 use crate::systems::{connect, gather, generate, trace};
 use glam::DVec3;
 use std::sync::Arc;
 
-/// Default photons traced.
-pub const DEFAULT_PHOTONS: u64 = 250_000;
-/// Default photons per density estimate.
-pub const DEFAULT_K: usize = 50;
-/// Default largest search radius, as a fraction of the scene's bounding-box diagonal.
-pub const DEFAULT_MAX_RADIUS_FRACTION: f32 = 0.02;
-
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PmSettings {
-    pub seed: u64,
-    pub sampler: SamplerKind,
-    pub max_depth: u32,
-    pub photons: u64,
-    /// Photons per density estimate, at least 2 (the k - 1 nearest over the k-th's disc).
-    pub k: usize,
-    /// Largest search radius in scene units (`None`: `DEFAULT_MAX_RADIUS_FRACTION` of the
-    /// scene diagonal).
-    pub max_radius: Option<f32>,
-    pub final_gather: bool,
-}
+pub use crate::components::photon_mapping::{
+    DEFAULT_K, DEFAULT_MAX_RADIUS_FRACTION, DEFAULT_PHOTONS, PmSettings,
+};
 
 impl From<&RenderSettings> for PmSettings {
     fn from(s: &RenderSettings) -> PmSettings {
@@ -66,27 +49,6 @@ impl From<&RenderSettings> for PmSettings {
             sampler: s.sampler,
             ..PmSettings::new(s.seed)
         }
-    }
-}
-
-impl PmSettings {
-    pub fn new(seed: u64) -> PmSettings {
-        PmSettings {
-            seed,
-            sampler: SamplerKind::Independent,
-            max_depth: u32::MAX,
-            photons: DEFAULT_PHOTONS,
-            k: DEFAULT_K,
-            max_radius: None,
-            final_gather: true,
-        }
-    }
-
-    pub fn max_radius_in(&self, data: &SceneData) -> f32 {
-        self.max_radius.unwrap_or_else(|| {
-            let s = &data.scene;
-            DEFAULT_MAX_RADIUS_FRACTION * (s.bounds_max - s.bounds_min).length()
-        })
     }
 }
 
@@ -273,4 +235,58 @@ pub fn render(
     control: &Control,
 ) -> RenderOutcome {
     render_passes::<PmState>(data, settings, budget, control)
+}
+
+/// The systems of its graphs bound to the columns of `PmState`.
+mod bindings {
+    use super::PmState;
+    use crate::systems::*;
+
+    crate::bind! {
+        PmState:
+        connect::sample_direct_light::SampleDirectLight {
+            read data, visible = camera_walk.visible, points = camera_walk.points,
+                glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points,
+                sampler = camera_walk.sampler, index = pass;
+            write shadow, shadow_len;
+        }
+        gather::caustic_photons::GatherCaustics {
+            read data, settings, maps, visible = camera_walk.visible, pixels;
+            write pass_radiance, nonfinite;
+        }
+        gather::direct_light::AddDirectLight {
+            read visible = camera_walk.visible, points = camera_walk.points, shadow;
+            write direct = pass_radiance, nonfinite;
+        }
+        gather::global_photons::GatherGlobalPhotons {
+            read data, settings, maps, points = gather_walk.visible;
+            write pass_radiance, nonfinite;
+        }
+        gather::global_photons::GatherIndirectPhotons {
+            read data, settings, maps, points = camera_walk.visible;
+            write pass_radiance, nonfinite;
+        }
+        gather::glossy_light::AddGlossyLight {
+            read glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points,
+                points = camera_walk.points, shadow;
+            write sums = pass_radiance, nonfinite;
+        }
+        gather::pass_film::AddPassToFilm {
+            read pixels;
+            write pass_radiance, film;
+        }
+        gather::photon_maps::BuildPhotonMaps {
+            read caustics;
+            write tracing = photon_pass.tracing, maps;
+        }
+        generate::final_gather_rays::GenerateFinalGatherRays {
+            read scene = data.scene, visible = camera_walk.visible, sampler = gather_walk.sampler,
+                pass, pixels;
+            write chains = gather_walk.chains, rays = gather_walk.rays, active = gather_walk.active;
+        }
+        trace::shadow::TraceShadow {
+            read accel = data.accel, len = shadow_len;
+            write shadow;
+        }
+    }
 }

@@ -3,7 +3,7 @@
 //! capped.
 //!
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator pt` prints it with
-//! each system's columns, and the README shows it for `door_ajar`.
+//! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 
 use crate::bsdf::MaterialKind;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};
@@ -14,49 +14,12 @@ use crate::integrators::{
     WaveState,
 };
 use crate::pipeline::{Graph, Node};
-use crate::sampling::{Sampler, SamplerKind};
+use crate::sampling::Sampler;
 use crate::systems::{connect, gather, generate, shade, trace};
 use glam::Vec3;
-use std::ops::Range;
 use std::sync::Arc;
 
-/// Random-number dimensions: two for the pixel jitter, then `DIMS_PER_BOUNCE` per bounce.
-pub const DIM_PIXEL: u32 = 0;
-pub const DIMS_PER_BOUNCE: u32 = 6;
-/// Offsets within a bounce's dimensions.
-pub const DIM_LIGHT_PICK: u32 = 0;
-pub const DIM_LIGHT_POINT: u32 = 1;
-pub const DIM_BSDF: u32 = 3;
-pub const DIM_ROULETTE: u32 = 5;
-
-/// First random dimension of bounce `depth`.
-#[inline]
-pub fn bounce_dim(depth: u32) -> u32 {
-    2 + depth * DIMS_PER_BOUNCE
-}
-
-/// Paths in flight at once by default (`--wavefront N` sets another): large enough to keep
-/// both cores busy between stage barriers, small enough to stay in a few tens of megabytes.
-pub const WAVEFRONT: usize = 1 << 18;
-
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PtSettings {
-    pub seed: u64,
-    pub sampler: SamplerKind,
-    /// Maximum number of scattering events; `u32::MAX` for unlimited.
-    pub max_depth: u32,
-}
-
-impl PtSettings {
-    /// Independent samples, `seed`, at most `max_depth` bounces.
-    pub fn new(seed: u64, max_depth: u32) -> PtSettings {
-        PtSettings {
-            seed,
-            sampler: SamplerKind::Independent,
-            max_depth,
-        }
-    }
-}
+pub use crate::components::path_tracing::*;
 
 impl From<&RenderSettings> for PtSettings {
     fn from(s: &RenderSettings) -> PtSettings {
@@ -65,29 +28,6 @@ impl From<&RenderSettings> for PtSettings {
             sampler: s.sampler,
             max_depth: s.max_depth,
         }
-    }
-}
-
-/// Slots of each material kind after `sort_by_material`: non-delta kinds first, so light
-/// sampling runs over one contiguous range.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct MaterialRanges {
-    pub diffuse: Range<usize>,
-    pub conductor: Range<usize>,
-    pub dielectric: Range<usize>,
-}
-
-impl MaterialRanges {
-    pub fn of(&self, kind: MaterialKind) -> Range<usize> {
-        match kind {
-            MaterialKind::Diffuse => self.diffuse.clone(),
-            MaterialKind::Conductor => self.conductor.clone(),
-            MaterialKind::Dielectric => self.dielectric.clone(),
-        }
-    }
-    /// Slots whose material can be reached by light sampling.
-    pub fn non_delta(&self) -> Range<usize> {
-        self.diffuse.start..self.conductor.end
     }
 }
 
@@ -113,18 +53,6 @@ pub struct PtState {
     pub film: Film,
     /// Double buffers for compaction and sorting.
     pub scratch: Scratch,
-}
-
-#[derive(Default)]
-pub struct Scratch {
-    pub rays: Rays,
-    pub hits: Hits,
-    pub paths: Paths,
-    pub order: Vec<u32>,
-    /// Queue of each slot, for sorting.
-    pub queue: Vec<u8>,
-    /// Slots per queue (three material kinds, then the ended paths) in each chunk, for sorting.
-    pub chunk_counts: Vec<[usize; crate::systems::shade::sort_by_material::QUEUES]>,
 }
 
 impl PtState {
@@ -309,4 +237,54 @@ pub fn render(
     control: &Control,
 ) -> RenderOutcome {
     render_waves::<PtState>(data, settings, budget, control, None)
+}
+
+/// The systems of its graphs bound to the columns of `PtState`.
+mod bindings {
+    use super::PtState;
+    use crate::systems::*;
+
+    crate::bind! {
+        PtState:
+        connect::apply_shadow::ApplyShadowContributions {
+            read shadow, len = shadow_len;
+            write radiance = paths.radiance;
+        }
+        connect::sample_lights::SampleLights {
+            read data, sampler, hits, rays, paths, surfaces, ranges;
+            write shadow, shadow_len;
+        }
+        gather::film::AccumulateFilm {
+            read sample_radiance, wave, pixels;
+            write film;
+        }
+        generate::camera_rays::GenerateCameraRays {
+            read wave, camera = data.scene.camera, pixels, sampler;
+            write rays, paths, sample_radiance, active;
+        }
+        shade::emitted_light::AddEmittedLight {
+            read data, hits, rays, live = active;
+            write paths;
+        }
+        shade::material::ShadeMaterial {
+            read data, sampler, hits, surfaces, ranges;
+            write rays, paths;
+        }
+        shade::russian_roulette::RussianRoulette {
+            read live = active, sampler;
+            write paths, rays;
+        }
+        shade::sort_by_material::SortByMaterial {
+            read scene = data.scene, max_depth = settings.max_depth;
+            write hits, paths, rays, sample_radiance, ranges, active, scratch, surfaces;
+        }
+        trace::closest::TraceClosest {
+            read accel = data.accel, rays, live = active;
+            write hits;
+        }
+        trace::shadow::TraceShadow {
+            read accel = data.accel, len = shadow_len;
+            write shadow;
+        }
+    }
 }

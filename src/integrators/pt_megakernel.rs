@@ -8,9 +8,9 @@
 //! Waves stay, as the film's batches: a wave's samples are rendered in parallel chunks and
 //! their radiance added to the film in one pass, as the wavefront does.
 
+use crate::components::path_tracing::{PtSettings, WAVEFRONT};
 use crate::film::{Film, Image};
 use crate::integrators::driver::WaveState;
-use crate::integrators::pt::{self, PtSettings};
 use crate::integrators::{IntegratorState, SceneData, Wave};
 use crate::pipeline::{Graph, Node};
 use crate::sampling::Sampler;
@@ -46,7 +46,7 @@ impl IntegratorState for MegakernelState {
 
 impl WaveState for MegakernelState {
     /// The same waves as the wavefront PT's: here they only batch the film's additions.
-    const WAVEFRONT: usize = pt::WAVEFRONT;
+    const WAVEFRONT: usize = WAVEFRONT;
     fn new(data: Arc<SceneData>, settings: PtSettings, capacity: usize) -> MegakernelState {
         let cam = data.scene.camera;
         MegakernelState {
@@ -81,5 +81,23 @@ impl WaveState for MegakernelState {
              radiance (12 bytes a sample)"
                 .to_string(),
         )]
+    }
+}
+
+/// The systems of its graphs bound to the columns of `MegakernelState`.
+mod bindings {
+    use super::MegakernelState;
+    use crate::systems::*;
+
+    crate::bind! {
+        MegakernelState:
+        gather::film::AccumulateFilm {
+            read sample_radiance, wave, pixels;
+            write film;
+        }
+        trace::paths::TracePaths {
+            read data, settings, sampler, wave, pixels;
+            write sample_radiance, traced;
+        }
     }
 }

@@ -24,7 +24,7 @@
 //! choice at the glass showed stay in its image, whatever the number of passes.
 //!
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator sppm` prints it with
-//! each system's columns, and the README shows it for `door_ajar`.
+//! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 //!
 //! Memory is bounded: per pixel a visible point and its statistics, per pass its photons;
 //! nothing grows with the number of passes.
@@ -39,44 +39,15 @@ use crate::integrators::{
 use crate::photons::state::{self, StateReader, StateWriter};
 use crate::photons::{HashGrid, PhotonPass};
 use crate::pipeline::{Graph, Node};
-use crate::sampling::{Sampler, SamplerKind};
+use crate::sampling::Sampler;
 use crate::systems::{connect, gather, shade, trace};
 use glam::DVec3;
 use std::sync::Arc;
 
-/// Default photons per pass.
-pub const DEFAULT_PHOTONS_PER_PASS: u64 = 250_000;
-/// Default alpha: the fraction of new photons a pass keeps.
-pub const DEFAULT_ALPHA: f32 = 0.7;
-/// SPPM's default initial radius, as a fraction of the scene's bounding-box diagonal: of
-/// 0.25%, 0.5%, 1% and 2%, 1% has the least relMSE over cornell_box, torus_glass and door_ajar
-/// at 10 s (the geometric mean of each scene's relMSE, less its reference's own noise, over
-/// the scene's best: 1.12 against 1.50 for 0.5%; docs/photons/README.md).
-pub const SPPM_RADIUS_FRACTION: f32 = 0.01;
-/// PPM's default initial radius, as a fraction of the scene's diagonal (not re-measured: its
-/// torus_glass curves in docs/photons/README.md are at 0.5%).
-pub const PPM_RADIUS_FRACTION: f32 = 0.005;
-/// Default eye-ray trees per pixel of PPM.
-pub const DEFAULT_EYE_RAYS: u32 = 16;
-
-/// The settings of PPM and SPPM.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ProgressiveSettings {
-    pub seed: u64,
-    pub sampler: SamplerKind,
-    /// Maximum number of scattering events of camera chains and photons; `u32::MAX` for
-    /// unlimited.
-    pub max_depth: u32,
-    pub photons_per_pass: u64,
-    pub alpha: f32,
-    /// Initial gather radius in scene units (`None`: `SPPM_RADIUS_FRACTION` or
-    /// `PPM_RADIUS_FRACTION` of the scene diagonal).
-    pub initial_radius: Option<f32>,
-    /// SPPM (true): new visible points every pass. PPM (false): pass 0's, kept.
-    pub stochastic: bool,
-    /// PPM: eye-ray trees per pixel, jittered over it (stratified).
-    pub eye_rays: u32,
-}
+pub use crate::components::photon_mapping::{
+    DEFAULT_ALPHA, DEFAULT_EYE_RAYS, DEFAULT_PHOTONS_PER_PASS, PPM_RADIUS_FRACTION,
+    ProgressiveSettings, SPPM_RADIUS_FRACTION,
+};
 
 impl ProgressiveSettings {
     /// The settings of PPM (`stochastic` false) or SPPM from a render's settings.
@@ -93,19 +64,6 @@ impl ProgressiveSettings {
         }
     }
 
-    pub fn new(seed: u64, stochastic: bool) -> ProgressiveSettings {
-        ProgressiveSettings {
-            seed,
-            sampler: SamplerKind::Independent,
-            max_depth: u32::MAX,
-            photons_per_pass: DEFAULT_PHOTONS_PER_PASS,
-            alpha: DEFAULT_ALPHA,
-            initial_radius: None,
-            stochastic,
-            eye_rays: DEFAULT_EYE_RAYS,
-        }
-    }
-
     /// Bytes of state a render of `pixels` pixels is expected to need (photons apart): PPM's
     /// grow with its eye rays, about two hit points each where a scene has glass (the torus:
     /// 0.93 per eye ray; `ProgressiveState::bytes` counts what a render holds).
@@ -119,19 +77,6 @@ impl ProgressiveSettings {
         pixels
             .saturating_mul(walk as u64)
             .saturating_add(points.saturating_mul(ProgressiveState::bytes_per_point() as u64))
-    }
-
-    /// The initial radius in `scene`.
-    pub fn radius_in(&self, data: &SceneData) -> f32 {
-        self.initial_radius.unwrap_or_else(|| {
-            let s = &data.scene;
-            let fraction = if self.stochastic {
-                SPPM_RADIUS_FRACTION
-            } else {
-                PPM_RADIUS_FRACTION
-            };
-            fraction * (s.bounds_max - s.bounds_min).length()
-        })
     }
 }
 
@@ -443,4 +388,53 @@ pub fn run_passes(
     passes: u64,
 ) -> ProgressiveState {
     crate::integrators::driver::run_passes(data, settings, passes)
+}
+
+/// The systems of its graphs bound to the columns of `ProgressiveState`.
+mod bindings {
+    use super::ProgressiveState;
+    use crate::systems::*;
+
+    crate::bind! {
+        ProgressiveState:
+        connect::sample_direct_light::SampleDirectLight {
+            read data, visible = camera_walk.visible, points = camera_walk.points,
+                glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points,
+                sampler = camera_walk.sampler, index = pass;
+            write shadow, shadow_len;
+        }
+        gather::direct_light::AddDirectLight {
+            read visible = camera_walk.visible, points = camera_walk.points, shadow;
+            write direct = estimates.direct, nonfinite;
+        }
+        gather::glossy_light::AddGlossyLight {
+            read glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points,
+                points = camera_walk.points, shadow;
+            write sums = glossy_direct, nonfinite;
+        }
+        gather::photon_grid::BuildPhotonGrid {
+            read radius = estimates.radius, triangle = camera_walk.visible.triangle,
+                points = camera_walk.points, tracing = photon_pass.tracing;
+            write grid;
+        }
+        gather::progressive_update::UpdatePixelEstimates {
+            read alpha = settings.alpha, points = camera_walk.points,
+                emitted = photon_pass.tracing.emitted;
+            write estimates, nonfinite, photons_emitted;
+        }
+        gather::visible_point_photons::GatherPhotons {
+            read data, visible = camera_walk.visible, tracing = photon_pass.tracing, grid,
+                hit_points = camera_walk.points;
+            write estimates;
+        }
+        shade::order_hit_points::OrderHitPoints {
+            read data, settings, tree = camera_walk.tree, starts = camera_walk.starts,
+                points = camera_walk.points;
+            write visible = camera_walk.visible, estimates, shadow;
+        }
+        trace::shadow::TraceShadow {
+            read accel = data.accel, len = shadow_len;
+            write shadow;
+        }
+    }
 }

@@ -481,3 +481,28 @@ impl MapQuery<'_> {
             .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
     }
 }
+
+/// The systems of its graphs bound to the columns of `PhotonPass`.
+mod bindings {
+    use super::PhotonPass;
+    use crate::systems::*;
+
+    crate::bind! {
+        PhotonPass:
+        generate::photons::EmitPhotons {
+            read data;
+            write tracing;
+        }
+        shade::compact_photons::CompactPhotons {
+            write tracing;
+        }
+        shade::scatter_photons::ScatterPhotons {
+            read data;
+            write tracing;
+        }
+        trace::closest::TraceClosest {
+            read accel = data.accel, rays = tracing.rays, live = tracing.active;
+            write hits = tracing.hits;
+        }
+    }
+}

@@ -30,74 +30,127 @@ pub struct Access {
     pub writes: &'static [&'static str],
 }
 
-/// One step of an integrator over the wavefront state `S`. Implement it with `system!`, which
-/// hands the system's body only the columns it declares.
+/// One step of an integrator over the wavefront state `S`: a system (`system!`) bound to the
+/// state's columns (`bind!`).
 pub trait System<S>: Send + Sync {
     /// A name that says what the system does; the report lists systems by it.
     fn name(&self) -> &'static str;
-    /// The columns the system reads and writes.
+    /// The columns of `S` the system reads and writes.
     fn access(&self) -> Access;
     /// Runs over the system's queue in `state`.
     fn run(&self, state: &mut S) -> Flow;
 }
 
-/// Declares a system: its name, and for each state it runs on the columns it reads and writes,
-/// then its body. The body sees each declared column as a local binding (`&` for reads, `&mut`
-/// for writes) and nothing else of the state, so an undeclared access does not compile, and
-/// the graph check reads the same list.
+/// What `system!` declares of a system, whatever state it runs on: its name, the names of the
+/// columns it reads and writes, and its body over them. `Columns` is the tuple of those
+/// columns, reads (`&`) then writes (`&mut`), in declaration order.
+pub trait Declared: Send + Sync {
+    type Columns<'a>;
+    const READS: &'static [&'static str];
+    const WRITES: &'static [&'static str];
+    fn name(&self) -> &'static str;
+    fn run_columns(&self, columns: Self::Columns<'_>) -> Flow;
+}
+
+/// Declares a system: its name, the columns it reads and writes (each a name and a type), and
+/// its body. The body sees each column as a local binding (`&` for reads, `&mut` for writes)
+/// and nothing else, so an undeclared access does not compile. The system names no state: a
+/// state runs it once `bind!` has mapped each column to one of the state's fields, and the
+/// graph check reads the fields the binding names.
 ///
 /// ```ignore
 /// pub struct ApplyShadowContributions;
 /// system! {
 ///     ApplyShadowContributions = "apply_shadow_contributions";
-///     on PtState {
-///         read shadow, range = shadow_queue;   // `range` binds `&state.shadow_queue`
-///         write radiance = paths.radiance;
-///     }
-///     run { /* uses shadow, range, radiance */ }
+///     read shadow: ShadowRays, len: usize;
+///     write radiance: Vec<Vec3>;
+///     run { /* uses shadow, len, radiance */ }
 /// }
 /// ```
 ///
 /// A system with fields names its `self` in the body and, if its name depends on them, in the
 /// name: `name(this) = this.kind.system_name();` and `run(this) { ... this.kind ... }`.
-/// A system that runs on several states lists one `on` block per state with the same binding
-/// names, so one body serves them all.
 #[macro_export]
 macro_rules! system {
     (
         $system:ty = $label:expr;
         $($rest:tt)*
     ) => {
-        $crate::system!(@states $system, (_this) $label; $($rest)*);
+        $crate::system!(@columns $system, (_this) $label; $($rest)*);
     };
     (
         $system:ty;
         name($nthis:ident) = $label:expr;
         $($rest:tt)*
     ) => {
-        $crate::system!(@states $system, ($nthis) $label; $($rest)*);
+        $crate::system!(@columns $system, ($nthis) $label; $($rest)*);
     };
-    (@states $system:ty, ($nthis:ident) $label:expr;
-        $(on $state:ty { $($columns:tt)* })+
+    (@columns $system:ty, ($nthis:ident) $label:expr;
+        $(read $($r:ident : $rt:ty),+ ;)?
+        $(write $($w:ident : $wt:ty),+ ;)?
         run $body:block
     ) => {
-        $crate::system!(@states $system, ($nthis) $label; $(on $state { $($columns)* })+ run (_this) $body);
+        $crate::system!(@columns $system, ($nthis) $label;
+            $(read $($r : $rt),+ ;)? $(write $($w : $wt),+ ;)? run (_this) $body);
     };
-    (@states $system:ty, ($nthis:ident) $label:expr;
-        $(
-            on $state:ty {
-                $(read $($r:ident $(= $($rp:ident).+)?),+ ;)?
-                $(write $($w:ident $(= $($wp:ident).+)?),+ ;)?
-            }
-        )+
+    (@columns $system:ty, ($nthis:ident) $label:expr;
+        $(read $($r:ident : $rt:ty),+ ;)?
+        $(write $($w:ident : $wt:ty),+ ;)?
         run ($this:ident) $body:block
     ) => {
+        impl $crate::pipeline::Declared for $system {
+            type Columns<'a> = ($($(&'a $rt,)+)? $($(&'a mut $wt,)+)?);
+            const READS: &'static [&'static str] = &[$($(stringify!($r)),+)?];
+            const WRITES: &'static [&'static str] = &[$($(stringify!($w)),+)?];
+            fn name(&self) -> &'static str {
+                let $nthis = self;
+                let _ = $nthis;
+                $label
+            }
+            #[allow(unused_variables)]
+            fn run_columns(&self, columns: Self::Columns<'_>) -> $crate::pipeline::Flow {
+                let $this = self;
+                let _ = $this;
+                let ($($($r,)+)? $($($w,)+)?) = columns;
+                $body
+            }
+        }
+    };
+}
+
+/// Binds systems to a state: for each system, the field of the state behind each column it
+/// declared (`name = path.in.state`, or just `name` for the field of that name), reads then
+/// writes in the system's order. A column the binding misses, adds, reorders or moves
+/// between reads and writes does not compile; the graph check sees the fields named here.
+///
+/// ```ignore
+/// bind! {
+///     PtState:
+///     trace::closest::TraceClosest { read accel = data.accel, rays, live = active; write hits; }
+/// }
+/// ```
+#[macro_export]
+macro_rules! bind {
+    ($state:ty: $(
+        $system:ty {
+            $(read $($r:ident $(= $($rp:ident).+)?),+ ;)?
+            $(write $($w:ident $(= $($wp:ident).+)?),+ ;)?
+        }
+    )*) => {
         $(
+            const _: () = assert!(
+                $crate::pipeline::same_names(
+                    <$system as $crate::pipeline::Declared>::READS,
+                    &[$($(stringify!($r)),+)?],
+                ) && $crate::pipeline::same_names(
+                    <$system as $crate::pipeline::Declared>::WRITES,
+                    &[$($(stringify!($w)),+)?],
+                ),
+                "a binding lists other columns than its system declares",
+            );
             impl $crate::pipeline::System<$state> for $system {
                 fn name(&self) -> &'static str {
-                    let $nthis = self;
-                    let _ = $nthis;
-                    $label
+                    $crate::pipeline::Declared::name(self)
                 }
                 fn access(&self) -> $crate::pipeline::Access {
                     $crate::pipeline::Access {
@@ -105,20 +158,44 @@ macro_rules! system {
                         writes: &[$($($crate::__column_name!($w $(= $($wp).+)?)),+)?],
                     }
                 }
-                #[allow(unused_variables)]
                 fn run(&self, state: &mut $state) -> $crate::pipeline::Flow {
-                    let $this = self;
-                    let _ = $this;
-                    $($(let $r = &$crate::__column!(state, $r $(= $($rp).+)?);)+)?
-                    $($(let $w = &mut $crate::__column!(state, $w $(= $($wp).+)?);)+)?
-                    $body
+                    $crate::pipeline::Declared::run_columns(
+                        self,
+                        (
+                            $($(&$crate::__column!(state, $r $(= $($rp).+)?),)+)?
+                            $($(&mut $crate::__column!(state, $w $(= $($wp).+)?),)+)?
+                        ),
+                    )
                 }
             }
-        )+
+        )*
     };
 }
 
-/// The state field a `system!` binding names (used by `system!`).
+/// Whether two lists of column names are equal (for `bind!`'s check, at compile time).
+pub const fn same_names(a: &[&str], b: &[&str]) -> bool {
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut i = 0;
+    while i < a.len() {
+        let (x, y) = (a[i].as_bytes(), b[i].as_bytes());
+        if x.len() != y.len() {
+            return false;
+        }
+        let mut k = 0;
+        while k < x.len() {
+            if x[k] != y[k] {
+                return false;
+            }
+            k += 1;
+        }
+        i += 1;
+    }
+    true
+}
+
+/// The state field a `bind!` column names (used by `bind!`).
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __column {
@@ -130,7 +207,7 @@ macro_rules! __column {
     };
 }
 
-/// The path of a `system!` binding as a string (used by `system!`).
+/// The path of a `bind!` column as a string (used by `bind!`).
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __column_name {
@@ -456,9 +533,7 @@ mod tests {
     struct Countdown;
     system! {
         Countdown = "countdown";
-        on Counters {
-            write values, decrements;
-        }
+        write values: Vec<u32>, decrements: u32;
         run {
             let taken = values.len();
             for v in values.iter_mut() {
@@ -473,12 +548,16 @@ mod tests {
     struct Report;
     system! {
         Report = "report";
-        on Counters {
-            read decrements;
-        }
+        read decrements: u32;
         run {
             Flow::new(*decrements as usize, 0)
         }
+    }
+
+    bind! {
+        Counters:
+        Countdown { write values, decrements; }
+        Report { read decrements; }
     }
 
     fn countdown_graph() -> Graph<Counters> {

@@ -19,7 +19,7 @@ use crate::bsdf::Material;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
-pub use crate::geometry::{FLAT, NO_EMITTER, TriangleColumns};
+pub use crate::geometry::{FLAT, MAX_COORDINATE, NO_EMITTER, TriangleColumns};
 
 /// A pinhole camera. The image's right is forward x up; row 0 is the top row.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -160,11 +160,6 @@ fn location(line: Option<usize>, column: Option<usize>) -> String {
         _ => String::new(),
     }
 }
-
-/// Coordinates (of every vertex after its transforms, and of the camera) must stay below this
-/// magnitude: beyond it, bounding-box areas, squared distances and the tree's costs overflow
-/// f32 (a quad of half-size 1e19 broke the BVH build).
-pub const MAX_COORDINATE: f64 = 1e12;
 
 /// The emitted power of a scene, pi x area x radiance summed over its emitters, must stay
 /// below this in every channel: light subpaths and photons carry it in f32, times geometry

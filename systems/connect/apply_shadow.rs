@@ -1,18 +1,17 @@
 //! Adds the contribution of every unoccluded shadow ray to the path that cast it.
 
 use crate::components::CHUNK;
-use crate::integrators::pt::PtState;
+use crate::components::ShadowRays;
 use crate::pipeline::Flow;
+use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct ApplyShadowContributions;
 
 crate::system! {
     ApplyShadowContributions = "apply_shadow_contributions";
-    on PtState {
-        read shadow, len = shadow_len;
-        write radiance = paths.radiance;
-    }
+    read shadow: ShadowRays, len: usize;
+    write radiance: Vec<Vec3>;
     run {
         let taken = *len;
         let applied: usize = radiance[..taken]

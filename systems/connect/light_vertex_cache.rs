@@ -4,19 +4,23 @@
 //! light-subpath order then depth order (the order the picks index, the same for any thread
 //! count).
 
-use crate::integrators::bdpt::{BdptState, CACHE_GROUP, LightVertexCache};
+use crate::components::PathVertices;
+use crate::components::Wave;
+use crate::components::subpaths::CACHE_GROUP;
+use crate::components::subpaths::LightVertexCache;
 use crate::path::{PathContext, Vertex};
 use crate::pipeline::Flow;
+use crate::scene::SceneData;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct CacheLightVertices;
 
 crate::system! {
     CacheLightVertices = "cache_light_vertices";
-    on BdptState {
-        read wave, capacity, subpath_len, data, vertices;
-        write light_cache;
-    }
+    read wave: Wave, capacity: usize, subpath_len: Vec<u32>, data: Arc<SceneData>,
+        vertices: Vec<PathVertices>;
+    write light_cache: LightVertexCache;
     run {
         let n = wave.len;
         let cap = *capacity;

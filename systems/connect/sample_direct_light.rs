@@ -10,11 +10,15 @@
 //! power heuristic, as a path tracer's.
 
 use crate::components::NO_VISIBLE_POINT;
-use crate::integrators::{pm::PmState, sppm::ProgressiveState};
+use crate::components::ShadowRays;
+use crate::components::VisiblePoints;
 use crate::math::Frame;
 use crate::pipeline::Flow;
+use crate::sampling::Sampler;
 use crate::sampling::{Stream, power_heuristic};
+use crate::scene::SceneData;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// First light-sample dimension of a pixel's glossy points (its visible points take
 /// `3 * branch`): glossy point `branch` takes `GLOSSY_DIM + 3 * branch`.
@@ -24,14 +28,9 @@ pub struct SampleDirectLight;
 
 crate::system! {
     SampleDirectLight = "sample_direct_light";
-    on PmState {
-        read data, visible = camera_walk.visible, points = camera_walk.points, glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points, sampler = camera_walk.sampler, index = pass;
-        write shadow, shadow_len;
-    }
-    on ProgressiveState {
-        read data, visible = camera_walk.visible, points = camera_walk.points, glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points, sampler = camera_walk.sampler, index = pass;
-        write shadow, shadow_len;
-    }
+    read data: Arc<SceneData>, visible: VisiblePoints, points: usize, glossy: VisiblePoints,
+        glossy_points: usize, sampler: Sampler<'static>, index: u64;
+    write shadow: ShadowRays, shadow_len: usize;
     run {
         let index = *index;
         let scene = &data.scene;

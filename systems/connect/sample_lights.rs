@@ -2,12 +2,16 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
+use crate::components::ShadowRays;
+use crate::components::path_tracing::DIM_LIGHT_PICK;
+use crate::components::path_tracing::DIM_LIGHT_POINT;
+use crate::components::path_tracing::MaterialRanges;
+use crate::components::path_tracing::bounce_dim;
 use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
-use crate::integrators::SceneData;
-use crate::integrators::pt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, PtState, bounce_dim};
 use crate::math::gamma;
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, power_heuristic, sample_cdf};
+use crate::scene::SceneData;
 use crate::systems::shade::Surface;
 use crate::systems::shade::lanes::{
     DiffuseLanes, F, LANES, M, V3, draw, draw2, lanes_of, offset_origin,
@@ -16,15 +20,15 @@ use crate::systems::shade::lanes::{
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
+use std::sync::Arc;
 
 pub struct SampleLights;
 
 crate::system! {
     SampleLights = "sample_lights";
-    on PtState {
-        read data, sampler, hits, rays, paths, surfaces, ranges;
-        write shadow, shadow_len;
-    }
+    read data: Arc<SceneData>, sampler: Sampler<'static>, hits: Hits, rays: Rays, paths: Paths,
+        surfaces: Surfaces, ranges: MaterialRanges;
+    write shadow: ShadowRays, shadow_len: usize;
     run {
         let data: &SceneData = data;
         let range = ranges.non_delta();

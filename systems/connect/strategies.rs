@@ -11,22 +11,28 @@
 //! estimation); t = 1 projects a light vertex onto the image (light tracing: it lands in
 //! whichever pixel it projects to).
 
+use crate::components::Wave;
+use crate::components::subpaths::BdptSettings;
+use crate::components::subpaths::CONNECT_CHUNK;
+use crate::components::subpaths::DIM_CACHE_PICK;
+use crate::components::subpaths::DIM_LIGHT_PICK;
+use crate::components::subpaths::DIM_LIGHT_POINT;
+use crate::components::subpaths::LightVertexCache;
+use crate::components::subpaths::Numbers;
+use crate::components::subpaths::StrategyFilter;
+use crate::components::subpaths::camera_vertex_dim;
 use crate::components::{
     Connections, ConnectionsChunk, PathVertices, PathVerticesView, ShadowRays, ShadowRaysChunk,
     split_ranges,
 };
 use crate::geometry::spawn_ray_to;
-use crate::integrators::Wave;
-use crate::integrators::bdpt::{
-    BdptSettings, BdptState, CONNECT_CHUNK, DIM_CACHE_PICK, DIM_LIGHT_PICK, DIM_LIGHT_POINT,
-    LightVertexCache, Numbers, StrategyFilter, camera_vertex_dim,
-};
 use crate::path::{Joint, PathContext, Vertex, VertexKind, towards};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, Stream};
 use crate::scene::{PreparedScene, SceneData};
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct ConnectStrategies;
 
@@ -74,10 +80,11 @@ fn slot_count(
 
 crate::system! {
     ConnectStrategies = "connect_strategies";
-    on BdptState {
-        read wave, capacity, settings, numbers = sampler, subpath_len, data, vertices, pixels, multiplex, chosen_s, sample_pixel;
-        write connection_start, connections_len, shadow, connections, sample_radiance;
-    }
+    read wave: Wave, capacity: usize, settings: BdptSettings, numbers: Numbers,
+        subpath_len: Vec<u32>, data: Arc<SceneData>, vertices: Vec<PathVertices>, pixels: u64,
+        multiplex: Vec<u32>, chosen_s: Vec<u16>, sample_pixel: Vec<u32>;
+    write connection_start: Vec<usize>, connections_len: usize, shadow: ShadowRays,
+        connections: Connections, sample_radiance: Vec<Vec3>;
     run {
         let wave_in = WaveInputs {
             wave: *wave,
@@ -236,7 +243,10 @@ pub fn connect_wave(
                 let k = first_sample + local;
                 let pixel = sample_pixel[k];
                 let strategy_count = if multiplexed {
-                    crate::integrators::bdpt::multiplexed_factor(multiplex[k], settings.max_depth)
+                    crate::components::subpaths::multiplexed_factor(
+                        multiplex[k],
+                        settings.max_depth,
+                    )
                 } else {
                     1.0
                 };

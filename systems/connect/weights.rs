@@ -5,24 +5,29 @@
 //! that reach the film: on door_ajar 4% of them. The arithmetic is the one the connection
 //! would have done at once, so the image is the same bit for bit.
 
+use crate::components::Wave;
+use crate::components::subpaths::BdptSettings;
+use crate::components::subpaths::CONNECT_CHUNK;
+use crate::components::subpaths::LightVertexCache;
+use crate::components::subpaths::Numbers;
 use crate::components::{Connections, PathVertices, ShadowRays};
-use crate::integrators::Wave;
-use crate::integrators::bdpt::{BdptSettings, BdptState, CONNECT_CHUNK, LightVertexCache, Numbers};
 use crate::path::{PathContext, Vertex};
 use crate::pipeline::Flow;
 use crate::sampling::Stream;
 use crate::scene::SceneData;
 use crate::systems::connect::strategies::{connection_weight, sampled_light_vertex};
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct WeighConnections;
 
 crate::system! {
     WeighConnections = "weigh_connections";
-    on BdptState {
-        read wave, capacity, settings, numbers = sampler, subpath_len, data, vertices, pixels, multiplex, connection_start, connections_len, connections;
-        write shadow;
-    }
+    read wave: Wave, capacity: usize, settings: BdptSettings, numbers: Numbers,
+        subpath_len: Vec<u32>, data: Arc<SceneData>, vertices: Vec<PathVertices>, pixels: u64,
+        multiplex: Vec<u32>, connection_start: Vec<usize>, connections_len: usize,
+        connections: Connections;
+    write shadow: ShadowRays;
     run {
         let input = WeighInputs {
             wave: *wave,
@@ -149,7 +154,7 @@ pub fn weigh_wave(
                     let strategy_count = if multiplex.is_empty() {
                         1.0
                     } else {
-                        crate::integrators::bdpt::multiplexed_factor(
+                        crate::components::subpaths::multiplexed_factor(
                             multiplex[k],
                             settings.max_depth,
                         )

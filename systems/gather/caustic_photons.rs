@@ -1,17 +1,21 @@
 //! Caustics at PM's visible points: a density estimate of the k nearest caustic photons.
 
-use crate::integrators::pm::PmState;
+use crate::components::VisiblePoints;
+use crate::components::photon_mapping::PmSettings;
 use crate::photons::MapQuery;
+use crate::photons::PhotonMaps;
 use crate::pipeline::Flow;
+use crate::scene::SceneData;
+use glam::DVec3;
+use std::sync::Arc;
 
 pub struct GatherCaustics;
 
 crate::system! {
     GatherCaustics = "gather_caustics";
-    on PmState {
-        read data, settings, maps, visible = camera_walk.visible, pixels;
-        write pass_radiance, nonfinite;
-    }
+    read data: Arc<SceneData>, settings: PmSettings, maps: Option<PhotonMaps>,
+        visible: VisiblePoints, pixels: usize;
+    write pass_radiance: Vec<DVec3>, nonfinite: u64;
     run {
         let Some(maps) = maps else {
             return Flow::default();

@@ -5,8 +5,11 @@
 //! The same selection of connections as `accumulate_connections`, into the chains instead
 //! of the film.
 
-use crate::integrators::mlt::MltState;
+use crate::components::Connections;
+use crate::components::ShadowRays;
+use crate::components::Wave;
 use crate::math::luminance;
+use crate::mlt::Contributions;
 use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -15,10 +18,9 @@ pub struct GatherChainContributions;
 
 crate::system! {
     GatherChainContributions = "gather_chain_contributions";
-    on MltState {
-        read wave = bdpt.wave, shadow = bdpt.shadow, connections = bdpt.connections, starts = bdpt.connection_start, radiance = bdpt.sample_radiance, sample_pixel = bdpt.sample_pixel, multiplex = bdpt.multiplex;
-        write out = chains.proposal_contributions;
-    }
+    read wave: Wave, shadow: ShadowRays, connections: Connections, starts: Vec<usize>,
+        radiance: Vec<Vec3>, sample_pixel: Vec<u32>, multiplex: Vec<u32>;
+    write out: Contributions;
     run {
         let n = wave.len;
         // The sample's own pixel and one per light-tracing splat: widen the columns for the

@@ -4,20 +4,23 @@
 //! images on, each strategy's share is also summed on its own.
 
 use crate::components::CHUNK;
+use crate::components::Connections;
+use crate::components::ShadowRays;
+use crate::components::Wave;
+use crate::film::Film;
 use crate::film::Splats;
-use crate::integrators::bdpt::BdptState;
 use crate::pipeline::Flow;
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
+use std::collections::BTreeMap;
 
 pub struct AccumulateConnections;
 
 crate::system! {
     AccumulateConnections = "accumulate_connections";
-    on BdptState {
-        read wave, shadow, connections, connection_start, connections_len, pixels, strategy_images = settings.strategy_images;
-        write sample_radiance, film, strategy_sums;
-    }
+    read wave: Wave, shadow: ShadowRays, connections: Connections, connection_start: Vec<usize>,
+        connections_len: usize, pixels: u64, strategy_images: bool;
+    write sample_radiance: Vec<Vec3>, film: Film, strategy_sums: BTreeMap<(u16, u16), Vec<DVec3>>;
     run {
         let n = wave.len;
         let (conns, starts) = (connections, connection_start);

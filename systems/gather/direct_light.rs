@@ -1,8 +1,10 @@
 //! Adds to each pixel's sum what its camera chain saw without photons: the emission it met
 //! and its light sample, when unoccluded. NaN or Inf values are counted and dropped.
 
-use crate::integrators::{pm::PmState, sppm::ProgressiveState};
+use crate::components::ShadowRays;
+use crate::components::VisiblePoints;
 use crate::pipeline::Flow;
+use glam::DVec3;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -10,14 +12,8 @@ pub struct AddDirectLight;
 
 crate::system! {
     AddDirectLight = "add_direct_light";
-    on PmState {
-        read visible = camera_walk.visible, points = camera_walk.points, shadow;
-        write direct = pass_radiance, nonfinite;
-    }
-    on ProgressiveState {
-        read visible = camera_walk.visible, points = camera_walk.points, shadow;
-        write direct = estimates.direct, nonfinite;
-    }
+    read visible: VisiblePoints, points: usize, shadow: ShadowRays;
+    write direct: Vec<DVec3>, nonfinite: u64;
     run {
         let pixels = *points;
         let (lit, dropped) = direct[..pixels]

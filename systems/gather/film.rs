@@ -1,22 +1,17 @@
 //! Adds the wave's finished samples to the film. The film's sums are exact, so the image never
 //! depends on how the work was split between threads.
 
-use crate::integrators::pt::PtState;
-use crate::integrators::pt_megakernel::MegakernelState;
+use crate::components::Wave;
+use crate::film::Film;
 use crate::pipeline::Flow;
+use glam::Vec3;
 
 pub struct AccumulateFilm;
 
 crate::system! {
     AccumulateFilm = "accumulate_film";
-    on PtState {
-        read sample_radiance, wave, pixels;
-        write film;
-    }
-    on MegakernelState {
-        read sample_radiance, wave, pixels;
-        write film;
-    }
+    read sample_radiance: Vec<Vec3>, wave: Wave, pixels: u64;
+    write film: Film;
     run {
         let len = wave.len;
         debug_assert_eq!(*pixels as usize, film.width * film.height);

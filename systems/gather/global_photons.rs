@@ -3,21 +3,21 @@
 //! (`gather_indirect_photons`), an estimate at the visible point of the photons that are
 //! neither direct nor caustic (light sampling and the caustic map cover those).
 
+use crate::components::photon_mapping::PmSettings;
 use crate::components::{PhotonFlags, VisiblePoints};
-use crate::integrators::pm::{PmSettings, PmState};
 use crate::photons::{MapQuery, PhotonMaps};
 use crate::pipeline::Flow;
 use crate::scene::SceneData;
 use glam::DVec3;
+use std::sync::Arc;
 
 pub struct GatherGlobalPhotons;
 
 crate::system! {
     GatherGlobalPhotons = "gather_global_photons";
-    on PmState {
-        read data, settings, maps, points = gather_walk.visible;
-        write pass_radiance, nonfinite;
-    }
+    read data: Arc<SceneData>, settings: PmSettings, maps: Option<PhotonMaps>,
+        points: VisiblePoints;
+    write pass_radiance: Vec<DVec3>, nonfinite: u64;
     run {
         gather(data, settings, maps, points, |_| true, pass_radiance, nonfinite)
     }
@@ -27,10 +27,9 @@ pub struct GatherIndirectPhotons;
 
 crate::system! {
     GatherIndirectPhotons = "gather_indirect_photons";
-    on PmState {
-        read data, settings, maps, points = camera_walk.visible;
-        write pass_radiance, nonfinite;
-    }
+    read data: Arc<SceneData>, settings: PmSettings, maps: Option<PhotonMaps>,
+        points: VisiblePoints;
+    write pass_radiance: Vec<DVec3>, nonfinite: u64;
     run {
         let indirect =
             |f: PhotonFlags| !(f.has(PhotonFlags::DIRECT) || f.has(PhotonFlags::CAUSTIC));

@@ -2,21 +2,17 @@
 //! (shadow slots `points..points + glossy_points`), when unoccluded: PM's pass radiance, or
 //! PPM's and SPPM's per-pixel sum over passes. NaN or Inf values are counted and dropped.
 
-use crate::integrators::{pm::PmState, sppm::ProgressiveState};
+use crate::components::ShadowRays;
+use crate::components::VisiblePoints;
 use crate::pipeline::Flow;
+use glam::DVec3;
 
 pub struct AddGlossyLight;
 
 crate::system! {
     AddGlossyLight = "add_glossy_light";
-    on PmState {
-        read glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points, points = camera_walk.points, shadow;
-        write sums = pass_radiance, nonfinite;
-    }
-    on ProgressiveState {
-        read glossy = camera_walk.glossy, glossy_points = camera_walk.glossy_points, points = camera_walk.points, shadow;
-        write sums = glossy_direct, nonfinite;
-    }
+    read glossy: VisiblePoints, glossy_points: usize, points: usize, shadow: ShadowRays;
+    write sums: Vec<DVec3>, nonfinite: u64;
     run {
         // Serial: several glossy points may add to one pixel, in their order.
         let mut lit = 0;

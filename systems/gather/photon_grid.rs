@@ -2,18 +2,16 @@
 //! of the largest gather radius of any pixel (radii only shrink, so cells do too).
 
 use crate::components::NO_VISIBLE_POINT;
-use crate::integrators::sppm::ProgressiveState;
 use crate::photons::HashGrid;
+use crate::photons::PhotonTracing;
 use crate::pipeline::Flow;
 
 pub struct BuildPhotonGrid;
 
 crate::system! {
     BuildPhotonGrid = "build_photon_grid";
-    on ProgressiveState {
-        read radius = estimates.radius, triangle = camera_walk.visible.triangle, points = camera_walk.points, tracing = photon_pass.tracing;
-        write grid;
-    }
+    read radius: Vec<f32>, triangle: Vec<u32>, points: usize, tracing: PhotonTracing;
+    write grid: Option<HashGrid>;
     run {
         let radius = radius[..*points]
             .iter()

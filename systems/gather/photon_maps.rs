@@ -2,7 +2,7 @@
 //! (the global map) and, where the scene has specular surfaces, one over the caustic photons.
 
 use crate::components::PhotonFlags;
-use crate::integrators::pm::PmState;
+use crate::photons::PhotonTracing;
 use crate::photons::{KdTree, PhotonMaps};
 use crate::pipeline::Flow;
 
@@ -10,10 +10,8 @@ pub struct BuildPhotonMaps;
 
 crate::system! {
     BuildPhotonMaps = "build_photon_maps";
-    on PmState {
-        read caustics;
-        write tracing = photon_pass.tracing, maps;
-    }
+    read caustics: bool;
+    write tracing: PhotonTracing, maps: Option<PhotonMaps>;
     run {
         let t = tracing;
         let stored = t.stored;

@@ -4,7 +4,7 @@
 //!
 //! N' = N + alpha M,  R' = R sqrt(N' / (N + M)),  tau' = (tau + tau_M) N' / (N + M)
 
-use crate::integrators::sppm::ProgressiveState;
+use crate::components::PixelEstimates;
 use crate::pipeline::Flow;
 use glam::DVec3;
 use rayon::prelude::*;
@@ -37,10 +37,8 @@ pub struct UpdatePixelEstimates;
 
 crate::system! {
     UpdatePixelEstimates = "update_pixel_estimates";
-    on ProgressiveState {
-        read alpha = settings.alpha, points = camera_walk.points, emitted = photon_pass.tracing.emitted;
-        write estimates, nonfinite, photons_emitted;
-    }
+    read alpha: f32, points: usize, emitted: u64;
+    write estimates: PixelEstimates, nonfinite: u64, photons_emitted: u64;
     run {
         let alpha = *alpha as f64;
         let pixels = *points;

@@ -4,20 +4,24 @@
 //! so light does not bleed round corners, through a wall from the photons on its far side,
 //! or under a wall from the next room's floor.
 
-use crate::integrators::sppm::ProgressiveState;
+use crate::components::PixelEstimates;
+use crate::components::VisiblePoints;
 use crate::photons::GatherPoint;
+use crate::photons::HashGrid;
+use crate::photons::PhotonTracing;
 use crate::pipeline::Flow;
+use crate::scene::SceneData;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct GatherPhotons;
 
 crate::system! {
     GatherPhotons = "gather_photons";
-    on ProgressiveState {
-        read data, visible = camera_walk.visible, tracing = photon_pass.tracing, grid, hit_points = camera_walk.points;
-        write estimates;
-    }
+    read data: Arc<SceneData>, visible: VisiblePoints, tracing: PhotonTracing,
+        grid: Option<HashGrid>, hit_points: usize;
+    write estimates: PixelEstimates;
     run {
         let photons = &tracing.photons;
         let points = &photons.p[..tracing.stored];

@@ -4,9 +4,12 @@
 //! jittered to point t of the pixel's stratified net (`CameraWalk::jitter`) and weighing
 //! 1 / trees.
 
-use crate::integrators::camera_walk::CameraWalk;
+use crate::components::CameraChains;
+use crate::components::Rays;
 use crate::pipeline::Flow;
+use crate::sampling::Sampler;
 use crate::sampling::Stream;
+use crate::scene::Camera;
 use crate::systems::shade::extend_camera_chains::DIM_PIXEL;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -15,10 +18,10 @@ pub struct GenerateCameraChains;
 
 crate::system! {
     GenerateCameraChains = "generate_camera_chains";
-    on CameraWalk {
-        read camera = data.scene.camera, sampler, jitter, sample_index, starts, tree, trees;
-        write chains, rays, active, points, started, glossy_points, glossy_rank;
-    }
+    read camera: Camera, sampler: Sampler<'static>, jitter: Sampler<'static>, sample_index: u64,
+        starts: usize, tree: bool, trees: u32;
+    write chains: CameraChains, rays: Rays, active: usize, points: usize, started: usize,
+        glossy_points: usize, glossy_rank: Vec<u32>;
     run {
         let cam = camera.frustum();
         let (w, pixels) = (cam.width as u64, cam.width as u64 * cam.height as u64);

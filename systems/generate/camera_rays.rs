@@ -1,10 +1,14 @@
 //! Generates one camera ray per sample of the wave: a pinhole camera, each sample uniform
 //! inside its pixel (a one-pixel box filter).
 
+use crate::components::Paths;
+use crate::components::Rays;
+use crate::components::Wave;
+use crate::components::path_tracing::DIM_PIXEL;
 use crate::components::{Path, PathFlags};
-use crate::integrators::pt::{DIM_PIXEL, PtState};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, Stream};
+use crate::scene::Camera;
 use crate::scene::Frustum;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -13,10 +17,8 @@ pub struct GenerateCameraRays;
 
 crate::system! {
     GenerateCameraRays = "generate_camera_rays";
-    on PtState {
-        read wave, camera = data.scene.camera, pixels, sampler;
-        write rays, paths, sample_radiance, active;
-    }
+    read wave: Wave, camera: Camera, pixels: u64, sampler: Sampler<'static>;
+    write rays: Rays, paths: Paths, sample_radiance: Vec<Vec3>, active: usize;
     run {
         let n = wave.len;
         let cam = camera.frustum();

@@ -4,11 +4,15 @@
 //! which the compaction that follows ends with no gather point.
 
 use crate::bsdf::{TransportMode, sample_direction};
+use crate::components::CameraChains;
 use crate::components::NO_VISIBLE_POINT;
-use crate::integrators::pm::PmState;
+use crate::components::Rays;
+use crate::components::VisiblePoints;
 use crate::math::Frame;
 use crate::pipeline::Flow;
+use crate::sampling::Sampler;
 use crate::sampling::Stream;
+use crate::scene::PreparedScene;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -16,10 +20,9 @@ pub struct GenerateFinalGatherRays;
 
 crate::system! {
     GenerateFinalGatherRays = "generate_final_gather_rays";
-    on PmState {
-        read scene = data.scene, visible = camera_walk.visible, sampler = gather_walk.sampler, pass, pixels;
-        write chains = gather_walk.chains, rays = gather_walk.rays, active = gather_walk.active;
-    }
+    read scene: PreparedScene, visible: VisiblePoints, sampler: Sampler<'static>, pass: u64,
+        pixels: usize;
+    write chains: CameraChains, rays: Rays, active: usize;
     run {
         let (pass, n) = (*pass, *pixels);
         let rays = rays.chunks_mut(0..n);

@@ -3,22 +3,22 @@
 
 use crate::geometry::offset_ray_origin;
 use crate::math::Frame;
-use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT, PhotonPass};
+use crate::photons::PhotonTracing;
+use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT};
 use crate::pipeline::Flow;
 use crate::sampling::{Stream, cosine_hemisphere};
 use crate::scene::SceneData;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
+use std::sync::Arc;
 
 pub struct EmitPhotons;
 
 crate::system! {
     EmitPhotons = "emit_photons";
-    on PhotonPass {
-        read data;
-        write tracing;
-    }
+    read data: Arc<SceneData>;
+    write tracing: PhotonTracing;
     run {
         let (data, t): (&SceneData, _) = (data, tracing);
         let n = t.remaining().min(t.walkers.capacity() as u64) as usize;

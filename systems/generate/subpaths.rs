@@ -9,27 +9,39 @@
 //! A multiplexed sample comes with its group in `multiplex` and leaves with its depth there
 //! (the tail group's depth drawn from its connection stream: `bdpt::multiplexed_depth`).
 
+use crate::components::PathVertices;
+use crate::components::Rays;
+use crate::components::Walkers;
+use crate::components::Wave;
+use crate::components::subpaths::BdptSettings;
+use crate::components::subpaths::CAMERA_DIM_PIXEL;
+use crate::components::subpaths::CONNECTION_DIM_STRATEGY;
+use crate::components::subpaths::CONNECTION_DIM_TAIL_DEPTH;
+use crate::components::subpaths::LIGHT_DIM_DIRECTION;
+use crate::components::subpaths::LIGHT_DIM_PICK;
+use crate::components::subpaths::LIGHT_DIM_POINT;
+use crate::components::subpaths::Numbers;
+use crate::components::subpaths::multiplexed_depth;
 use crate::components::{CAMERA_VERTEX, PathVertex};
 use crate::geometry::offset_ray_origin;
-use crate::integrators::bdpt::{
-    BdptState, CAMERA_DIM_PIXEL, CONNECTION_DIM_STRATEGY, CONNECTION_DIM_TAIL_DEPTH,
-    LIGHT_DIM_DIRECTION, LIGHT_DIM_PICK, LIGHT_DIM_POINT, multiplexed_depth,
-};
 use crate::math::Frame;
 use crate::pipeline::Flow;
 use crate::sampling::{Stream, cosine_hemisphere};
+use crate::scene::SceneData;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
+use std::sync::Arc;
 
 pub struct StartSubpaths;
 
 crate::system! {
     StartSubpaths = "start_subpaths";
-    on BdptState {
-        read wave, data, pixels, numbers = sampler, capacity, settings;
-        write vertices, walkers, rays, subpath_len, active, depth, sample_pixel, chosen_s, multiplex;
-    }
+    read wave: Wave, data: Arc<SceneData>, pixels: u64, numbers: Numbers, capacity: usize,
+        settings: BdptSettings;
+    write vertices: Vec<PathVertices>, walkers: Walkers, rays: Rays, subpath_len: Vec<u32>,
+        active: usize, depth: usize, sample_pixel: Vec<u32>, chosen_s: Vec<u16>,
+        multiplex: Vec<u32>;
     run {
         let n = wave.len;
         let cap = *capacity;

@@ -5,17 +5,19 @@
 //! on the thread count), `commit_accepted` (accepted chains take their proposal; the step
 //! ends).
 
-use crate::integrators::bdpt::Numbers;
-use crate::integrators::mlt::MltState;
+use crate::components::subpaths::Numbers;
+use crate::mlt::ChainSplats;
+use crate::mlt::ChainStates;
+use crate::mlt::MltCounters;
+use crate::mlt::Normalisation;
 use crate::pipeline::Flow;
+use glam::DVec3;
 
 pub struct AcceptOrReject;
 
 crate::system! {
     AcceptOrReject = "accept_or_reject";
-    on MltState {
-        write chains, numbers = bdpt.sampler, counters;
-    }
+    write chains: ChainStates, numbers: Numbers, counters: MltCounters;
     run {
         let Numbers::Primary { store, .. } = numbers else {
             unreachable!("MLT evaluates primary samples")
@@ -31,10 +33,8 @@ pub struct EstimateNormalisation;
 
 crate::system! {
     EstimateNormalisation = "estimate_normalisation";
-    on MltState {
-        read chains;
-        write normalisation;
-    }
+    read chains: ChainStates;
+    write normalisation: Normalisation;
     run {
         let per_group = crate::mlt::large_step_targets(chains, normalisation.sums.len());
         normalisation.add_large_steps(&per_group);
@@ -47,10 +47,8 @@ pub struct SplatExpectedValues;
 
 crate::system! {
     SplatExpectedValues = "splat_expected_values";
-    on MltState {
-        read chains, pixels;
-        write splats, splat_sums, nonfinite;
-    }
+    read chains: ChainStates, pixels: u64;
+    write splats: ChainSplats, splat_sums: Vec<DVec3>, nonfinite: u64;
     run {
         crate::mlt::splat_expected_values(chains, splats, *pixels as u32);
         let (added, dropped) = splats.add_to(splat_sums);
@@ -63,9 +61,7 @@ pub struct CommitAccepted;
 
 crate::system! {
     CommitAccepted = "commit_accepted";
-    on MltState {
-        write chains, step, steps_left;
-    }
+    write chains: ChainStates, step: u64, steps_left: u64;
     run {
         crate::mlt::commit_accepted(chains);
         *step += 1;

@@ -9,10 +9,13 @@
 //! from `two_tailed`.
 
 use crate::bsdf::TransportMode;
-use crate::integrators::path_mlt::PathMltState;
+use crate::components::metropolis::PathMltSettings;
+use crate::mlt::path_chains::PathChains;
 use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
 use crate::mlt::path_space::{Path, PathSpace, StepNumbers, dir};
 use crate::path::{VertexKind, to_area};
+use crate::scene::SceneData;
+use std::sync::Arc;
 
 /// 2^-j, exact (0 below f64's normal range, where no sum here can tell).
 #[inline]
@@ -236,10 +239,8 @@ pub struct BidirectionalMutation;
 
 crate::system! {
     BidirectionalMutation = "bidirectional_mutation";
-    on PathMltState {
-        read data, settings;
-        write chains;
-    }
+    read data: Arc<SceneData>, settings: PathMltSettings;
+    write chains: PathChains;
     run {
         super::path_mutation::run(data, &settings.mutations, chains, MutationKind::Bidirectional, propose)
     }

@@ -19,13 +19,22 @@
 //!   chains' current state.
 
 use crate::components::CHUNK;
-use crate::integrators::Wave;
-use crate::integrators::bdpt::Numbers;
-use crate::integrators::mlt::{
-    BOOTSTRAP_PER_CHAIN, BOOTSTRAP_TIME_SHARE, Bootstrap, ChainRule, MAX_BOOTSTRAP_EVALUATIONS,
-    MIN_CHAINS, MUTATIONS_PER_BOOTSTRAP_EVALUATION, MltSettings, MltState, NONZERO_SEEDS_PER_CHAIN,
-    STEPS_PER_CHAIN, TIMED_MUTATIONS_PER_PIXEL,
-};
+use crate::components::Wave;
+use crate::components::metropolis::BOOTSTRAP_PER_CHAIN;
+use crate::components::metropolis::BOOTSTRAP_TIME_SHARE;
+use crate::components::metropolis::Bootstrap;
+use crate::components::metropolis::ChainRule;
+use crate::components::metropolis::MAX_BOOTSTRAP_EVALUATIONS;
+use crate::components::metropolis::MIN_CHAINS;
+use crate::components::metropolis::MUTATIONS_PER_BOOTSTRAP_EVALUATION;
+use crate::components::metropolis::MltSettings;
+use crate::components::metropolis::NONZERO_SEEDS_PER_CHAIN;
+use crate::components::metropolis::STEPS_PER_CHAIN;
+use crate::components::metropolis::TIMED_MUTATIONS_PER_PIXEL;
+use crate::components::subpaths::Numbers;
+use crate::mlt::Contributions;
+use crate::mlt::Normalisation;
+use crate::mlt::SeedSelection;
 use crate::mlt::{ChainStates, MIN_BOOTSTRAP_SAMPLES, bootstrap_error, needs_more_bootstrap};
 use crate::pipeline::Flow;
 use crate::sampling::PrimarySamples;
@@ -38,7 +47,7 @@ fn fill_vectors(store: &mut PrimarySamples, settings: &MltSettings, items: &[u64
     let groups = settings.groups() as u64;
     for (slot, &item) in items.iter().enumerate() {
         store.set_used(slot, settings.dims_of_group((item % groups) as u32));
-        store.tails_mut()[slot] = MltState::bootstrap_tail(settings.seed, item);
+        store.tails_mut()[slot] = Bootstrap::tail(settings.seed, item);
     }
     store
         .blocks_mut(CHUNK)
@@ -53,7 +62,7 @@ fn fill_vectors(store: &mut PrimarySamples, settings: &MltSettings, items: &[u64
                 let dim = dim as u32;
                 for ((x, &item), &used) in column.iter_mut().zip(items).zip(block.used) {
                     if dim < used {
-                        *x = MltState::bootstrap_number(settings.seed, item, dim);
+                        *x = Bootstrap::number(settings.seed, item, dim);
                     }
                 }
             }
@@ -64,10 +73,8 @@ pub struct BeginBootstrapWave;
 
 crate::system! {
     BeginBootstrapWave = "begin_bootstrap_wave";
-    on MltState {
-        read settings, pixels;
-        write bootstrap, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
-    }
+    read settings: MltSettings, pixels: u64;
+    write bootstrap: Bootstrap, numbers: Numbers, wave: Wave, multiplex: Vec<u32>;
     run {
         bootstrap.started.get_or_insert_with(std::time::Instant::now);
         let Numbers::Primary { store, .. } = numbers else {
@@ -172,10 +179,8 @@ pub struct CollectBootstrapWeights;
 
 crate::system! {
     CollectBootstrapWeights = "collect_bootstrap_weights";
-    on MltState {
-        read settings, pixels, wave = bdpt.wave, contributions = chains.proposal_contributions;
-        write bootstrap;
-    }
+    read settings: MltSettings, pixels: u64, wave: Wave, contributions: Contributions;
+    write bootstrap: Bootstrap;
     run {
         let n = wave.len;
         let pixels = *pixels;
@@ -292,7 +297,7 @@ mod tests {
 
     #[test]
     fn timed_chains_take_their_steps_in_the_budget() {
-        let s = MltSettings::from_render(&crate::integrators::RenderSettings::default(), false);
+        let s = MltSettings::new(0, false);
         let pixels = 256 * 256;
         let pace = BootstrapPace {
             spent: 0.1,
@@ -360,10 +365,9 @@ pub struct SelectSeeds;
 
 crate::system! {
     SelectSeeds = "select_seeds";
-    on MltState {
-        read settings, bootstrap, pixels;
-        write selection, chains, normalisation, steps_per_pass;
-    }
+    read settings: MltSettings, bootstrap: Bootstrap, pixels: u64;
+    write selection: Option<SeedSelection>, chains: ChainStates, normalisation: Normalisation,
+        steps_per_pass: u64;
     run {
         if let Some(budget) = settings.time_budget {
             // Fewer chains where the budget cannot give each its steps.
@@ -392,10 +396,8 @@ pub struct ReplaySeeds;
 
 crate::system! {
     ReplaySeeds = "replay_seeds";
-    on MltState {
-        read settings, selection;
-        write chains, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
-    }
+    read settings: MltSettings, selection: Option<SeedSelection>;
+    write chains: ChainStates, numbers: Numbers, wave: Wave, multiplex: Vec<u32>;
     run {
         let Some(selection) = selection.as_ref() else {
             *wave = Wave { first: 0, len: 0 };
@@ -427,10 +429,8 @@ pub struct AdoptSeeds;
 
 crate::system! {
     AdoptSeeds = "adopt_seeds";
-    on MltState {
-        read selection;
-        write chains, bootstrap;
-    }
+    read selection: Option<SeedSelection>;
+    write chains: ChainStates, bootstrap: Bootstrap;
     run {
         chains.current_contributions.clone_from(&chains.proposal_contributions);
         chains.current_contributions.truncate(chains.chains());

@@ -4,10 +4,13 @@
 //! which is joined to the camera. The turn's density is symmetric, so T(y -> x) / T(x -> y)
 //! is the ratio of the Jacobians from that direction to the regrown vertices' areas.
 
-use crate::integrators::path_mlt::PathMltState;
+use crate::components::metropolis::PathMltSettings;
+use crate::mlt::path_chains::PathChains;
 use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
 use crate::mlt::path_space::{PathSpace, StepNumbers, dir, perturb_direction, specular_lobe};
 use crate::path::{Vertex, to_area};
+use crate::scene::SceneData;
+use std::sync::Arc;
 
 /// The non-specular vertex b before the specular chain x_{b+1} .. x_{n-3}, when the path ends
 /// (L|D) S+ D E.
@@ -75,10 +78,8 @@ pub struct CausticPerturbation;
 
 crate::system! {
     CausticPerturbation = "caustic_perturbation";
-    on PathMltState {
-        read data, settings;
-        write chains;
-    }
+    read data: Arc<SceneData>, settings: PathMltSettings;
+    write chains: PathChains;
     run {
         super::path_mutation::run(data, &settings.mutations, chains, MutationKind::Caustic, propose)
     }

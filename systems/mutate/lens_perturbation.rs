@@ -5,11 +5,14 @@
 //! the kept rest. The offset's density is symmetric, so T(y -> x) / T(x -> y) is the ratio of
 //! the Jacobians from raster to the regrown vertices' areas, D(x) / D(y).
 
-use crate::integrators::path_mlt::PathMltState;
+use crate::components::metropolis::PathMltSettings;
+use crate::mlt::path_chains::PathChains;
 use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
 use crate::mlt::path_space::{PathSpace, StepNumbers, dir, perturb_offset, specular_lobe};
 use crate::path::{Vertex, to_area};
+use crate::scene::SceneData;
 use glam::Vec2;
+use std::sync::Arc;
 
 /// The first non-specular vertex c counted from the camera, when the lens perturbation
 /// applies: x_{c+1} .. x_{n-2} specular, and x_{c-1} not (or c = 0, the light).
@@ -110,10 +113,8 @@ pub struct LensPerturbation;
 
 crate::system! {
     LensPerturbation = "lens_perturbation";
-    on PathMltState {
-        read data, settings;
-        write chains;
-    }
+    read data: Arc<SceneData>, settings: PathMltSettings;
+    write chains: PathChains;
     run {
         super::path_mutation::run(data, &settings.mutations, chains, MutationKind::Lens, propose)
     }

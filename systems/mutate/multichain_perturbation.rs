@@ -7,12 +7,15 @@
 //! ratio of the Jacobians D(x) / D(y).
 
 use super::lens_perturbation::{camera_chain_end, camera_chain_jacobian, retrace_camera_chain};
-use crate::integrators::path_mlt::PathMltState;
+use crate::components::metropolis::PathMltSettings;
+use crate::mlt::path_chains::PathChains;
 use crate::mlt::path_chains::{MutationKind, MutationSet, Proposal};
 use crate::mlt::path_space::{
     PathSpace, StepNumbers, dir, perturb_direction, perturb_offset, specular_lobe,
 };
 use crate::path::Vertex;
+use crate::scene::SceneData;
+use std::sync::Arc;
 
 /// The camera chain's diffuse vertex c, when x_{c-1} is specular (a second chain follows).
 pub fn suitable(ps: &PathSpace, x: &[Vertex]) -> Option<usize> {
@@ -87,10 +90,8 @@ pub struct MultiChainPerturbation;
 
 crate::system! {
     MultiChainPerturbation = "multichain_perturbation";
-    on PathMltState {
-        read data, settings;
-        write chains;
-    }
+    read data: Arc<SceneData>, settings: PathMltSettings;
+    write chains: PathChains;
     run {
         super::path_mutation::run(data, &settings.mutations, chains, MutationKind::MultiChain, propose)
     }

@@ -5,10 +5,12 @@
 
 use super::path_mutation::LANE_ACCEPT;
 use crate::components::CHUNK;
-use crate::integrators::path_mlt::{MutationCounts, PathMltState};
+use crate::components::metropolis::MutationCounts;
 use crate::mlt::Splat;
+use crate::mlt::path_chains::PathChains;
 use crate::mlt::path_chains::{INLINE_VERTICES, chunk_starts, copy_path};
 use crate::pipeline::Flow;
+use glam::DVec3;
 use rayon::prelude::*;
 
 /// a(x -> y) given the targets and T(y -> x) / T(x -> y).
@@ -28,9 +30,7 @@ pub struct AcceptPathProposals;
 
 crate::system! {
     AcceptPathProposals = "accept_path_proposals";
-    on PathMltState {
-        write chains, counts;
-    }
+    write chains: PathChains, counts: MutationCounts;
     run {
         let n = chains.chains();
         let (cur, prop, ratio, keys, kinds) = (&chains.current_target, &chains.proposal_target, &chains.ratio, &chains.step_key, &chains.kind);
@@ -64,10 +64,8 @@ pub struct SplatPathExpectedValues;
 
 crate::system! {
     SplatPathExpectedValues = "splat_path_expected_values";
-    on PathMltState {
-        read chains, splat_scale;
-        write splats, splat_sums, nonfinite;
-    }
+    read chains: PathChains, splat_scale: f32;
+    write splats: Vec<Vec<Splat>>, splat_sums: Vec<DVec3>, nonfinite: u64;
     run {
         let n = chains.chains();
         let scale = *splat_scale;
@@ -99,9 +97,7 @@ pub struct CommitPathProposals;
 
 crate::system! {
     CommitPathProposals = "commit_path_proposals";
-    on PathMltState {
-        write chains, step, steps_left;
-    }
+    write chains: PathChains, step: u64, steps_left: u64;
     run {
         *step += 1;
         *steps_left -= 1;

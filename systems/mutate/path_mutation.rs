@@ -3,7 +3,7 @@
 //! runs over the chains that chose it (propose, then evaluate f of the proposal).
 
 use crate::components::CHUNK;
-use crate::integrators::path_mlt::{PathMltSettings, PathMltState};
+use crate::components::metropolis::PathMltSettings;
 use crate::mlt::path_chains::{
     INLINE_VERTICES, MutationKind, MutationSet, PathChains, Proposal, chunk_starts, load_path,
     path_len, store_path,
@@ -17,6 +17,7 @@ use crate::systems::mutate::{
 };
 use glam::DVec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Random-number lanes of a chain's step: the mutation's choice, the acceptance, then the
 /// mutation's own numbers.
@@ -58,10 +59,8 @@ pub struct ChooseMutations;
 
 crate::system! {
     ChooseMutations = "choose_mutations";
-    on PathMltState {
-        read data, settings, step;
-        write chains;
-    }
+    read data: Arc<SceneData>, settings: PathMltSettings, step: u64;
+    write chains: PathChains;
     run {
         choose(data, settings, *step, chains)
     }

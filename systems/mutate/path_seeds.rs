@@ -1,5 +1,5 @@
 //! `adopt_seed_paths`: the chains of path-space MLT start from the paths of the BDPT
-//! bootstrap (`crate::integrators::mlt`'s, run nested, full BDPT as in pssmlt: every strategy
+//! bootstrap (pssmlt's, run nested, full BDPT as in pssmlt: every strategy
 //! of every evaluation, MIS-weighted with the balance heuristic), as Mitsuba seeds its MLT:
 //! every strategy's path of every evaluation is a candidate, weighted by its MIS-weighted
 //! luminance. The evaluations were resampled by their targets (the sum of those weights), and
@@ -15,53 +15,58 @@
 //! (depths x strategies). With the multiplexed bootstrap, b on torus_glass came out 0.049 where
 //! the truth is 0.025 (heavy tail), and a fifth of 32768 chains started on a handful of paths.
 
-use crate::integrators::bdpt::BdptState;
-use crate::integrators::bdpt::{DIM_LIGHT_PICK, DIM_LIGHT_POINT, camera_vertex_dim};
-use crate::integrators::path_mlt::PathMltState;
+use crate::components::subpaths::DIM_LIGHT_PICK;
+use crate::components::subpaths::DIM_LIGHT_POINT;
+use crate::components::subpaths::{Numbers, camera_vertex_dim};
+use crate::components::{Connections, PathVertices, ShadowRays, Wave};
 use crate::math::luminance;
+use crate::mlt::SeedSelection;
+use crate::mlt::path_chains::PathChains;
 use crate::mlt::path_chains::{INLINE_VERTICES, chunk_starts, path_len, store_path};
 use crate::mlt::path_space::{Path, PathSpace};
 use crate::path::{Vertex, VertexKind};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Stream, mix64};
+use crate::scene::SceneData;
+use std::sync::Arc;
 
 pub struct AdoptSeedPaths;
 
 crate::system! {
     AdoptSeedPaths = "adopt_seed_paths";
-    on PathMltState {
-        read data, pixels;
-        write seeding, chains, splat_scale, seeded, seed_mismatches;
-    }
+    read data: Arc<SceneData>, pixels: u64, selection: Option<SeedSelection>, seed: u64,
+        targets: Vec<f32>, capacity: usize, numbers: Numbers, wave: Wave,
+        subpath_len: Vec<u32>, vertices: Vec<PathVertices>, connection_start: Vec<usize>,
+        shadow: ShadowRays, connections: Connections;
+    write chains: PathChains, splat_scale: f32, seeded: bool, seed_mismatches: usize;
     run {
         *seeded = true;
         let n = chains.chains();
-        let Some(selection) = seeding.selection.as_ref() else {
+        let Some(selection) = selection.as_ref() else {
             return Flow::new(n, 0);
         };
         let ps = PathSpace::new(data);
-        let bdpt = &seeding.bdpt;
-        let cap = bdpt.capacity;
-        let sampler = bdpt.sampler.sampler();
+        let cap = *capacity;
+        let sampler = numbers.sampler();
         let mut paths: Vec<Path> = Vec::with_capacity(n);
         let mut mismatches = 0;
-        let pick_seed = mix64(seeding.settings.seed ^ STRATEGY_DOMAIN);
+        let pick_seed = mix64(seed ^ STRATEGY_DOMAIN);
         for i in 0..n {
-            let target = seeding.chains.current_contributions.target[i];
+            let target = targets[i];
             let mut path: Path = Vec::new();
             // The replayed sample's strategy, by its share of the sample's luminance.
             let u = SampleKey::new(pick_seed, i as u64, 0).get(0);
-            let Some((s, t)) = pick_strategy(bdpt, i, target, u) else {
+            let Some((s, t)) = pick_strategy((connection_start, shadow, connections), i, target, u) else {
                 mismatches += (target > 0.0) as usize;
                 paths.push(path);
                 continue;
             };
-            let (nc, nl) = (bdpt.subpath_len[i] as usize, bdpt.subpath_len[cap + i] as usize);
+            let (nc, nl) = (subpath_len[i] as usize, subpath_len[cap + i] as usize);
             let vertex = |slot: usize, d: usize| {
-                Vertex::from_store(&bdpt.vertices[d].view(0..bdpt.vertices[d].capacity()), slot, d)
+                Vertex::from_store(&vertices[d].view(0..vertices[d].capacity()), slot, d)
             };
             if s == 1 && t >= 2 {
-                let key = bdpt.sampler.key(&sampler, Stream::Connection, bdpt.wave, *pixels, i);
+                let key = numbers.key(&sampler, Stream::Connection, *wave, *pixels, i);
                 let dim = camera_vertex_dim(t - 1);
                 if let Some(v) = ps.sample_light_origin(
                     sampler.get(key, dim + DIM_LIGHT_PICK),
@@ -128,12 +133,16 @@ const STRATEGY_DOMAIN: u64 = 0x6d6c_745f_7374_7261;
 /// connections that reached the film (s = 0, or an unoccluded connection), the first whose
 /// running luminance passes `u` x the sample's target (the sum of them all), so each is picked
 /// with probability its luminance over the target. None for a black sample.
-fn pick_strategy(bdpt: &BdptState, k: usize, target: f32, u: f32) -> Option<(usize, usize)> {
+fn pick_strategy(
+    (connection_start, shadow, conns): (&[usize], &ShadowRays, &Connections),
+    k: usize,
+    target: f32,
+    u: f32,
+) -> Option<(usize, usize)> {
     if target <= 0.0 {
         return None;
     }
-    let slots = bdpt.connection_start[k]..bdpt.connection_start[k + 1];
-    let (shadow, conns) = (&bdpt.shadow, &bdpt.connections);
+    let slots = connection_start[k]..connection_start[k + 1];
     let reached = |&slot: &usize| conns.s[slot] == 0 || shadow.unoccluded[slot];
     let weight = |slot: usize| luminance(shadow.contribution[slot]) as f64;
     let total: f64 = slots.clone().filter(reached).map(weight).sum();

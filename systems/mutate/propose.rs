@@ -3,19 +3,18 @@
 //! step), then hands it to the BDPT state as its primary-sample store (a swap, no copy), with
 //! each chain's group as its sample's multiplexed depth group (mmlt).
 
-use crate::integrators::Wave;
-use crate::integrators::bdpt::Numbers;
-use crate::integrators::mlt::MltState;
+use crate::components::Wave;
+use crate::components::metropolis::MltSettings;
+use crate::components::subpaths::Numbers;
+use crate::mlt::ChainStates;
 use crate::pipeline::Flow;
 
 pub struct ProposeMutations;
 
 crate::system! {
     ProposeMutations = "propose_mutations";
-    on MltState {
-        read settings, step;
-        write chains, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
-    }
+    read settings: MltSettings, step: u64;
+    write chains: ChainStates, numbers: Numbers, wave: Wave, multiplex: Vec<u32>;
     run {
         crate::mlt::propose_mutations(chains, &settings.mutation, settings.seed, *step);
         // Each sample starts from its chain's group (`start_subpaths` makes it a depth).

@@ -4,11 +4,13 @@
 //! numbered among its pixel's; the live chains move to the front, in slot order, and the
 //! branches split off this bounce start after them, in chunk order.
 
+use crate::components::Hits;
+use crate::components::Rays;
+use crate::components::camera_walk::Branch;
 use crate::components::{
     CHUNK, CameraChain, CameraChains, NO_VISIBLE_POINT, Ray, VisiblePoint, VisiblePoints,
     gather_column, live_slots,
 };
-use crate::integrators::camera_walk::CameraWalk;
 use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -17,10 +19,11 @@ pub struct CompactCameraChains;
 
 crate::system! {
     CompactCameraChains = "compact_camera_chains";
-    on CameraWalk {
-        read tree;
-        write chains, rays, hits, active, visible, points, spawned, order, scratch_chains, scratch_rays, glossy, glossy_points, glossy_rank, met_glossy;
-    }
+    read tree: bool;
+    write chains: CameraChains, rays: Rays, hits: Hits, active: usize, visible: VisiblePoints,
+        points: usize, spawned: Vec<Vec<Branch>>, order: Vec<u32>, scratch_chains: CameraChains,
+        scratch_rays: Rays, glossy: VisiblePoints, glossy_points: usize, glossy_rank: Vec<u32>,
+        met_glossy: Vec<Vec<VisiblePoint>>;
     run {
         use std::mem::swap;
         let n = *active;

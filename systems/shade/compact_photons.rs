@@ -1,16 +1,14 @@
 //! Drops the photons that ended, keeping the rest in slot order.
 
 use crate::components::{gather_column, live_slots};
-use crate::photons::PhotonPass;
+use crate::photons::PhotonTracing;
 use crate::pipeline::Flow;
 
 pub struct CompactPhotons;
 
 crate::system! {
     CompactPhotons = "compact_photons";
-    on PhotonPass {
-        write tracing;
-    }
+    write tracing: PhotonTracing;
     run {
         use std::mem::swap;
         let t = tracing;

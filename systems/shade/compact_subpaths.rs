@@ -2,17 +2,17 @@
 //! increasing subpath order, which lets later bounces split the vertex stores by chunk), and
 //! moves on to the next depth.
 
+use crate::components::Rays;
+use crate::components::Walkers;
+use crate::components::subpaths::Scratch;
 use crate::components::{gather_column, live_slots};
-use crate::integrators::bdpt::BdptState;
 use crate::pipeline::Flow;
 
 pub struct CompactSubpaths;
 
 crate::system! {
     CompactSubpaths = "compact_subpaths";
-    on BdptState {
-        write walkers, rays, active, depth, scratch;
-    }
+    write walkers: Walkers, rays: Rays, active: usize, depth: usize, scratch: Scratch;
     run {
         use std::mem::swap;
         let n = *active;

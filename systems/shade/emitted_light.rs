@@ -2,24 +2,25 @@
 //! the light sampling that could also have found them.
 
 use crate::accel::Hit;
+use crate::components::Hits;
+use crate::components::Paths;
+use crate::components::Rays;
 use crate::components::{MISS, PathFlags};
 use crate::geometry::surface_point;
-use crate::integrators::SceneData;
-use crate::integrators::pt::PtState;
 use crate::pipeline::Flow;
 use crate::sampling::power_heuristic;
 use crate::scene::NO_EMITTER;
+use crate::scene::SceneData;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct AddEmittedLight;
 
 crate::system! {
     AddEmittedLight = "add_emitted_light";
-    on PtState {
-        read data, hits, rays, live = active;
-        write paths;
-    }
+    read data: Arc<SceneData>, hits: Hits, rays: Rays, live: usize;
+    write paths: Paths;
     run {
         let found: usize = paths
             .chunks_mut(0..*live)

@@ -8,15 +8,22 @@
 //! roulette (see `camera_walk`).
 
 use crate::bsdf::{Material, TransportMode, sample_direction};
+use crate::components::CameraChains;
+use crate::components::Hits;
+use crate::components::Rays;
+use crate::components::camera_walk::Branch;
+use crate::components::camera_walk::MIN_BRANCH_WEIGHT;
+use crate::components::camera_walk::TREE_DEPTH;
 use crate::components::{CHUNK, MISS, NO_VISIBLE_POINT, VisiblePoint};
 use crate::geometry::{offset_ray_origin, surface_point};
-use crate::integrators::camera_walk::{Branch, CameraWalk, MIN_BRANCH_WEIGHT, TREE_DEPTH};
 use crate::math::Frame;
 use crate::photons::chains_follow;
 use crate::pipeline::Flow;
+use crate::sampling::Sampler;
 use crate::sampling::power_heuristic;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::scene::NO_EMITTER;
+use crate::scene::PreparedScene;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -34,10 +41,10 @@ pub struct ExtendCameraChains;
 
 crate::system! {
     ExtendCameraChains = "extend_camera_chains";
-    on CameraWalk {
-        read scene = data.scene, sampler, max_depth, tree, direct_light, hits, live = active;
-        write chains, rays, spawned, met_glossy;
-    }
+    read scene: PreparedScene, sampler: Sampler<'static>, max_depth: u32, tree: bool,
+        direct_light: bool, hits: Hits, live: usize;
+    write chains: CameraChains, rays: Rays, spawned: Vec<Vec<Branch>>,
+        met_glossy: Vec<Vec<VisiblePoint>>;
     run {
         let (n, max_depth, tree, direct_light) = (*live, *max_depth, *tree, *direct_light);
         let rays = rays.chunks_mut(0..n);

@@ -6,15 +6,22 @@
 //! nothing, or by roulette.
 
 use crate::bsdf::{TransportMode, sample_direction};
+use crate::components::Hits;
+use crate::components::Rays;
+use crate::components::Walkers;
+use crate::components::subpaths::BdptSettings;
+use crate::components::subpaths::DIM_BSDF;
+use crate::components::subpaths::DIM_ROULETTE;
+use crate::components::subpaths::Numbers;
+use crate::components::subpaths::camera_vertex_dim;
+use crate::components::subpaths::light_vertex_dim;
 use crate::components::{MISS, PathVertex, PathVertices, split_ranges};
 use crate::geometry::{offset_ray_origin, surface_point};
-use crate::integrators::bdpt::{
-    BdptState, DIM_BSDF, DIM_ROULETTE, camera_vertex_dim, light_vertex_dim,
-};
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction, to_area};
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::sampling::{SampleKey, Sampler};
+use crate::scene::PreparedScene;
 use glam::Vec3;
 use rayon::prelude::*;
 
@@ -22,10 +29,9 @@ pub struct ExtendSubpaths;
 
 crate::system! {
     ExtendSubpaths = "extend_subpaths";
-    on BdptState {
-        read scene = data.scene, settings, numbers = sampler, capacity, hits, active, depth, multiplex, chosen_s;
-        write vertices, subpath_len, walkers, rays;
-    }
+    read scene: PreparedScene, settings: BdptSettings, numbers: Numbers, capacity: usize,
+        hits: Hits, active: usize, depth: usize, multiplex: Vec<u32>, chosen_s: Vec<u16>;
+    write vertices: Vec<PathVertices>, subpath_len: Vec<u32>, walkers: Walkers, rays: Rays;
     run {
         let sampler = numbers.sampler();
         let sampler = &sampler;

@@ -449,7 +449,7 @@ impl DiffuseLanes {
     /// or None when one of them is not Lambertian.
     #[inline(always)]
     pub fn at(
-        data: &crate::integrators::SceneData,
+        data: &crate::scene::SceneData,
         surfaces: &crate::components::SurfacesView,
         triangles: &[u32],
         dirs: &[Vec3],

@@ -4,7 +4,14 @@
 
 use super::surface::scatter_paths;
 use crate::bsdf::MaterialKind;
-use crate::integrators::pt::PtState;
+use crate::components::Hits;
+use crate::components::Paths;
+use crate::components::Rays;
+use crate::components::Surfaces;
+use crate::components::path_tracing::MaterialRanges;
+use crate::sampling::Sampler;
+use crate::scene::SceneData;
+use std::sync::Arc;
 
 pub struct ShadeMaterial(pub MaterialKind);
 
@@ -22,10 +29,9 @@ impl MaterialKind {
 crate::system! {
     ShadeMaterial;
     name(this) = this.0.shading_system();
-    on PtState {
-        read data, sampler, hits, surfaces, ranges;
-        write rays, paths;
-    }
+    read data: Arc<SceneData>, sampler: Sampler<'static>, hits: Hits, surfaces: Surfaces,
+        ranges: MaterialRanges;
+    write rays: Rays, paths: Paths;
     run(this) {
         let range = ranges.of(this.0);
         match this.0 {

@@ -2,19 +2,21 @@
 //! its branches ended), numbers each among its pixel's (`branch`, which keeps their light
 //! samples apart), and gives each its own progressive statistics at the initial radius.
 
+use crate::components::ShadowRays;
+use crate::components::photon_mapping::ProgressiveSettings;
 use crate::components::{CHUNK, PixelEstimates, VisiblePoints};
-use crate::integrators::sppm::ProgressiveState;
 use crate::pipeline::Flow;
+use crate::scene::SceneData;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct OrderHitPoints;
 
 crate::system! {
     OrderHitPoints = "order_hit_points";
-    on ProgressiveState {
-        read data, settings, tree = camera_walk.tree, starts = camera_walk.starts, points = camera_walk.points;
-        write visible = camera_walk.visible, estimates, shadow;
-    }
+    read data: Arc<SceneData>, settings: ProgressiveSettings, tree: bool, starts: usize,
+        points: usize;
+    write visible: VisiblePoints, estimates: PixelEstimates, shadow: ShadowRays;
     run {
         let n = *points;
         if !*tree || *starts == 0 {

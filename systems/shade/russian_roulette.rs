@@ -3,7 +3,10 @@
 //! that left the scene. So the wavefront is compacted once per bounce, not twice.
 
 use crate::components::PathFlags;
-use crate::integrators::pt::{DIM_ROULETTE, PtState, bounce_dim};
+use crate::components::Paths;
+use crate::components::Rays;
+use crate::components::path_tracing::DIM_ROULETTE;
+use crate::components::path_tracing::bounce_dim;
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{ROULETTE_DEPTH, survival, survives};
 use crate::sampling::{SampleKey, Sampler};
@@ -14,10 +17,8 @@ pub struct RussianRoulette;
 
 crate::system! {
     RussianRoulette = "russian_roulette";
-    on PtState {
-        read live = active, sampler;
-        write paths, rays;
-    }
+    read live: usize, sampler: Sampler<'static>;
+    write paths: Paths, rays: Rays;
     run {
         let taken = *live;
         let rays = rays.chunks_mut(0..taken);

@@ -7,20 +7,20 @@ use crate::bsdf::{TransportMode, sample_direction};
 use crate::components::{CHUNK, MISS, PhotonFlags};
 use crate::geometry::{offset_ray_origin, surface_point};
 use crate::path::{Vertex, VertexKind, local_frame, shading_correction};
-use crate::photons::{DIM_BSDF, DIM_ROULETTE, PhotonPass, StoredPhoton, bounce_dim, chains_follow};
+use crate::photons::PhotonTracing;
+use crate::photons::{DIM_BSDF, DIM_ROULETTE, StoredPhoton, bounce_dim, chains_follow};
 use crate::pipeline::Flow;
 use crate::sampling::roulette::{survival, survives};
 use crate::scene::SceneData;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct ScatterPhotons;
 
 crate::system! {
     ScatterPhotons = "scatter_photons";
-    on PhotonPass {
-        read data;
-        write tracing;
-    }
+    read data: Arc<SceneData>;
+    write tracing: PhotonTracing;
     run {
         let (data, t): (&SceneData, _) = (data, tracing);
         let n = t.active;

@@ -6,10 +6,17 @@
 //! and shading normals) for the light-sampling and shading systems.
 
 use crate::bsdf::MaterialKind;
+use crate::components::Hits;
+use crate::components::Paths;
+use crate::components::Rays;
+use crate::components::Surfaces;
+use crate::components::path_tracing::MaterialRanges;
+use crate::components::path_tracing::Scratch;
 use crate::components::{CHUNK, MISS};
 use crate::geometry::{SurfacePoint, TriangleColumns, surface_point};
-use crate::integrators::pt::{MaterialRanges, PtState};
 use crate::pipeline::Flow;
+use crate::scene::PreparedScene;
+use glam::Vec3;
 use rayon::prelude::*;
 
 pub struct SortByMaterial;
@@ -24,15 +31,13 @@ fn queue_of(kind: MaterialKind) -> u8 {
 }
 
 const DROPPED: u8 = 3;
-/// The three material queues and the dropped paths.
-pub const QUEUES: usize = 4;
+pub use crate::components::path_tracing::QUEUES;
 
 crate::system! {
     SortByMaterial = "sort_by_material";
-    on PtState {
-        read scene = data.scene, max_depth = settings.max_depth;
-        write hits, paths, rays, sample_radiance, ranges, active, scratch, surfaces;
-    }
+    read scene: PreparedScene, max_depth: u32;
+    write hits: Hits, paths: Paths, rays: Rays, sample_radiance: Vec<Vec3>, ranges: MaterialRanges,
+        active: usize, scratch: Scratch, surfaces: Surfaces;
     run {
         let taken = *active;
         let max_depth = *max_depth;

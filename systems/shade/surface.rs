@@ -3,15 +3,16 @@
 
 use super::lanes::{DiffuseLanes, F, LANES, M, V3, draw2, lanes_of, offset_origin, same_side};
 use crate::bsdf::{Material, MaterialKind, TransportMode, sample_direction};
+use crate::components::path_tracing::DIM_BSDF;
+use crate::components::path_tracing::bounce_dim;
 use crate::components::{
     Hits, PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView,
 };
 use crate::geometry::{SurfacePoint, offset_ray_origin};
-use crate::integrators::SceneData;
-use crate::integrators::pt::{DIM_BSDF, bounce_dim};
 use crate::math::Frame;
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler};
+use crate::scene::SceneData;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::{FRAC_1_PI, PI};

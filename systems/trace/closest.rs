@@ -1,9 +1,8 @@
 //! Finds the closest hit of every live ray.
 
 use crate::accel::{Accel, Hit};
+use crate::components::Hits;
 use crate::components::{HitsChunk, MISS, Rays};
-use crate::integrators::{bdpt::BdptState, camera_walk::CameraWalk, pt::PtState};
-use crate::photons::PhotonPass;
 use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -14,22 +13,8 @@ pub struct TraceClosest;
 
 crate::system! {
     TraceClosest = "trace_closest";
-    on PtState {
-        read accel = data.accel, rays, live = active;
-        write hits;
-    }
-    on BdptState {
-        read accel = data.accel, rays, live = active;
-        write hits;
-    }
-    on PhotonPass {
-        read accel = data.accel, rays = tracing.rays, live = tracing.active;
-        write hits = tracing.hits;
-    }
-    on CameraWalk {
-        read accel = data.accel, rays, live = active;
-        write hits;
-    }
+    read accel: Accel, rays: Rays, live: usize;
+    write hits: Hits;
     run {
         let accel: &Accel = accel;
         let (traced, found) = hits

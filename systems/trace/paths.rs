@@ -7,12 +7,13 @@
 
 use crate::accel::{Accel, Hit};
 use crate::bsdf::MaterialKind;
+use crate::components::Wave;
+use crate::components::path_tracing::PtSettings;
 use crate::components::{CHUNK, PathFlags};
-use crate::integrators::SceneData;
-use crate::integrators::pt_megakernel::MegakernelState;
 use crate::pipeline::Flow;
 use crate::sampling::Sampler;
 use crate::scene::Frustum;
+use crate::scene::SceneData;
 use crate::systems::connect::sample_lights::light_sample;
 use crate::systems::generate::camera_rays::camera_ray;
 use crate::systems::shade::emitted_light::emitted_light;
@@ -21,15 +22,15 @@ use crate::systems::shade::sort_by_material::shading_point;
 use crate::systems::shade::{Surface, scatter};
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 pub struct TracePaths;
 
 crate::system! {
     TracePaths = "trace_paths";
-    on MegakernelState {
-        read data, settings, sampler, wave, pixels;
-        write sample_radiance, traced;
-    }
+    read data: Arc<SceneData>, settings: PtSettings, sampler: Sampler<'static>, wave: Wave,
+        pixels: u64;
+    write sample_radiance: Vec<Vec3>, traced: RayCounts;
     run {
         let n = wave.len;
         let walk = Walk {

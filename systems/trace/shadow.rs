@@ -1,8 +1,8 @@
 //! Tests every shadow ray for occlusion (any hit before its end).
 
 use crate::accel::Accel;
+use crate::components::ShadowRays;
 use crate::components::ShadowRaysChunk;
-use crate::integrators::{bdpt::BdptState, pm::PmState, pt::PtState, sppm::ProgressiveState};
 use crate::pipeline::Flow;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -12,22 +12,8 @@ pub struct TraceShadow;
 
 crate::system! {
     TraceShadow = "trace_shadow";
-    on PtState {
-        read accel = data.accel, len = shadow_len;
-        write shadow;
-    }
-    on BdptState {
-        read accel = data.accel, len = connections_len;
-        write shadow;
-    }
-    on PmState {
-        read accel = data.accel, len = shadow_len;
-        write shadow;
-    }
-    on ProgressiveState {
-        read accel = data.accel, len = shadow_len;
-        write shadow;
-    }
+    read accel: Accel, len: usize;
+    write shadow: ShadowRays;
     run {
         let accel: &Accel = accel;
         let (taken, unoccluded) = shadow

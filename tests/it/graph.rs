@@ -90,12 +90,13 @@ fn every_scene_samples_lights_and_traces_shadows() {
     }
 }
 
-/// The README's graph blocks (`<!-- graph: INTEGRATOR SCENE -->` then a text block) are what
+/// The graph blocks of docs/architecture.md (`<!-- graph: INTEGRATOR SCENE -->` then a text block) are what
 /// `stagelight graph` prints, so the docs never drift from the graphs.
 #[test]
 fn readme_graph_blocks_are_the_graphs_printed() {
-    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
-        .expect("README.md");
+    let readme =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/architecture.md"))
+            .expect("docs/architecture.md");
     let mut checked = 0;
     for (i, _) in readme.match_indices("<!-- graph: ") {
         let rest = &readme[i + "<!-- graph: ".len()..];
@@ -109,7 +110,7 @@ fn readme_graph_blocks_are_the_graphs_printed() {
         let data = SceneData::new(load_small(&format!("{scene}.ron"), 8));
         let kind = IntegratorKind::named(name);
         let printed = (kind.info().graph)(&data, &RenderSettings::default()).description;
-        assert_eq!(body, printed, "README graph block of {tag}");
+        assert_eq!(body, printed, "docs/architecture.md graph block of {tag}");
         checked += 1;
     }
     assert!(checked >= 4, "found {checked} graph blocks");

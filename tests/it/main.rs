@@ -5,11 +5,13 @@
 mod common;
 
 mod accel;
+mod assembled_integrator;
 mod bdpt;
 mod bsdf;
 mod cli;
 mod compare;
 mod determinism;
+mod docs;
 mod film_precision;
 mod fuzz;
 #[path = "../fuzz/targets.rs"]

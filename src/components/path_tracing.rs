@@ -1,0 +1,84 @@
+//! What the systems of path tracing share: the settings, the random-number dimensions of a
+//! bounce, the material ranges of a sorted wave and the scratch stores of sorting.
+//! `crate::integrators::pt` assembles them into its state.
+
+use crate::bsdf::MaterialKind;
+use crate::components::{Hits, Paths, Rays};
+use crate::sampling::SamplerKind;
+use std::ops::Range;
+
+/// Random-number dimensions: two for the pixel jitter, then `DIMS_PER_BOUNCE` per bounce.
+pub const DIM_PIXEL: u32 = 0;
+pub const DIMS_PER_BOUNCE: u32 = 6;
+/// Offsets within a bounce's dimensions.
+pub const DIM_LIGHT_PICK: u32 = 0;
+pub const DIM_LIGHT_POINT: u32 = 1;
+pub const DIM_BSDF: u32 = 3;
+pub const DIM_ROULETTE: u32 = 5;
+
+/// First random dimension of bounce `depth`.
+#[inline]
+pub fn bounce_dim(depth: u32) -> u32 {
+    2 + depth * DIMS_PER_BOUNCE
+}
+
+/// Paths in flight at once by default (the wavefront's and the megakernel's waves) (`--wavefront N` sets another): large enough to keep
+/// both cores busy between stage barriers, small enough to stay in a few tens of megabytes.
+pub const WAVEFRONT: usize = 1 << 18;
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PtSettings {
+    pub seed: u64,
+    pub sampler: SamplerKind,
+    /// Maximum number of scattering events; `u32::MAX` for unlimited.
+    pub max_depth: u32,
+}
+
+impl PtSettings {
+    /// Independent samples, `seed`, at most `max_depth` bounces.
+    pub fn new(seed: u64, max_depth: u32) -> PtSettings {
+        PtSettings {
+            seed,
+            sampler: SamplerKind::Independent,
+            max_depth,
+        }
+    }
+}
+
+/// Slots of each material kind after `sort_by_material`: non-delta kinds first, so light
+/// sampling runs over one contiguous range.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct MaterialRanges {
+    pub diffuse: Range<usize>,
+    pub conductor: Range<usize>,
+    pub dielectric: Range<usize>,
+}
+
+impl MaterialRanges {
+    pub fn of(&self, kind: MaterialKind) -> Range<usize> {
+        match kind {
+            MaterialKind::Diffuse => self.diffuse.clone(),
+            MaterialKind::Conductor => self.conductor.clone(),
+            MaterialKind::Dielectric => self.dielectric.clone(),
+        }
+    }
+    /// Slots whose material can be reached by light sampling.
+    pub fn non_delta(&self) -> Range<usize> {
+        self.diffuse.start..self.conductor.end
+    }
+}
+
+/// The three material queues and the dropped paths of `sort_by_material`.
+pub const QUEUES: usize = 4;
+
+#[derive(Default)]
+pub struct Scratch {
+    pub rays: Rays,
+    pub hits: Hits,
+    pub paths: Paths,
+    pub order: Vec<u32>,
+    /// Queue of each slot, for sorting.
+    pub queue: Vec<u8>,
+    /// Slots per queue (three material kinds, then the ended paths) in each chunk, for sorting.
+    pub chunk_counts: Vec<[usize; QUEUES]>,
+}

@@ -1,0 +1,109 @@
+//! What the systems of photon mapping share: the settings of PM, PPM and SPPM.
+//! `crate::integrators::{pm, sppm}` assemble them into their states.
+
+use crate::sampling::SamplerKind;
+use crate::scene::SceneData;
+
+/// Default photons traced.
+pub const DEFAULT_PHOTONS: u64 = 250_000;
+/// Default photons per density estimate.
+pub const DEFAULT_K: usize = 50;
+/// Default largest search radius, as a fraction of the scene's bounding-box diagonal.
+pub const DEFAULT_MAX_RADIUS_FRACTION: f32 = 0.02;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PmSettings {
+    pub seed: u64,
+    pub sampler: SamplerKind,
+    pub max_depth: u32,
+    pub photons: u64,
+    /// Photons per density estimate, at least 2 (the k - 1 nearest over the k-th's disc).
+    pub k: usize,
+    /// Largest search radius in scene units (`None`: `DEFAULT_MAX_RADIUS_FRACTION` of the
+    /// scene diagonal).
+    pub max_radius: Option<f32>,
+    pub final_gather: bool,
+}
+
+impl PmSettings {
+    pub fn new(seed: u64) -> PmSettings {
+        PmSettings {
+            seed,
+            sampler: SamplerKind::Independent,
+            max_depth: u32::MAX,
+            photons: DEFAULT_PHOTONS,
+            k: DEFAULT_K,
+            max_radius: None,
+            final_gather: true,
+        }
+    }
+
+    pub fn max_radius_in(&self, data: &SceneData) -> f32 {
+        self.max_radius.unwrap_or_else(|| {
+            let s = &data.scene;
+            DEFAULT_MAX_RADIUS_FRACTION * (s.bounds_max - s.bounds_min).length()
+        })
+    }
+}
+
+/// Default photons per pass.
+pub const DEFAULT_PHOTONS_PER_PASS: u64 = 250_000;
+/// Default alpha: the fraction of new photons a pass keeps.
+pub const DEFAULT_ALPHA: f32 = 0.7;
+/// SPPM's default initial radius, as a fraction of the scene's bounding-box diagonal: of
+/// 0.25%, 0.5%, 1% and 2%, 1% has the least relMSE over cornell_box, torus_glass and door_ajar
+/// at 10 s (the geometric mean of each scene's relMSE, less its reference's own noise, over
+/// the scene's best: 1.12 against 1.50 for 0.5%; docs/photons/README.md).
+pub const SPPM_RADIUS_FRACTION: f32 = 0.01;
+/// PPM's default initial radius, as a fraction of the scene's diagonal (not re-measured: its
+/// torus_glass curves in docs/photons/README.md are at 0.5%).
+pub const PPM_RADIUS_FRACTION: f32 = 0.005;
+/// Default eye-ray trees per pixel of PPM.
+pub const DEFAULT_EYE_RAYS: u32 = 16;
+
+/// The settings of PPM and SPPM.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ProgressiveSettings {
+    pub seed: u64,
+    pub sampler: SamplerKind,
+    /// Maximum number of scattering events of camera chains and photons; `u32::MAX` for
+    /// unlimited.
+    pub max_depth: u32,
+    pub photons_per_pass: u64,
+    pub alpha: f32,
+    /// Initial gather radius in scene units (`None`: `SPPM_RADIUS_FRACTION` or
+    /// `PPM_RADIUS_FRACTION` of the scene diagonal).
+    pub initial_radius: Option<f32>,
+    /// SPPM (true): new visible points every pass. PPM (false): pass 0's, kept.
+    pub stochastic: bool,
+    /// PPM: eye-ray trees per pixel, jittered over it (stratified).
+    pub eye_rays: u32,
+}
+
+impl ProgressiveSettings {
+    pub fn new(seed: u64, stochastic: bool) -> ProgressiveSettings {
+        ProgressiveSettings {
+            seed,
+            sampler: SamplerKind::Independent,
+            max_depth: u32::MAX,
+            photons_per_pass: DEFAULT_PHOTONS_PER_PASS,
+            alpha: DEFAULT_ALPHA,
+            initial_radius: None,
+            stochastic,
+            eye_rays: DEFAULT_EYE_RAYS,
+        }
+    }
+
+    /// The initial radius in `scene`.
+    pub fn radius_in(&self, data: &SceneData) -> f32 {
+        self.initial_radius.unwrap_or_else(|| {
+            let s = &data.scene;
+            let fraction = if self.stochastic {
+                SPPM_RADIUS_FRACTION
+            } else {
+                PPM_RADIUS_FRACTION
+            };
+            fraction * (s.bounds_max - s.bounds_min).length()
+        })
+    }
+}
