@@ -2,6 +2,7 @@
 //! error against a reference, and write a report folder: results.csv, error_vs_time.png and
 //! .svg, grid.png, summary.md, and index.html (the interactive page, with runs/*.exr).
 
+pub mod files;
 pub mod format;
 pub mod page;
 pub mod plot;

@@ -7,7 +7,6 @@ use super::{Comparison, ReportError, report_error};
 use crate::viewer::{Page, PageImage, ResultsTable, TableCell, TableRow};
 use std::path::Path;
 
-pub const INDEX_HTML: &str = "index.html";
 /// The runs' images as EXR files.
 pub const RUNS_DIR: &str = "runs";
 
@@ -74,7 +73,7 @@ pub fn write_page(
             .write_exr(&path)
             .map_err(|e| report_error(&path, e.message))?;
     }
-    let plot_path = dir.join(super::report::PLOT_SVG);
+    let plot_path = dir.join(super::files::PLOT_SVG);
     let plot_svg = std::fs::read_to_string(&plot_path).map_err(|e| report_error(&plot_path, e))?;
     let images = c
         .results
@@ -111,13 +110,13 @@ pub fn write_page(
     links.extend([
         (
             "summary.md".to_string(),
-            super::report::SUMMARY_MD.to_string(),
+            super::files::SUMMARY_MD.to_string(),
         ),
         (
             "results.csv".to_string(),
-            super::report::RESULTS_CSV.to_string(),
+            super::files::RESULTS_CSV.to_string(),
         ),
-        ("grid.png".to_string(), super::report::GRID_PNG.to_string()),
+        ("grid.png".to_string(), super::files::GRID_PNG.to_string()),
     ]);
     let page = Page {
         title: format!("Speed against error: {}", c.scene_name),
@@ -133,7 +132,7 @@ pub fn write_page(
         table: Some(results_table(c, labels)),
         links,
     };
-    let html = dir.join(INDEX_HTML);
+    let html = dir.join(super::files::INDEX_HTML);
     crate::viewer::write_page(&page, &html).map_err(|e| report_error(&e.path, e.message))?;
     Ok(())
 }

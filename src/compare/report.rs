@@ -6,12 +6,7 @@ use super::{quality_targets, report_error, time_to_reach};
 use std::fmt::Write;
 use std::path::Path;
 
-/// The files a report folder holds.
-pub const RESULTS_CSV: &str = "results.csv";
-pub const PLOT_PNG: &str = "error_vs_time.png";
-pub const PLOT_SVG: &str = "error_vs_time.svg";
-pub const GRID_PNG: &str = "grid.png";
-pub const SUMMARY_MD: &str = "summary.md";
+use super::files::{GRID_PNG, INDEX_HTML, PLOT_PNG, PLOT_SVG, RESULTS_CSV, SUMMARY_MD};
 
 /// The CSV's columns, in order.
 pub const CSV_HEADER: [&str; 17] = [
@@ -65,7 +60,7 @@ pub fn report_files(dir: &Path) -> Vec<std::path::PathBuf> {
         PLOT_SVG,
         GRID_PNG,
         SUMMARY_MD,
-        super::page::INDEX_HTML,
+        INDEX_HTML,
     ]
     .iter()
     .map(|f| dir.join(f))

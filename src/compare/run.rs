@@ -133,12 +133,12 @@ pub fn compare(o: &CompareOptions) -> Result<i32> {
         comparison.reference_path.display(),
         comparison.reference_note,
         out_dir.display(),
-        report::RESULTS_CSV,
-        report::PLOT_PNG,
-        report::PLOT_SVG,
-        report::GRID_PNG,
-        report::SUMMARY_MD,
-        crate::compare::page::INDEX_HTML
+        super::files::RESULTS_CSV,
+        super::files::PLOT_PNG,
+        super::files::PLOT_SVG,
+        super::files::GRID_PNG,
+        super::files::SUMMARY_MD,
+        super::files::INDEX_HTML
     );
     if comparison.interrupted {
         text += "interrupted: the report holds the runs finished before the stop\n";

@@ -991,11 +991,11 @@ fn write_sharded_report(
             c.results.len(),
             plan.tasks,
             study.report_dir.display(),
-            report::RESULTS_CSV,
-            report::PLOT_PNG,
-            report::PLOT_SVG,
-            report::GRID_PNG,
-            report::SUMMARY_MD
+            super::files::RESULTS_CSV,
+            super::files::PLOT_PNG,
+            super::files::PLOT_SVG,
+            super::files::GRID_PNG,
+            super::files::SUMMARY_MD
         );
     }
     if let CompareRequest::Thesis(o) = request {
@@ -1006,13 +1006,13 @@ fn write_sharded_report(
                 comparison: comparisons.iter().find(|(k, _)| k == key).map(|(_, c)| c),
             })
             .collect();
-        let summary = o.output.join(report::SUMMARY_MD);
+        let summary = o.output.join(super::files::SUMMARY_MD);
         crate::film::output::write_bytes(
             &summary,
             thesis::summary_markdown(&scenes, most_threads, &o.photon_budgets, Some(&note))
                 .as_bytes(),
         )?;
-        let csv = o.output.join(report::RESULTS_CSV);
+        let csv = o.output.join(super::files::RESULTS_CSV);
         let all: Vec<(&str, &Comparison)> =
             comparisons.iter().map(|(k, c)| (k.as_str(), c)).collect();
         thesis::write_csv(&all, &csv)?;

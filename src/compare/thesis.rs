@@ -144,7 +144,10 @@ pub(crate) fn write_scene_report(
         c,
         dir,
         &page_labels(c, photon_budgets),
-        vec![("all scenes".into(), format!("../{}", page::INDEX_HTML))],
+        vec![(
+            "all scenes".into(),
+            format!("../{}", super::files::INDEX_HTML),
+        )],
     )
 }
 
@@ -167,10 +170,10 @@ pub(crate) fn write_index(out_dir: &Path, scenes: &[SceneResult]) -> Result<()> 
                 c.results.len(),
                 c.width,
                 c.height,
-                index = page::INDEX_HTML,
-                summary = report::SUMMARY_MD,
-                plot = report::PLOT_SVG,
-                grid = report::GRID_PNG,
+                index = super::files::INDEX_HTML,
+                summary = super::files::SUMMARY_MD,
+                plot = super::files::PLOT_SVG,
+                grid = super::files::GRID_PNG,
             ),
             None => writeln!(
                 body,
@@ -188,10 +191,10 @@ pub(crate) fn write_index(out_dir: &Path, scenes: &[SceneResult]) -> Result<()> 
          exposure, pixel readout), its sortable results and its plot. \
          <a href=\"{summary}\">summary.md</a>, <a href=\"{csv}\">results.csv</a>.</p>\n\
          {body}</body>\n</html>\n",
-        summary = report::SUMMARY_MD,
-        csv = report::RESULTS_CSV,
+        summary = super::files::SUMMARY_MD,
+        csv = super::files::RESULTS_CSV,
     );
-    let path = out_dir.join(page::INDEX_HTML);
+    let path = out_dir.join(super::files::INDEX_HTML);
     crate::film::output::write_bytes(&path, html.as_bytes())?;
     Ok(())
 }
@@ -496,12 +499,12 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
             comparison: comparisons.iter().find(|(k, _)| k == key).map(|(_, c)| c),
         })
         .collect();
-    let summary = out_dir.join(report::SUMMARY_MD);
+    let summary = out_dir.join(super::files::SUMMARY_MD);
     crate::film::output::write_bytes(
         &summary,
         summary_markdown(&scenes, pool.current_num_threads(), &o.photon_budgets, None).as_bytes(),
     )?;
-    let csv = out_dir.join(report::RESULTS_CSV);
+    let csv = out_dir.join(super::files::RESULTS_CSV);
     let all: Vec<(&str, &Comparison)> = comparisons.iter().map(|(k, c)| (*k, c)).collect();
     write_csv(&all, &csv)?;
     write_index(out_dir, &scenes)?;
@@ -510,7 +513,7 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
         comparisons.len(),
         summary.display(),
         csv.display(),
-        out_dir.join(page::INDEX_HTML).display()
+        out_dir.join(super::files::INDEX_HTML).display()
     );
     if interrupted {
         text += "interrupted: the report holds the runs finished before the stop\n";
