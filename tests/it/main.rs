@@ -19,6 +19,7 @@ mod fuzz_targets;
 mod graph;
 mod hostile;
 mod kernels;
+mod layering;
 mod light_vertex_cache;
 mod mlt;
 mod path_mlt;
