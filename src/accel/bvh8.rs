@@ -26,6 +26,8 @@ use glam::{Vec3, Vec3A};
 pub(super) const LEAF: u32 = 1 << 31;
 /// The lane mask of a leaf reference.
 const LANE_MASK: u32 = (1 << LANES) - 1;
+/// The box test's padding, relative to the magnitudes involved (see `BoxRay`).
+const PADDING: f32 = 1.0 / (1u32 << 18) as f32;
 /// The most triangles a leaf holds: one packet.
 pub(super) const LEAF_MAX: u32 = LANES as u32;
 /// The most packets a tree may hold (the bits of a leaf reference).
@@ -56,6 +58,28 @@ impl Node {
         self.child[slot] = reference;
     }
 
+    /// Enlarges each child's box by `PADDING` times its largest coordinate magnitude (rounded
+    /// outwards by the padding's own size: 2^-24 of it is far below it).
+    fn pad(&mut self) {
+        for slot in 0..8 {
+            let m = (0..3)
+                .map(|a| {
+                    self.planes[a][0][slot]
+                        .abs()
+                        .max(self.planes[a][1][slot].abs())
+                })
+                .fold(0.0f32, f32::max);
+            // Empty slots (+inf, -inf) stay as they are.
+            if !m.is_finite() {
+                continue;
+            }
+            for a in 0..3 {
+                self.planes[a][0][slot] -= m * PADDING;
+                self.planes[a][1][slot] += m * PADDING;
+            }
+        }
+    }
+
     /// The box of all the children.
     pub(super) fn bounds(&self) -> (Vec3, Vec3) {
         let p = &self.planes;
@@ -70,8 +94,6 @@ impl Node {
 
 pub(crate) struct Bvh8 {
     nodes: Vec<Node>,
-    /// The largest magnitude of any vertex coordinate: the scale of the box padding.
-    scale: f32,
 }
 
 impl Bvh8 {
@@ -80,8 +102,11 @@ impl Bvh8 {
         self.nodes.capacity() * std::mem::size_of::<Node>()
     }
 
-    pub(super) fn new(nodes: Vec<Node>, scale: f32) -> Bvh8 {
-        Bvh8 { nodes, scale }
+    /// The tree of `nodes`, whose planes are the children's exact boxes: they are padded here
+    /// (see `BoxRay`).
+    pub(super) fn new(mut nodes: Vec<Node>) -> Bvh8 {
+        nodes.iter_mut().for_each(Node::pad);
+        Bvh8 { nodes }
     }
 
     /// Asks the CPU to bring the node or packet `reference` into the cache.
@@ -125,7 +150,7 @@ impl Bvh8 {
         ray: &TraversalRay,
         mut t_max: f32,
     ) -> Option<TriangleHit> {
-        let box_ray = BoxRay::new(ray, self.scale);
+        let box_ray = BoxRay::new(ray);
         let mut hit = None;
         // Pending children: the entry distance (non-negative, so its bits order like the
         // value) in the high half, the child reference in the low half.
@@ -279,14 +304,18 @@ impl Bvh8 {
     }
 }
 
-/// The ray as the box test sees it. The test computes `(plane - o) * inv_dir` per slab, with
-/// the origin moved by `pad` along each axis so that every box is in effect enlarged by `pad`
-/// on each side: `pad = 2^-18 (max |o| + scale)`, with `scale` the largest vertex coordinate
-/// magnitude, is far above the rounding of `o +- pad` (2^-24 of it), of the subtraction and of
-/// the product with the rounded reciprocal (relative 3 * 2^-24 of `|plane - o| <= |o| +
-/// scale`, which the padding also dominates in t, as it adds `pad |inv_dir|` on each side),
-/// and above the rounding of the triangle test (a few 2^-24 of the same magnitudes). So the
-/// box test is conservative: a ray never misses a box that holds a triangle it hits.
+/// The ray as the box test sees it. The test computes `(plane - o) * inv_dir` per slab with
+/// every box enlarged on each side by `2^-18 (max |o| + m)`, `m` the largest coordinate
+/// magnitude of that child's box: its part `2^-18 m` is added to the child's planes when the
+/// tree is made (`Node::pad`), its part `pad = 2^-18 max |o|` moves the origin here. That is far
+/// above the rounding of `o +- pad` (2^-24 of it), of the subtraction and of the product with
+/// the rounded reciprocal (relative 3 * 2^-24 of `|plane - o| <= |o| + m`, which the padding
+/// also dominates in t, as it adds its length times `|inv_dir|` on each side), and above the
+/// rounding of the triangle test for a triangle in that box (a few 2^-24 of the same
+/// magnitudes). So the box test is conservative: a ray never misses a box that holds a
+/// triangle it hits. Padding by each box's own magnitudes, not the scene's largest, keeps one
+/// huge triangle (a floor 2e10 wide) from enlarging every box in the scene: with the scene's,
+/// a 4 m room's boxes grew by 38 km and every ray entered every box.
 struct BoxRay {
     /// Per axis: the index (0: minima, 1: maxima) of the planes the ray enters by.
     near: [usize; 3],
@@ -299,9 +328,9 @@ struct BoxRay {
 
 impl BoxRay {
     #[inline(always)]
-    fn new(ray: &TraversalRay, scale: f32) -> BoxRay {
+    fn new(ray: &TraversalRay) -> BoxRay {
         let o = ray.origin;
-        let pad = (o.abs().max_element() + scale) * (1.0 / (1u32 << 18) as f32);
+        let pad = o.abs().max_element() * PADDING;
         let neg = ray.neg;
         // Entering through min - pad (positive direction): (min - pad) - o = min - (o + pad);
         // through max + pad (negative direction): max - (o - pad). Lane by lane, the same

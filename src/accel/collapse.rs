@@ -130,16 +130,8 @@ pub(crate) fn collapse(bvh: &Bvh2, verts: &[[Vec3; 3]]) -> Collapsed {
         tree.packets.len() <= MAX_PACKETS,
         "more than {MAX_PACKETS} triangle packets: too many triangles for one tree"
     );
-    let scale = verts
-        .par_iter()
-        .map(|t| {
-            t.iter()
-                .map(|v| v.abs().max_element())
-                .fold(0.0f32, f32::max)
-        })
-        .reduce(|| 0.0, f32::max);
     Collapsed {
-        tree: Bvh8::new(tree.nodes, scale),
+        tree: Bvh8::new(tree.nodes),
         packets: tree.packets,
         lanes: tree.lanes,
     }

@@ -158,6 +158,36 @@ const BUILD_PARAMS: BvhBuildParams = BvhBuildParams {
     ..BvhBuildParams::medium_build()
 };
 
+/// How much larger than the triangles' centres' bounds the union of their boxes may be before
+/// the boxes the binary tree is built from are clipped (`clipped_to_the_scene`).
+const OUTSIZED: f32 = 16.0;
+
+/// The boxes the binary tree is built from. obvhs scales its Morton codes to the union of the
+/// boxes, so one outsized triangle (a floor 2e10 wide under a room of 4 m) puts every other
+/// triangle in one Morton cell, and PLOC's tree degrades towards a linear scan (door_ajar with
+/// such a floor traced 200x slower). Where the union is over `OUTSIZED` times the centres'
+/// bounds, every box is clipped to those bounds grown by their own size: the tree's structure
+/// follows the scene, and the eight-wide nodes, whose boxes `collapse` computes from the
+/// vertices, still hold each triangle whole (an outsized one widens only the nodes above its
+/// leaf). Ordinary scenes are left as they are (their union is about their centres' bounds).
+fn clipped_to_the_scene(aabbs: Vec<Aabb>) -> Vec<Aabb> {
+    let mut union = Aabb::empty();
+    let mut centres = Aabb::empty();
+    for b in &aabbs {
+        union = union.union(b);
+        centres.extend(b.center());
+    }
+    let size = centres.diagonal().length();
+    if union.diagonal().length() <= OUTSIZED * size {
+        return aabbs;
+    }
+    let grown = Aabb::new(
+        centres.min - Vec3A::splat(size),
+        centres.max + Vec3A::splat(size),
+    );
+    aabbs.iter().map(|b| b.intersection(&grown)).collect()
+}
+
 impl Accel {
     /// Builds the tree. Zero-area triangles and exact copies are left out: they are never hit.
     pub fn build(triangles: &TriangleColumns) -> Accel {
@@ -185,6 +215,7 @@ impl Accel {
             .map(|&[a, b, c]| Aabb::new(Vec3A::from(a.min(b).min(c)), Vec3A::from(a.max(b).max(c))))
             .collect();
         let params = BUILD_PARAMS;
+        let aabbs = clipped_to_the_scene(aabbs);
         let mut bvh2 = obvhs::ploc::PlocBuilder::with_capacity(aabbs.len()).build(
             params.ploc_search_distance,
             &aabbs,

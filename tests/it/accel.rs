@@ -189,6 +189,30 @@ fn closest_hit_matches_brute_force_on_random_soups() {
     assert!(hits > 500, "too few hits ({hits}) for a meaningful test");
 }
 
+/// One outsized triangle (a floor 2e10 wide) under a small scene: the tree is built from boxes
+/// clipped to the scene and pads each box by its own magnitudes (a padding scaled to the
+/// largest vertex made every ray enter every box, 250x slower: see
+/// docs/measurements/outsized-triangles.md); hits stay exact against brute force.
+#[test]
+fn closest_hit_matches_brute_force_beside_an_outsized_floor() {
+    let mut rng = Rng::new(7);
+    let (lo, hi) = (Vec3::splat(-1.0), Vec3::splat(1.0));
+    let mut tris = random_soup(&mut rng, 3000, lo, hi, 0.15);
+    let (y, w) = (-0.75, 1e10);
+    tris.push([
+        Vec3::new(-w, y, -w),
+        Vec3::new(-w, y, w),
+        Vec3::new(w, y, w),
+    ]);
+    tris.push([
+        Vec3::new(-w, y, -w),
+        Vec3::new(w, y, w),
+        Vec3::new(w, y, -w),
+    ]);
+    let hits = check_against_brute_force(&tris, &mut rng, 10_000, (lo * 1.2, hi * 1.2));
+    assert!(hits > 4_000, "too few hits ({hits}) for a meaningful test");
+}
+
 #[test]
 fn closest_hit_matches_brute_force_on_closed_meshes() {
     let mut rng = Rng::new(2);
