@@ -321,6 +321,12 @@ impl Accel {
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
         self.dispatch::<true>(origin, dir, t_max).is_some()
     }
+
+    /// The hit that `any_hit` stops at (the first it finds, not necessarily the nearest), if
+    /// any: for checking occlusion against another tracer hit by hit.
+    pub fn any_hit_found(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+        self.dispatch::<true>(origin, dir, t_max)
+    }
 }
 
 /// The watertight ray-triangle test that the accelerator runs, on one triangle: `(t, b1, b2)`
