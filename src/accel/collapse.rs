@@ -139,7 +139,7 @@ pub(crate) fn collapse(bvh: &Bvh2, verts: &[[Vec3; 3]]) -> Collapsed {
         })
         .reduce(|| 0.0, f32::max);
     Collapsed {
-        tree: Bvh8::new(tree.nodes, scale),
+        tree: Bvh8::new(tree.nodes, scale, tree.packets.len()),
         packets: tree.packets,
         lanes: tree.lanes,
     }

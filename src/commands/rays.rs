@@ -450,12 +450,14 @@ pub fn bench_rays(options: &RayBenchOptions) -> Result<()> {
     }
     crate::npy::write_hits(&options.dir.join(HITS_FILE), &hit_t, &hit_primitive)?;
     let machine = super::bench::Machine::this(threads);
+    let (node_bytes, packet_bytes) = accel.memory_bytes();
     let mut text = format!(
-        "{}: {} triangles ({} in the tree, built in {:.3} s); {} threads, median of {} runs\n\
-         {}\n{:<8} {:<11} {:>10} {:>12} {:>12}\n",
+        "{}: {} triangles ({} in the tree of {:.2} MB, built in {:.3} s); {} threads, median \
+         of {} runs\n{}\n{:<8} {:<11} {:>10} {:>12} {:>12}\n",
         options.dir.display(),
         files.triangles.len(),
         accel.len(),
+        (node_bytes + packet_bytes) as f64 / 1e6,
         build_seconds,
         threads,
         options.runs,
