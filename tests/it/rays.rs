@@ -91,6 +91,12 @@ fn written_rays_are_the_renders_and_bench_finds_its_hits() {
 
     // The same render in this process, with what its trace systems found.
     let data = Arc::new(SceneData::new(stagelight::scene::load(&scene).unwrap()));
+    use stagelight::integrators::driver::IntegratorState;
+    use stagelight::integrators::pt::{PtState, recording_graph};
+    assert_eq!(
+        recording_graph(&data).check(PtState::INPUTS),
+        Vec::<String>::new()
+    );
     let record = stagelight::commands::rays::record(data.clone(), 2, None);
     let closest = read_rays(&out.join("closest.npy"));
     let shadow = read_rays(&out.join("shadow.npy"));
