@@ -5,7 +5,9 @@ Traces the rays a `stagelight rays SCENE --out DIR` folder holds with Embree (th
 binding of Embree 4.4: rtcIntersect1 / rtcOccluded1, one ray at a time, on one thread) and
 with `stagelight bench --rays DIR --threads 1` in the same run, bounce group by bounce group,
 and prints both rays/s (medians of --runs timed runs after a warm-up), their ratio, and how
-many hits differ.
+many hits differ. Both are timed --rounds times, one after the other (stagelight in a fresh
+process each round); the ratio printed is the median of the rounds' ratios, with their
+range, since the machine's state (caches, huge pages) drifts between runs.
 
 A closest hit differs when one tracer hits and the other does not, or when both hit and the
 distances differ by more than a relative 1e-4 (a different primitive at the same distance, as
@@ -104,6 +106,8 @@ def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("dir", help="a folder written by `stagelight rays`")
     parser.add_argument("--runs", type=int, default=5, help="timed runs per group (median)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="rounds of both tracers, one after the other (median ratio)")
     parser.add_argument("--stagelight", default=None,
                         help="the stagelight binary (default: target/release/stagelight)")
     parser.add_argument("--fast", action="store_true",
@@ -118,16 +122,6 @@ def main():
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     binary = args.stagelight or os.path.join(root, "target", "release", "stagelight")
-    with tempfile.TemporaryDirectory() as tmp:
-        saved = os.path.join(tmp, "ours.json")
-        command = [binary, "bench", "--rays", args.dir, "--threads", "1",
-                   "--runs", str(args.runs), "--save", saved]
-        done = subprocess.run(command, capture_output=True, text=True)
-        if done.returncode != 0:
-            sys.exit(f"{' '.join(command)} failed:\n{done.stderr}")
-        with open(saved) as f:
-            ours = json.load(f)
-    ours_seconds = {(g["kind"], g["group"]): g["median_seconds"] for g in ours["groups"]}
 
     with open(os.path.join(args.dir, "rays.json")) as f:
         index = json.load(f)
@@ -136,7 +130,6 @@ def main():
         "closest": np.load(os.path.join(args.dir, "closest.npy")),
         "shadow": np.load(os.path.join(args.dir, "shadow.npy")),
     }
-    hits = np.load(os.path.join(args.dir, "hits.npy"))
     n_closest = len(rays["closest"])
 
     scene = rtcore_scene.EmbreeScene(robust=not args.fast)
@@ -146,25 +139,52 @@ def main():
     scene.run(probe, probe + np.float32(1), query="OCCLUDED")  # commits (builds) the scene
     build = time.perf_counter() - start
 
-    print(f"{args.dir}: {len(triangles)} triangles; Embree built in {build:.3f} s "
-          f"({'fast' if args.fast else 'robust'}), stagelight in {ours['build_seconds']:.3f} s")
-    print(f"stagelight: {ours['machine']['cpu']}, 1 thread; median of {args.runs} runs each")
-    print(f"{'rays':<8} {'group':<11} {'count':>9} {'Embree Mr/s':>12} "
-          f"{'ours Mr/s':>10} {'ours/Embree':>12} {'differ':>7} {'Embree t=0':>11} "
-          f"{'same t, other prim':>19}")
-    table = []
-    for kind in ["closest", "shadow"]:
-        all_rows = rays[kind]
-        totals = [0, 0.0, 0.0, 0, 0, 0]
-        for name, first, count in groups(index[kind]):
-            rows = all_rows[first:first + count]
-            origins = np.ascontiguousarray(rows[:, 0:3])
-            dirs = np.ascontiguousarray(rows[:, 4:7])
-            t_max = np.ascontiguousarray(rows[:, 7])
+    groups_of = {kind: groups(index[kind]) for kind in ["closest", "shadow"]}
+    inputs = {}
+    for kind, spans in groups_of.items():
+        for name, first, count in spans:
+            rows = rays[kind][first:first + count]
             if not (rows[:, 3] == 0).all():
                 sys.exit(f"{kind}.npy: a ray with t_min != 0 (embreex traces from t = 0)")
-            query = "INTERSECT" if kind == "closest" else "OCCLUDED"
-            embree_seconds, result = time_embree(scene, origins, dirs, t_max, query, args.runs)
+            inputs[(kind, name)] = (np.ascontiguousarray(rows[:, 0:3]),
+                                    np.ascontiguousarray(rows[:, 4:7]),
+                                    np.ascontiguousarray(rows[:, 7]))
+
+    # Rounds: stagelight (a fresh process) then Embree, each group timed by both per round.
+    ours_rounds, embree_rounds, results = [], [], {}
+    for _ in range(args.rounds):
+        with tempfile.TemporaryDirectory() as tmp:
+            saved = os.path.join(tmp, "ours.json")
+            command = [binary, "bench", "--rays", args.dir, "--threads", "1",
+                       "--runs", str(args.runs), "--save", saved]
+            done = subprocess.run(command, capture_output=True, text=True)
+            if done.returncode != 0:
+                sys.exit(f"{' '.join(command)} failed:\n{done.stderr}")
+            with open(saved) as f:
+                ours = json.load(f)
+        ours_rounds.append({(g["kind"], g["group"]): g["median_seconds"]
+                            for g in ours["groups"]})
+        seconds = {}
+        for key, (origins, dirs, t_max) in inputs.items():
+            query = "INTERSECT" if key[0] == "closest" else "OCCLUDED"
+            seconds[key], results[key] = time_embree(scene, origins, dirs, t_max, query,
+                                                     args.runs)
+        embree_rounds.append(seconds)
+    hits = np.load(os.path.join(args.dir, "hits.npy"))
+
+    print(f"{args.dir}: {len(triangles)} triangles; Embree built in {build:.3f} s "
+          f"({'fast' if args.fast else 'robust'}), stagelight in {ours['build_seconds']:.3f} s")
+    print(f"stagelight: {ours['machine']['cpu']}, 1 thread; medians of {args.runs} runs, "
+          f"{args.rounds} rounds (ratio: the median of the rounds' ratios, and their range)")
+    print(f"{'rays':<8} {'group':<11} {'count':>9} {'Embree Mr/s':>12} "
+          f"{'ours Mr/s':>10} {'ours/Embree':>12} {'range':>11} {'differ':>7} "
+          f"{'Embree t=0':>11} {'same t, other prim':>19}")
+    table = []
+    for kind, spans in groups_of.items():
+        total = {"count": 0, "differ": 0, "at_zero": 0, "other": 0}
+        for name, first, count in spans:
+            origins, dirs, t_max = inputs[(kind, name)]
+            result = results[(kind, name)]
             offset = first if kind == "closest" else n_closest + first
             mine = hits[offset:offset + count]
             other_primitive = 0
@@ -189,40 +209,46 @@ def main():
                 again = scene.run(origins[k], dirs[k], dists=t_max[k].copy(), output=1)
                 at_zero = int(((again["primID"] >= 0) & (again["tfar"] == 0)).sum())
             differ = int(differing.sum())
-            our_seconds = ours_seconds[(kind, name)]
-            row = {
-                "kind": kind, "group": name, "count": count,
-                "embree_rays_per_second": count / embree_seconds,
-                "ours_rays_per_second": count / our_seconds,
-                "ratio": embree_seconds / our_seconds,
-                "differ": differ, "embree_at_t0": at_zero,
-                "same_t_other_primitive": other_primitive,
-            }
-            table.append(row)
-            totals = [totals[0] + count, totals[1] + embree_seconds, totals[2] + our_seconds,
-                      totals[3] + differ, totals[4] + at_zero, totals[5] + other_primitive]
-            print_row(row)
-        if totals[0]:
-            row = {
-                "kind": kind, "group": "all", "count": totals[0],
-                "embree_rays_per_second": totals[0] / totals[1],
-                "ours_rays_per_second": totals[0] / totals[2],
-                "ratio": totals[1] / totals[2],
-                "differ": totals[3], "embree_at_t0": totals[4],
-                "same_t_other_primitive": totals[5],
-            }
-            table.append(row)
-            print_row(row)
+            table.append(row_of(kind, name, count, [r[(kind, name)] for r in embree_rounds],
+                                [r[(kind, name)] for r in ours_rounds],
+                                differ, at_zero, other_primitive))
+            print_row(table[-1])
+            for key, value in [("count", count), ("differ", differ), ("at_zero", at_zero),
+                               ("other", other_primitive)]:
+                total[key] += value
+        if spans:
+            names = [name for name, _, _ in spans]
+            table.append(row_of(
+                kind, "all", total["count"],
+                [sum(r[(kind, n)] for n in names) for r in embree_rounds],
+                [sum(r[(kind, n)] for n in names) for r in ours_rounds],
+                total["differ"], total["at_zero"], total["other"]))
+            print_row(table[-1])
     if args.json:
         with open(args.json, "w") as f:
-            json.dump({"dir": args.dir, "runs": args.runs, "robust": not args.fast,
-                       "cpu": ours["machine"]["cpu"], "rows": table}, f, indent=2)
+            json.dump({"dir": args.dir, "runs": args.runs, "rounds": args.rounds,
+                       "robust": not args.fast, "cpu": ours["machine"]["cpu"],
+                       "rows": table}, f, indent=2)
+
+
+def row_of(kind, group, count, embree_seconds, ours_seconds, differ, at_zero, other):
+    """A table row from each round's seconds of both tracers."""
+    ratios = [e / o for e, o in zip(embree_seconds, ours_seconds)]
+    return {
+        "kind": kind, "group": group, "count": count,
+        "embree_rays_per_second": count / float(np.median(embree_seconds)),
+        "ours_rays_per_second": count / float(np.median(ours_seconds)),
+        "ratio": float(np.median(ratios)), "ratio_min": min(ratios),
+        "ratio_max": max(ratios), "ratios": ratios,
+        "differ": differ, "embree_at_t0": at_zero, "same_t_other_primitive": other,
+    }
 
 
 def print_row(r):
     print(f"{r['kind']:<8} {r['group']:<11} {r['count']:>9} "
           f"{r['embree_rays_per_second'] / 1e6:>12.2f} {r['ours_rays_per_second'] / 1e6:>10.2f} "
-          f"{r['ratio']:>12.3f} {r['differ']:>7} {r['embree_at_t0']:>11} "
+          f"{r['ratio']:>12.3f} {r['ratio_min']:>5.2f}-{r['ratio_max']:<5.2f} {r['differ']:>7} "
+          f"{r['embree_at_t0']:>11} "
           f"{r['same_t_other_primitive']:>19}")
 
 
