@@ -124,6 +124,12 @@ pub fn write_rays(
     options: &RaysOptions,
 ) -> Result<RayIndex> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    // A hits.npy of earlier rays would no longer match these.
+    let stale = dir.join(HITS_FILE);
+    if stale.exists() {
+        std::fs::remove_file(&stale)
+            .with_context(|| format!("cannot remove the old {}", stale.display()))?;
+    }
     write_mesh(&dir.join(MESH_FILE), triangles)?;
     let (closest, closest_spans) = concatenate(&record.closest);
     let (shadow, shadow_spans) = concatenate(&record.shadow);

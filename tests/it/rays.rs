@@ -145,6 +145,17 @@ fn written_rays_are_the_renders_and_bench_finds_its_hits() {
     assert!(o.status.success(), "{}", stderr(&o));
     let hits = read_hits(&out.join("hits.npy"));
     assert_eq!(hits.len(), closest.len() + shadow.len());
+    // Writing rays again into the folder drops the hits of the old ones.
+    let o = stagelight(&[
+        "rays",
+        scene.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--spp",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.join("hits.npy").exists());
     // Closest rays: the render's hits, bit for bit.
     let rendered_hits = record.closest.iter().flat_map(|b| b.hits.clone());
     let mut found = 0;
