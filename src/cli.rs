@@ -66,10 +66,17 @@ pub enum Command {
         #[arg(short, long, value_name = "PAGE.html")]
         output: PathBuf,
     },
-    /// Renders a scene several times at a fixed budget and prints throughput as a table.
+    /// Renders a scene several times at a fixed budget and prints throughput as a table; with
+    /// --rays, traces the rays of a folder `stagelight rays` wrote instead.
     Bench {
-        #[arg(required_unless_present = "big", conflicts_with = "big")]
+        #[arg(required_unless_present_any = ["big", "rays"], conflicts_with_all = ["big", "rays"])]
         scene: Option<PathBuf>,
+        /// Trace the rays in DIR (written by `stagelight rays`) with the renderer's trace
+        /// systems, closest-hit and shadow rays by bounce group (after one warm-up run),
+        /// print rays/s and write DIR/hits.npy (t and primitive per ray). Takes --threads,
+        /// --runs and --save.
+        #[arg(long, value_name = "DIR", conflicts_with_all = ["big", "baseline", "sweep"])]
+        rays: Option<PathBuf>,
         /// Bench the big scenes (the Cornell box with 32 to 5 million triangles), written as
         /// PLY files, stagelight and Mitsuba 3 scenes into DIR where missing.
         #[arg(long, value_name = "DIR")]
@@ -98,6 +105,11 @@ pub enum Command {
         #[arg(long, conflicts_with_all = ["big", "kernel", "wavefront"])]
         sweep: bool,
     },
+    /// Writes the rays PT traces on a scene, as data: DIR/mesh.ply (every triangle in world
+    /// space; face i is triangle id i), DIR/closest.npy and DIR/shadow.npy (float32, N x 8:
+    /// origin xyz, t_min, direction xyz, t_max) and DIR/rays.json (their rows by bounce).
+    /// `stagelight bench --rays DIR` traces them.
+    Rays(RaysArgs),
     /// Prints an integrator's graph for a scene: its systems in run order, with the columns
     /// each reads and writes.
     Graph {
@@ -108,6 +120,27 @@ pub enum Command {
         #[arg(long)]
         no_final_gather: bool,
     },
+}
+
+/// `stagelight rays`.
+#[derive(clap::Args, Debug)]
+pub struct RaysArgs {
+    /// Scene file (RON).
+    pub scene: PathBuf,
+    /// The folder to write (created if missing).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// Samples per pixel of the render whose rays are written (PT with the defaults of
+    /// `render`).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=1024))]
+    pub spp: u64,
+    /// Write the rays of bounces 0..K only (0: camera rays and the shadow rays from the
+    /// points they find); default: all.
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
+    pub bounces: Option<u64>,
+    /// Worker threads of the render (default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub threads: Option<u64>,
 }
 
 /// Which passes of a render this run makes (a shard); see `commands::ShardChoice`.
@@ -553,6 +586,32 @@ fn run(cli: Cli) -> Result<i32> {
             Ok(0)
         }
         Command::Bench {
+            rays: Some(dir),
+            runs,
+            threads,
+            save,
+            ..
+        } => {
+            crate::commands::rays::bench_rays(&crate::commands::rays::RayBenchOptions {
+                dir,
+                threads: threads.map(|t| t as usize),
+                runs,
+                save,
+            })?;
+            Ok(0)
+        }
+        Command::Rays(a) => {
+            crate::commands::rays::rays(&crate::commands::rays::RaysOptions {
+                scene: a.scene,
+                out: a.out,
+                spp: a.spp,
+                bounces: a.bounces.map(|b| b as usize),
+                threads: a.threads.map(|t| t as usize),
+            })?;
+            Ok(0)
+        }
+        Command::Bench {
+            rays: None,
             scene,
             big,
             save,

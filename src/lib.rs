@@ -19,6 +19,7 @@ pub mod integrators;
 pub mod math;
 pub mod metrics;
 pub mod mlt;
+pub mod npy;
 pub mod path;
 pub mod photons;
 pub mod pipeline;

@@ -15,6 +15,7 @@ pub mod generate {
 pub mod trace {
     pub mod closest;
     pub mod paths;
+    pub mod record_rays;
     pub mod shadow;
 }
 

@@ -131,7 +131,7 @@ pub(crate) fn collapse(bvh: &Bvh2, verts: &[[Vec3; 3]]) -> Collapsed {
         "more than {MAX_PACKETS} triangle packets: too many triangles for one tree"
     );
     Collapsed {
-        tree: Bvh8::new(tree.nodes),
+        tree: Bvh8::new(tree.nodes, tree.packets.len()),
         packets: tree.packets,
         lanes: tree.lanes,
     }

@@ -26,7 +26,10 @@ use glam::{DVec3, Vec3, Vec3A};
 use obvhs::BvhBuildParams;
 use obvhs::aabb::Aabb;
 use rayon::prelude::*;
-use triangle::{TraversalRay, columns};
+use triangle::{LANES, TraversalRay, columns};
+
+/// A hint for `Accel::any_hit_with_hint` that names no packet.
+pub const NO_HINT: u32 = u32::MAX;
 
 /// A closest hit: distance along the (unnormalised) direction, triangle id, barycentrics of
 /// p1 and p2.
@@ -317,6 +320,75 @@ impl Accel {
         self.traverse::<ANY, false>(origin, dir, t_max)
     }
 
+    /// `any_hit`, testing first the triangle packet `hint` names (`NO_HINT`: none; any value
+    /// is safe), and setting `hint` to the packet of the hit that traversal finds (`NO_HINT`
+    /// when nothing is hit). A run of
+    /// shadow rays from nearby points towards one light is often blocked by the same triangles,
+    /// so passing each ray's hint on to the next skips most traversals of occluded rays. The
+    /// answer is `any_hit`'s: a hit in the hinted packet passes the same triangle test, and
+    /// traversal never culls a box that holds a hit triangle.
+    #[inline(always)]
+    fn any_hit_hinted<const AVX2: bool>(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        hint: &mut u32,
+    ) -> bool {
+        let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
+        if !(t_max > 0.0 && finite_nonzero(origin, dir)) {
+            return false;
+        }
+        let Some(tree) = self.tree.as_ref() else {
+            return false;
+        };
+        let ray = TraversalRay::new(origin, dir);
+        let packet = *hint as usize;
+        if let Some(triangles) = self.tris.packets.get(packet) {
+            let used = (0..LANES)
+                .filter(|&lane| self.tris.ids[packet * LANES + lane] != u32::MAX)
+                .fold(0u32, |m, lane| m | (1 << lane));
+            let mut t = t_max;
+            if ray.intersect4::<true>(triangles, used, &mut t).is_some() {
+                return true;
+            }
+        }
+        match tree.traverse::<true, AVX2>(&self.tris, &ray, t_max) {
+            Some(hit) => {
+                *hint = hit.slot / LANES as u32;
+                true
+            }
+            None => {
+                // After an unblocked ray the next is likely unblocked too: no packet to try.
+                *hint = NO_HINT;
+                false
+            }
+        }
+    }
+
+    /// `any_hit_hinted` for code compiled for AVX2 and FMA (see `trace_in_avx2`).
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA, and the caller must be compiled for them.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    pub(crate) unsafe fn any_hit_hinted_in_avx2(
+        &self,
+        origin: Vec3,
+        dir: Vec3,
+        t_max: f32,
+        hint: &mut u32,
+    ) -> bool {
+        self.any_hit_hinted::<true>(origin, dir, t_max, hint)
+    }
+
+    /// Whether anything is hit with t in (0, t_max), trying the packet `hint` first (see
+    /// `any_hit_hinted`); the portable traversal (code compiled for AVX2 calls
+    /// `any_hit_hinted_in_avx2`).
+    pub fn any_hit_with_hint(&self, origin: Vec3, dir: Vec3, t_max: f32, hint: &mut u32) -> bool {
+        self.any_hit_hinted::<false>(origin, dir, t_max, hint)
+    }
+
     /// `closest_hit` (`ANY = false`) or `any_hit` for code that is itself compiled for AVX2
     /// and FMA (see `crate::cpu`), inlined there.
     ///
@@ -351,6 +423,12 @@ impl Accel {
     /// Whether anything is hit with t in (0, t_max) along `origin + t dir`.
     pub fn any_hit(&self, origin: Vec3, dir: Vec3, t_max: f32) -> bool {
         self.dispatch::<true>(origin, dir, t_max).is_some()
+    }
+
+    /// The hit that `any_hit` stops at (the first it finds, not necessarily the nearest), if
+    /// any: for checking occlusion against another tracer hit by hit.
+    pub fn any_hit_found(&self, origin: Vec3, dir: Vec3, t_max: f32) -> Option<Hit> {
+        self.dispatch::<true>(origin, dir, t_max)
     }
 }
 
@@ -418,5 +496,50 @@ mod tests {
                 accel.traverse::<true, false>(o, d, t_max).is_some()
             );
         }
+    }
+
+    /// Any-hit with a hint answers as any-hit does, whatever the hint: the packet of the
+    /// previous ray's occluder (a run of rays from nearby points, as shadow rays come), a
+    /// stale or out-of-range one, or none; and the hint does take effect (most occluded rays
+    /// after an occluded one are answered by the hinted packet, without a traversal).
+    #[test]
+    fn hinted_any_hit_agrees_with_any_hit() {
+        let r = |i: u64, d: u32| SampleKey::new(12, i, 0).get(d);
+        let tris = TriangleColumns {
+            p0: vec![Vec3::new(-1.0, -1.0, 1.0), Vec3::new(-1.0, -1.0, 2.0)],
+            p1: vec![Vec3::new(1.0, -1.0, 1.0), Vec3::new(1.0, 1.0, 2.0)],
+            p2: vec![Vec3::new(1.0, 1.0, 1.0), Vec3::new(-1.0, 1.0, 2.0)],
+            normal: vec![Vec3::Z; 2],
+            material: vec![0; 2],
+            emitter: vec![NO_EMITTER; 2],
+            smooth: vec![FLAT; 2],
+            vertex_normals: Vec::new(),
+        };
+        let accel = Accel::build(&tris);
+        let mut hint = NO_HINT;
+        // Occluded rays after an occluded ray (whose hint they get), and how many of them
+        // still needed a traversal (which changes the hint).
+        let (mut followers, mut traversals, mut previous_occluded) = (0, 0, false);
+        for i in 0..4000u64 {
+            // Rays from a small patch towards random points beyond both triangles.
+            let o = Vec3::new(r(i, 0), r(i, 1), 0.0) * 0.2;
+            let target = Vec3::new(r(i, 2) * 4.0 - 2.0, r(i, 3) * 4.0 - 2.0, 3.0);
+            let t_max = if i % 3 == 0 { 0.4 } else { 1.0 };
+            let reset = i % 97 == 0;
+            if reset {
+                hint = [NO_HINT, 7, u32::MAX - 1][(i / 97 % 3) as usize];
+            }
+            let before = hint;
+            let expected = accel.any_hit(o, target - o, t_max);
+            let got = accel.any_hit_with_hint(o, target - o, t_max, &mut hint);
+            assert_eq!(got, expected, "ray {i}");
+            if got && previous_occluded && !reset {
+                followers += 1;
+                traversals += (hint != before) as usize;
+            }
+            previous_occluded = got;
+        }
+        assert!(followers > 1000, "{followers}");
+        assert!(traversals * 10 < followers, "{traversals} of {followers}");
     }
 }

@@ -6,6 +6,7 @@
 pub mod bench;
 pub mod big_scenes;
 pub mod merge;
+pub mod rays;
 pub mod reference;
 pub mod render;
 pub mod slurm;

@@ -11,6 +11,7 @@ pub mod path_tracing;
 mod paths;
 pub mod photon_mapping;
 mod photons;
+pub mod ray_record;
 mod rays;
 mod shadow;
 pub mod subpaths;

@@ -147,6 +147,34 @@ pub fn render_waves_of<S: WaveState>(
     }
 }
 
+/// Runs `graph` over the waves of `spp` passes of a fresh state (waves of up to `wavefront`
+/// samples, as `render_waves_of` plans them) and returns the state, for callers that read
+/// what the graph left in it (`stagelight rays`: the rays it recorded).
+pub fn run_waves_of<S: WaveState>(
+    data: Arc<SceneData>,
+    settings: S::Settings,
+    graph: &Graph<S>,
+    spp: u64,
+    wavefront: usize,
+) -> S {
+    assert!(wavefront > 0, "a wave holds at least one sample");
+    let cam = data.scene.camera;
+    let pixels = cam.width as u64 * cam.height as u64;
+    let mut plan = WavePlan::starting_at(pixels, Budget::SamplesPerPixel(spp), wavefront, 0);
+    let mut state = S::new(data, settings, plan.capacity());
+    let mut stats = Stats::default();
+    let never = std::sync::atomic::AtomicBool::new(false);
+    let control = Control {
+        stop: &never,
+        progress: &|_, _| {},
+    };
+    while let Some((first, len)) = plan.next_wave(&control) {
+        state.begin_wave(Wave { first, len });
+        graph.run(&mut state, &mut stats);
+    }
+    state
+}
+
 /// Renders with a pass-based integrator: a sample budget is a number of passes, a time budget
 /// ends at the first pass boundary past it (at least one pass). A stop request ends the render
 /// at a pass boundary, keeping every finished pass.

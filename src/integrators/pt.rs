@@ -6,6 +6,7 @@
 //! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 
 use crate::bsdf::MaterialKind;
+use crate::components::ray_record::RayRecord;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};
 use crate::film::{Film, Image};
 use crate::integrators::driver::{render_waves, render_waves_of};
@@ -53,6 +54,8 @@ pub struct PtState {
     pub film: Film,
     /// Double buffers for compaction and sorting.
     pub scratch: Scratch,
+    /// The rays traced, for `stagelight rays` (`recording_graph`); empty otherwise.
+    pub record: RayRecord,
 }
 
 impl PtState {
@@ -84,6 +87,7 @@ impl PtState {
                 queue: vec![0; capacity],
                 chunk_counts: Vec::with_capacity(capacity.div_ceil(crate::components::CHUNK)),
             },
+            record: RayRecord::default(),
         }
     }
 
@@ -115,6 +119,16 @@ pub fn used_kinds(data: &SceneData) -> Vec<MaterialKind> {
 /// The path tracer's graph for a scene: one shading system per material kind in use, light
 /// sampling only where a non-delta surface and an emitter exist.
 pub fn graph(data: &SceneData) -> Graph<PtState> {
+    graph_of(data, false)
+}
+
+/// `graph` with each trace system followed by one that records the rays it traced and what
+/// it found into `PtState::record` (`stagelight rays`); the render is unchanged.
+pub fn recording_graph(data: &SceneData) -> Graph<PtState> {
+    graph_of(data, true)
+}
+
+fn graph_of(data: &SceneData, record: bool) -> Graph<PtState> {
     let kinds = used_kinds(data);
     let has_emitters = !data.scene.emitters.triangle.is_empty();
     let light_sampling = has_emitters
@@ -123,6 +137,9 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
             .any(|k| matches!(k, MaterialKind::Diffuse | MaterialKind::Conductor));
 
     let mut bounce: Vec<Node<PtState>> = vec![Node::system(trace::closest::TraceClosest)];
+    if record {
+        bounce.push(Node::system(trace::record_rays::RecordClosestRays));
+    }
     if has_emitters {
         bounce.push(Node::system(shade::emitted_light::AddEmittedLight));
     }
@@ -135,6 +152,9 @@ pub fn graph(data: &SceneData) -> Graph<PtState> {
     }
     if light_sampling {
         bounce.push(Node::system(trace::shadow::TraceShadow));
+        if record {
+            bounce.push(Node::system(trace::record_rays::RecordShadowRays));
+        }
         bounce.push(Node::system(
             connect::apply_shadow::ApplyShadowContributions,
         ));
@@ -281,6 +301,14 @@ mod bindings {
         trace::closest::TraceClosest {
             read accel = data.accel, rays, live = active;
             write hits;
+        }
+        trace::record_rays::RecordClosestRays {
+            read rays, hits, live = active, wave;
+            write record;
+        }
+        trace::record_rays::RecordShadowRays {
+            read shadow, len = shadow_len;
+            write record;
         }
         trace::shadow::TraceShadow {
             read accel = data.accel, len = shadow_len;

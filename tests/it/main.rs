@@ -29,6 +29,7 @@ mod photon_mapping;
 mod photons;
 mod properties;
 mod pt_furnace;
+mod rays;
 mod reference;
 mod report_page;
 mod scene_crosscheck;
