@@ -107,3 +107,37 @@ impl ProgressiveSettings {
         })
     }
 }
+
+/// Camera rays, a grid of this many per side over the image, whose first hits give the
+/// pixel footprint.
+const FOOTPRINT_RAYS_PER_SIDE: u32 = 32;
+
+/// The width of one pixel where the camera sees the scene: the median over a grid of camera
+/// rays of the distance to the first hit times a pixel's angular size (the image plane at
+/// distance 1 is `2 tan(fov/2)` tall over `height` pixels). None when no ray hits anything.
+/// Unlike a fraction of the scene's bounds, it does not grow with geometry the camera barely
+/// sees (one huge ground triangle).
+pub fn pixel_footprint(data: &SceneData) -> Option<f32> {
+    let frustum = data.scene.camera.frustum();
+    let (w, h) = (frustum.width as f32, frustum.height as f32);
+    let n = FOOTPRINT_RAYS_PER_SIDE;
+    let mut distances: Vec<f32> = (0..n * n)
+        .filter_map(|i| {
+            let raster = glam::Vec2::new(
+                ((i % n) as f32 + 0.5) / n as f32 * w,
+                ((i / n) as f32 + 0.5) / n as f32 * h,
+            );
+            let dir = frustum.direction(raster);
+            let hit = data
+                .accel
+                .closest_hit(frustum.position, dir, f32::INFINITY)?;
+            (hit.t.is_finite() && hit.t > 0.0).then(|| hit.t * dir.length())
+        })
+        .collect();
+    if distances.is_empty() {
+        return None;
+    }
+    distances.sort_by(f32::total_cmp);
+    let median = distances[distances.len() / 2];
+    Some(median * 2.0 * frustum.tan_half / h)
+}

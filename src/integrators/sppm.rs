@@ -56,7 +56,7 @@ impl ProgressiveSettings {
         ProgressiveSettings {
             max_depth: s.max_depth,
             photons_per_pass: p.photons_per_pass,
-            alpha: p.alpha,
+            alpha: p.alpha.unwrap_or(DEFAULT_ALPHA),
             initial_radius: p.radius,
             eye_rays: p.eye_rays,
             sampler: s.sampler,

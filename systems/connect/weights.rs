@@ -167,6 +167,7 @@ pub fn weigh_wave(
                         (s, t),
                         strategy_count,
                         connection_count,
+                        settings.techniques(wave, k, pixels),
                     );
                     sh.contribution[this] *= weight;
                     weighed += 1;

@@ -157,7 +157,7 @@ fn a_photon_checkpoint_continues_only_its_own_render() {
     let e = refused("sppm", &other, settings(3));
     assert!(e.contains("a different scene"), "{e}");
     let mut alpha = settings(3);
-    alpha.photons.alpha = 0.5;
+    alpha.photons.alpha = Some(0.5);
     let e = refused("sppm", &data, alpha);
     assert!(e.contains("settings") && e.contains("alpha: 0.5"), "{e}");
 
