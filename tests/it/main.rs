@@ -36,4 +36,5 @@ mod scene_errors;
 mod scene_loading;
 mod shards;
 mod stability;
+mod vcm;
 mod window_room;
