@@ -368,6 +368,24 @@ impl WaveState for BdptState {
         &mut self.film
     }
     fn notes(&self) -> Vec<(&'static str, String)> {
+        if let Some(m) = self.settings.merging {
+            let footprint = crate::components::photon_mapping::pixel_footprint(&self.data);
+            let pixels = footprint.map_or(String::new(), |f| {
+                format!(" ({:.2} pixel footprints of {f:.4e})", m.radius / f)
+            });
+            let techniques = match (m.connect, m.merge) {
+                (true, true) => "connections and merges",
+                (false, _) => "merges and emitters hit (bpm)",
+                (true, false) => "connections alone",
+            };
+            return vec![(
+                "vertex merging",
+                format!(
+                    "{techniques}; first-pass radius {:.4e}{pixels}, alpha {}",
+                    m.radius, m.alpha
+                ),
+            )];
+        }
         let cache = &self.light_cache;
         if cache.per_camera_vertex == 0 {
             return Vec::new();
