@@ -278,8 +278,7 @@ pub fn connect_wave(
                             let weight = connection_weight(
                                 &ctx,
                                 &settings,
-                                &camera.vertices,
-                                &light.vertices,
+                                (&camera.vertices, &light.vertices),
                                 (s, t),
                                 strategy_count,
                                 connection_count,
@@ -447,13 +446,13 @@ pub fn sampled_light_vertex(
 /// The factor a connection's unweighted contribution is multiplied by: its MIS weight (when
 /// every strategy counts) times the strategy count of a multiplexed sample (1 otherwise).
 /// `connection_count` is how many times as often the connection strategies are sampled as the
-/// others (1 but through a light-vertex cache).
+/// others (1 but through a light-vertex cache); `techniques` what VCM's weights count (read
+/// only with `settings.merging`).
 #[inline]
 pub fn connection_weight(
     ctx: &PathContext,
     settings: &BdptSettings,
-    camera: &[Vertex],
-    light: &[Vertex],
+    (camera, light): (&[Vertex], &[Vertex]),
     (s, t): (usize, usize),
     strategy_count: f32,
     connection_count: f32,

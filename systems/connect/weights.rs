@@ -162,8 +162,7 @@ pub fn weigh_wave(
                     let weight = connection_weight(
                         &ctx,
                         &settings,
-                        &camera,
-                        light_side,
+                        (&camera, light_side),
                         (s, t),
                         strategy_count,
                         connection_count,
