@@ -278,9 +278,9 @@ pub struct PhotonArgs {
     /// default 0.75).
     #[arg(long, value_parser = parse_alpha)]
     pub alpha: Option<f32>,
-    /// Initial gather radius in scene units (default: 1% of the scene's bounding-box diagonal
-    /// for sppm, 0.5% for ppm; for vcm and bpm 1.5 times the width of a pixel where the
-    /// camera's rays first hit, their median).
+    /// Initial gather radius in scene units (default: a multiple of the width of a pixel where
+    /// the camera's rays first hit, their median: 5.6 for sppm, 2.8 for ppm, 1.5 for vcm and
+    /// bpm).
     #[arg(long, value_parser = parse_radius)]
     pub radius: Option<f32>,
     /// Eye-ray trees per pixel, jittered over it as a stratified net (ppm: its hit points are

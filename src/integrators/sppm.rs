@@ -359,8 +359,12 @@ impl PassState for ProgressiveState {
         let s = &self.data.scene;
         let diagonal = (s.bounds_max - s.bounds_min).length();
         let radius = self.settings.radius_in(&self.data);
+        let footprint = crate::components::photon_mapping::pixel_footprint(&self.data)
+            .map_or(String::new(), |f| {
+                format!(", {:.2} pixel footprints of {f:.4e}", radius / f)
+            });
         let radius = format!(
-            "initial {radius:.4e} ({:.3}% of the scene's diagonal {diagonal:.4e})",
+            "initial {radius:.4e} ({:.3}% of the scene's diagonal {diagonal:.4e}{footprint})",
             100.0 * radius / diagonal
         );
         vec![("state", line), ("radius", radius)]

@@ -345,3 +345,41 @@ fn vcm_image_is_bit_identical_for_one_and_two_threads() {
     assert!(files[0] == files[1], "vcm: 1 and 2 threads differ");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The merge and gather radii come from what the camera sees: door_ajar with its floor
+/// stretched to 1e10 (a bounding box over 1e9 times door_ajar's) gets door_ajar's radii within 10
+/// percent, for PPM, SPPM and VCM, at most six pixel footprints.
+#[test]
+fn merge_radii_follow_the_pixel_footprint_not_the_scene_bounds() {
+    use stagelight::components::photon_mapping::{ProgressiveSettings, pixel_footprint};
+    let door = SceneData::new(load_small("door_ajar.ron", 64));
+    let mut stretched = crate::common::load_test_scene("stretched_wall.ron");
+    stretched.camera.width = 64;
+    stretched.camera.height = 64;
+    let stretched = SceneData::new(stretched);
+    let size = |d: &SceneData| (d.scene.bounds_max - d.scene.bounds_min).length();
+    assert!(size(&stretched) > 1e9 * size(&door));
+    let (a, b) = (
+        pixel_footprint(&door).unwrap(),
+        pixel_footprint(&stretched).unwrap(),
+    );
+    // The stretched floor is seen where door_ajar's was: the same footprint, nearly.
+    assert!((b / a - 1.0).abs() < 0.1, "footprints {a} and {b}");
+    for stochastic in [false, true] {
+        let p = ProgressiveSettings::new(0, stochastic);
+        let (ra, rb) = (p.radius_in(&door), p.radius_in(&stretched));
+        assert!(
+            (rb / ra - 1.0).abs() < 0.1,
+            "{stochastic}: radii {ra} and {rb}"
+        );
+        assert!(rb <= 6.0 * b, "{stochastic}: radius {rb}, footprint {b}");
+    }
+    let render = stagelight::integrators::RenderSettings::default();
+    let radius = |d: &SceneData| {
+        bdpt::vcm_settings(d, &render, true, true)
+            .merging
+            .unwrap()
+            .radius
+    };
+    assert!((radius(&stretched) / radius(&door) - 1.0).abs() < 0.1);
+}
