@@ -286,3 +286,50 @@ fn photon_mapper_options_are_checked() {
         stderr(&o)
     );
 }
+
+/// A second Ctrl-C ends the process at once, with 130, even inside a long pass: one PPM pass
+/// of `stretched_wall` (door_ajar's floor stretched to 1e10, whose one huge triangle makes
+/// every camera ray slow) takes over 20 s in a release build. Any output left is whole.
+#[test]
+fn a_second_ctrl_c_ends_the_process_at_once() {
+    let dir = temp_dir("cli-second-sigint");
+    let out = dir.join("long.exr");
+    let mut child = spawn(
+        stagelight_command()
+            .args([
+                "render",
+                "tests/scenes/stretched_wall.ron",
+                "--integrator",
+                "ppm",
+                "--photons-per-pass",
+                "2000",
+                "--spp",
+                "1000000",
+                "--threads",
+                "2",
+                "--quiet",
+                "-o",
+            ])
+            .arg(&out),
+    );
+    wait_for_progress(&mut child, 1.0);
+    let signal = |child: &std::process::Child| {
+        let sent = std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .expect("kill runs");
+        assert!(sent.success());
+    };
+    signal(&child);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let second = std::time::Instant::now();
+    signal(&child);
+    let o = child.wait_with_output().unwrap();
+    let took = second.elapsed().as_secs_f64();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(took < 5.0, "ended {took:.1} s after the second signal");
+    if out.exists() {
+        stagelight::film::Image::read_exr(&out).expect("a whole EXR or none");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
