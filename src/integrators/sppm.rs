@@ -255,6 +255,14 @@ pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
             camera_walk::INPUTS,
         ),
         Node::system(shade::order_hit_points::OrderHitPoints),
+        // The photons before anything the pass adds to the estimates: a stop between chunks
+        // of photons drops the pass with the estimates as the last finished pass left them.
+        Node::nested(
+            crate::photons::graph(),
+            "photon_pass",
+            |s: &mut ProgressiveState| &mut s.photon_pass,
+            crate::photons::INPUTS,
+        ),
         Node::system(connect::sample_direct_light::SampleDirectLight),
         Node::system(trace::shadow::TraceShadow),
         Node::system(gather::direct_light::AddDirectLight),
@@ -263,12 +271,6 @@ pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
         nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
     }
     nodes.extend([
-        Node::nested(
-            crate::photons::graph(),
-            "photon_pass",
-            |s: &mut ProgressiveState| &mut s.photon_pass,
-            crate::photons::INPUTS,
-        ),
         Node::system(gather::photon_grid::BuildPhotonGrid),
         Node::system(gather::visible_point_photons::GatherPhotons),
         Node::system(gather::progressive_update::UpdatePixelEstimates),
