@@ -1,8 +1,8 @@
 //! Gathers the wave's light vertices that camera vertices may merge with (VCM, BPM) and
 //! builds the photon mappers' hash grid over them: every light vertex past the emitter that
 //! is not on glass and carries light, in light-subpath then depth order (the order the
-//! merges visit, so no image depends on the thread count). Cells are the radius of the
-//! wave's first pass, the largest of its passes (radii only shrink).
+//! merges visit, so no image depends on the thread count). Cells are twice the radius of the
+//! wave's first pass, the largest of its passes (radii only shrink), for octant queries.
 
 use crate::components::PathVertices;
 use crate::components::Wave;
@@ -64,7 +64,7 @@ crate::system! {
         }
         let radius = merging.radius_at(wave.first / *pixels);
         if !light_grid.p.is_empty() && radius > 0.0 {
-            light_grid.grid = Some(HashGrid::build(&light_grid.p, radius));
+            light_grid.grid = Some(HashGrid::build_for_octants(&light_grid.p, radius));
         }
         Flow::new(n, light_grid.p.len())
     }

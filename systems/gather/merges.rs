@@ -59,7 +59,7 @@ crate::system! {
                             continue;
                         }
                         let wo = towards(z, &camera[t - 2]);
-                        grid.for_each_within(&light_grid.p, z.p, radius, |i| {
+                        grid.for_each_within_octants(&light_grid.p, z.p, radius, |i| {
                             let i = i as usize;
                             let (sub, s) = (light_grid.subpath[i] as usize, light_grid.depth[i] as usize);
                             // The merged path y_0..y_{s-1} z_{t-1}..z_0: s + t vertices.
