@@ -76,6 +76,10 @@ crate::system! {
                             if depth < min_depth || depth > max_depth {
                                 return;
                             }
+                            // Unweighted study of one technique: the merges of its (s, t).
+                            if !weighted && !settings.strategies.keeps(s, t) {
+                                return;
+                            }
                             light.clear();
                             for (d, store) in stores.iter().enumerate().take(s + 1) {
                                 light.push(Vertex::from_store(store, sub, d));

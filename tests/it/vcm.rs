@@ -7,7 +7,7 @@ use crate::bdpt::{assert_agree, halves_over_seeds, split};
 use crate::common::{load_small, mean_over_seeds};
 use crate::common::{render_bdpt, shrunk_scene, stagelight_command, stderr, temp_dir};
 use stagelight::integrators::SceneData;
-use stagelight::integrators::bdpt::{self, BdptSettings, VertexMerging};
+use stagelight::integrators::bdpt::{self, BdptSettings, StrategyFilter, VertexMerging};
 use stagelight::path::{MisHeuristic, PathContext, Techniques, Vertex, VertexKind};
 use std::sync::Arc;
 
@@ -382,4 +382,48 @@ fn merge_radii_follow_the_pixel_footprint_not_the_scene_bounds() {
             .radius
     };
     assert!((radius(&stretched) / radius(&door) - 1.0).abs() < 0.1);
+}
+
+/// Merges alone, unweighted, converge to what BDPT's strategies make of the same paths: the
+/// merges (s, t) (light subpath y_0..y_s, y_s merged with camera vertex z_{t-1}) of paths of
+/// one depth against BDPT's strategy (s, t) alone, per image half (a small radius: the kernel's
+/// bias stays under the noise).
+#[test]
+fn merges_alone_agree_with_bdpt_strategies_alone_per_half() {
+    let scene = load_small("cornell_box.ron", 16);
+    for (s, t) in [(1u16, 2u16), (2, 2), (1, 3)] {
+        let only = StrategyFilter::Only {
+            s: Some(s),
+            t: Some(t),
+        };
+        let bd = halves_over_seeds(
+            |seed| {
+                let settings = BdptSettings {
+                    strategies: only,
+                    ..BdptSettings::new(seed, u32::MAX)
+                };
+                render_bdpt(scene.clone(), 16, settings).0.film.image()
+            },
+            8,
+        );
+        let merged = halves_over_seeds(
+            |seed| {
+                let settings = BdptSettings {
+                    strategies: only,
+                    merging: merging(false, true, 8.0),
+                    ..BdptSettings::new(500 + seed, u32::MAX)
+                };
+                render_bdpt(scene.clone(), 16, settings).0.film.image()
+            },
+            8,
+        );
+        for (i, half) in ["upper", "lower"].iter().enumerate() {
+            assert_agree(
+                &format!("merges ({s},{t}) alone vs bdpt's, {half} half"),
+                merged[i],
+                bd[i],
+                4.5,
+            );
+        }
+    }
 }
