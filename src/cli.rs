@@ -306,11 +306,14 @@ pub struct PhotonArgs {
     /// Photons traced per pass (ppm, sppm).
     #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_PHOTONS_PER_PASS, value_parser = clap::value_parser!(u64).range(1..))]
     pub photons_per_pass: u64,
-    /// Fraction of each pass's photons a pixel keeps, in (0, 1) (ppm, sppm).
-    #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_ALPHA, value_parser = parse_alpha)]
-    pub alpha: f32,
-    /// Initial gather radius in scene units (default: 1% of the scene's bounding-box diagonal
-    /// for sppm, 0.5% for ppm).
+    /// Fraction of each pass's photons a pixel keeps, in (0, 1) (ppm, sppm; default 0.7), or
+    /// the merge radius reduction: pass i's radius is r (i + 1)^((alpha - 1) / 2) (vcm, bpm;
+    /// default 0.75).
+    #[arg(long, value_parser = parse_alpha)]
+    pub alpha: Option<f32>,
+    /// Initial gather radius in scene units (default: a multiple of the width of a pixel where
+    /// the camera's rays first hit, their median: 5.6 for sppm, 2.8 for ppm, 1.5 for vcm and
+    /// bpm).
     #[arg(long, value_parser = parse_radius)]
     pub radius: Option<f32>,
     /// Eye-ray trees per pixel, jittered over it as a stratified net (ppm: its hit points are

@@ -594,3 +594,155 @@ impl PathContext<'_> {
         1.0 / (1.0 + sum)
     }
 }
+
+/// The techniques a vertex connection and merging estimator (VCM, Georgiev et al. 2012)
+/// combines, as its MIS weights count them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Techniques {
+    /// Whether the strategies with s >= 1 (light sampling, joins, light tracing) take part;
+    /// s = 0 (the camera subpath reaches a light) always does.
+    pub connect: bool,
+    /// pi r^2 N (merge radius r, N light subpaths merged with): a merge at vertex x is
+    /// sampled with the density of the connection that ends its light subpath just before x,
+    /// times x's light-side area density, times this. 0: no merging.
+    pub merge_count: f32,
+}
+
+impl Techniques {
+    /// BDPT's strategies alone.
+    pub const CONNECTIONS: Techniques = Techniques {
+        connect: true,
+        merge_count: 0.0,
+    };
+}
+
+impl PathContext<'_> {
+    /// The MIS weight of one technique of a VCM estimator for the path it makes: the
+    /// connection (s, t) of `camera` (z_0..z_{t-1}) and `light` (y_0..y_{s-1}) when `merged`
+    /// is `None`, or the merge of camera vertex z_{t-1} with light vertex y_s (`merged`, the
+    /// light subpath's next vertex after `light[s - 1]`, found within the radius of z_{t-1}),
+    /// the path being y_0..y_{s-1} z_{t-1}..z_0.
+    ///
+    /// Veach's ratio walk of `mis_weight` over every connection (s', t') of the path, with a
+    /// merge term at each vertex where merging is allowed (not delta, neither the emitter's
+    /// nor the camera's vertex): p_VM(x_i) = p_VC(light reaching x_{i-1}) p_light(x_i)
+    /// merge_count, read off the walk before it steps past x_i. For a merge, the densities at
+    /// the joint come from the light subpath's own direction into y_s and the camera's BSDF
+    /// at z_{t-1} (its neighbours' densities as the merged path makes them).
+    pub fn vcm_weight(
+        &self,
+        camera: &[Vertex],
+        light: &[Vertex],
+        (s, t): (usize, usize),
+        merged: Option<&Vertex>,
+        heuristic: MisHeuristic,
+        techniques: Techniques,
+    ) -> f32 {
+        let eta = techniques.merge_count;
+        let connect = techniques.connect;
+        let mut z_rev = [0.0f32; 2]; // for z_{t-1}, z_{t-2}
+        let mut y_rev = [0.0f32; 2]; // for y_{s-1}, y_{s-2}
+        let z = &camera[t - 1];
+        match merged {
+            None => {
+                let y_last = light.get(s.wrapping_sub(1)).filter(|_| s >= 1);
+                z_rev[0] = match y_last {
+                    Some(y) => self.pdf_area(y, if s >= 2 { Some(&light[s - 2]) } else { None }, z),
+                    None => self.pdf_light_origin(z),
+                };
+                if t >= 2 {
+                    z_rev[1] = match y_last {
+                        Some(y) => self.pdf_area(z, Some(y), &camera[t - 2]),
+                        None => self.pdf_light_dir(z, &camera[t - 2]),
+                    };
+                }
+                if let Some(y) = y_last {
+                    let z_prev = if t >= 2 { Some(&camera[t - 2]) } else { None };
+                    y_rev[0] = self.pdf_area(z, z_prev, y);
+                    if s >= 2 {
+                        y_rev[1] = self.pdf_area(y, Some(z), &light[s - 2]);
+                    }
+                }
+            }
+            Some(y_s) => {
+                debug_assert!(s >= 1 && t >= 2);
+                let y = &light[s - 1];
+                // The light arrives at the merge along y_{s-1} -> y_s; the camera left
+                // z_{t-1} towards z_{t-2}.
+                let w_light = towards(y_s, y);
+                let w_camera = towards(z, &camera[t - 2]);
+                z_rev[0] = y_s.pdf_fwd;
+                z_rev[1] = to_area(self.pdf_dir(z, w_light, w_camera), z, &camera[t - 2]);
+                y_rev[0] = to_area(self.pdf_dir(z, w_camera, w_light), y_s, y);
+                if s >= 2 {
+                    // y_{s-1} sampling y_{s-2}, reached from y_s: stored by the light walk.
+                    y_rev[1] = light[s - 2].pdf_rev;
+                }
+            }
+        }
+        let h = |r: f32| match heuristic {
+            MisHeuristic::Power => r * r,
+            MisHeuristic::Balance => r,
+        };
+        let camera_rev = |i: usize| {
+            if i + 1 == t {
+                z_rev[0]
+            } else if i + 2 == t {
+                z_rev[1]
+            } else {
+                camera[i].pdf_rev
+            }
+        };
+        // A connection's joined vertices and a merge's camera vertex are never delta; a
+        // merge's y_{s-1} may be (a caustic).
+        let camera_delta = |i: usize| i + 1 != t && camera[i].delta;
+        let light_rev = |i: usize| {
+            if i + 1 == s {
+                y_rev[0]
+            } else if i + 2 == s {
+                y_rev[1]
+            } else {
+                light[i].pdf_rev
+            }
+        };
+        let light_delta = |i: usize| (merged.is_some() || i + 1 != s) && light[i].delta;
+        let merging = eta > 0.0;
+
+        // The technique's own density over p_VC(s, t).
+        let own = match merged {
+            None => 1.0,
+            Some(_) => h(remap0(z_rev[0]) * eta),
+        };
+        // Connection (s, t) itself: for a merge, only when its joint is not delta.
+        let mut sum = match merged {
+            None => 1.0,
+            Some(_) if connect && !light_delta(s - 1) => 1.0,
+            Some(_) => 0.0,
+        };
+        // Fewer camera vertices: (s + 1, t - 1), ... down to t = 1; the merge at camera
+        // vertex i before the step past it (not at the emitter: s = 0, i = t - 1).
+        let mut ratio = 1.0f32;
+        for i in (1..t).rev() {
+            if merging && !camera_delta(i) && !(s == 0 && i + 1 == t) {
+                sum += h(ratio * remap0(camera_rev(i)) * eta);
+            }
+            ratio *= remap0(camera_rev(i)) / remap0(camera[i].pdf_fwd);
+            if connect && !camera_delta(i) && !camera_delta(i - 1) {
+                sum += h(ratio);
+            }
+        }
+        // Fewer light vertices, down to s = 0; merges at light vertices past the emitter.
+        ratio = 1.0;
+        for i in (0..s).rev() {
+            if merging && i >= 1 && !light_delta(i) {
+                sum += h(ratio * remap0(light_rev(i)) * eta);
+            }
+            ratio *= remap0(light_rev(i)) / remap0(light[i].pdf_fwd);
+            let delta_before = i > 0 && light_delta(i - 1);
+            if (connect || i == 0) && !light_delta(i) && !delta_before {
+                sum += h(ratio);
+            }
+        }
+        own / sum
+    }
+}

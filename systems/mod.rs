@@ -73,6 +73,8 @@ pub mod gather {
     pub mod film;
     pub mod global_photons;
     pub mod glossy_light;
+    pub mod light_vertex_grid;
+    pub mod merges;
     pub mod pass_film;
     pub mod photon_grid;
     pub mod photon_maps;

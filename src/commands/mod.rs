@@ -231,13 +231,20 @@ pub fn scene_stem(scene: &Path) -> String {
 }
 
 /// A flag Ctrl-C (SIGINT), SIGTERM and SIGHUP set: renders stop after the passes in flight,
-/// write what they finished and exit 130. A second signal while files are being written has
-/// no further effect.
+/// write what they finished and exit 130. A second signal ends the process at once with 130,
+/// nothing more written: a pass can take long (issue 29: a scene whose one huge triangle made
+/// a photon pass take minutes), and outputs are written to temporary files and renamed, so
+/// any output left is a whole file.
 pub fn stop_on_ctrl_c() -> Result<Arc<AtomicBool>> {
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
-    ctrlc::set_handler(move || flag.store(true, Ordering::SeqCst))
-        .context("cannot install the Ctrl-C handler")?;
+    ctrlc::set_handler(move || {
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("second stop signal: ending now, without writing");
+            std::process::exit(130);
+        }
+    })
+    .context("cannot install the Ctrl-C handler")?;
     Ok(stop)
 }
 

@@ -4,7 +4,8 @@
 //! assembles them into its state; the MLT integrators hold that state in turn.
 
 use crate::components::{Rays, Walkers, Wave};
-use crate::path::{Joint, MisHeuristic, PathContext, Vertex};
+use crate::path::{Joint, MisHeuristic, PathContext, Techniques, Vertex};
+use crate::photons::HashGrid;
 use crate::sampling::{PrimarySamples, SampleKey, Sampler, SamplerKind, Stream};
 use glam::Vec3;
 
@@ -209,6 +210,66 @@ pub struct BdptSettings {
     /// Light-vertex cache: each camera vertex joins this many vertices picked from the
     /// wave's cache instead of its own light subpath's (0: plain BDPT).
     pub light_vertex_cache: u32,
+    /// Vertex merging (VCM, BPM): camera vertices also merge with the wave's light vertices
+    /// within a radius, and every weight counts the merges. None: BDPT.
+    pub merging: Option<VertexMerging>,
+}
+
+/// How camera vertices merge with light vertices (`--integrator vcm`, `bpm`).
+#[derive(Clone, Copy, Debug)]
+pub struct VertexMerging {
+    /// The merge radius of the first pass, in scene units.
+    pub radius: f32,
+    /// The radius of pass i (from 0) is `radius (i + 1)^((alpha - 1) / 2)` (Georgiev et al.
+    /// 2012, after Knaus and Zwicker): the merges' bias vanishes while their variance grows
+    /// slowly enough for the estimate to converge.
+    pub alpha: f32,
+    /// Connections (strategies s >= 1) take part; false: bidirectional photon mapping (BPM),
+    /// merges and s = 0 only.
+    pub connect: bool,
+    /// Merges take part; false: connections alone, under VCM's weights (BDPT's estimator).
+    pub merge: bool,
+}
+
+impl PartialEq for VertexMerging {
+    fn eq(&self, other: &Self) -> bool {
+        self.radius.to_bits() == other.radius.to_bits()
+            && self.alpha.to_bits() == other.alpha.to_bits()
+            && self.connect == other.connect
+            && self.merge == other.merge
+    }
+}
+
+impl Eq for VertexMerging {}
+
+impl VertexMerging {
+    /// The merge radius of pass `pass`.
+    #[inline]
+    pub fn radius_at(&self, pass: u64) -> f32 {
+        (self.radius as f64 * ((pass + 1) as f64).powf((self.alpha as f64 - 1.0) / 2.0)) as f32
+    }
+}
+
+/// The light vertices a wave's camera vertices merge with (VCM): every light vertex past the
+/// emitter (depth >= 1) that is not delta and carries light, in light-subpath order then depth
+/// order, and a hash grid over their positions.
+#[derive(Default)]
+pub struct LightVertexGrid {
+    pub p: Vec<Vec3>,
+    /// The vertex's light subpath (its slot) and depth.
+    pub subpath: Vec<u32>,
+    pub depth: Vec<u32>,
+    /// Over `p`, for queries up to the largest radius of the wave's passes (None: no vertex).
+    pub grid: Option<HashGrid>,
+}
+
+impl LightVertexGrid {
+    pub fn clear(&mut self) {
+        self.p.clear();
+        self.subpath.clear();
+        self.depth.clear();
+        self.grid = None;
+    }
 }
 
 impl BdptSettings {
@@ -222,6 +283,40 @@ impl BdptSettings {
             strategy_images: false,
             min_depth: 0,
             light_vertex_cache: 0,
+            merging: None,
+        }
+    }
+
+    /// Whether the strategies s >= 1 run (all but BPM).
+    #[inline]
+    pub fn connects(&self) -> bool {
+        self.merging.is_none_or(|m| m.connect)
+    }
+
+    /// Every strategy within the depth bounds runs (no filter to ask).
+    #[inline]
+    pub fn all_strategies(&self) -> bool {
+        self.strategies == StrategyFilter::All && self.connects()
+    }
+
+    /// The techniques the MIS weights of sample `k` of `wave` count: with merging, merges
+    /// with the wave's light subpaths within the radius of the sample's pass.
+    #[inline]
+    pub fn techniques(&self, wave: Wave, k: usize, pixels: u64) -> Techniques {
+        match self.merging {
+            None => Techniques::CONNECTIONS,
+            Some(m) => {
+                let merge_count = if m.merge {
+                    let r = m.radius_at((wave.first + k as u64) / pixels);
+                    std::f32::consts::PI * r * r * wave.len as f32
+                } else {
+                    0.0
+                };
+                Techniques {
+                    connect: m.connect,
+                    merge_count,
+                }
+            }
         }
     }
 
@@ -265,6 +360,7 @@ impl BdptSettings {
             && s + t - 2 <= self.max_depth as usize
             && s + t - 2 >= self.min_depth as usize
             && self.strategies.keeps(s, t)
+            && (s == 0 || self.connects())
     }
 }
 

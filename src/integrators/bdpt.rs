@@ -99,6 +99,49 @@ pub struct BdptState {
     pub light_cache: LightVertexCache,
     /// Per connection slot joined through the cache: the cache index of its light vertex.
     pub cache_pick: Vec<u32>,
+    /// The wave's light vertices that camera vertices merge with (VCM, BPM).
+    pub light_grid: LightVertexGrid,
+}
+
+/// The default first-pass merge radius of VCM and BPM, in pixel footprints
+/// (`photon_mapping::pixel_footprint`): the disc is a few pixels wide where the camera looks.
+pub const MERGE_RADIUS_PIXELS: f32 = 1.5;
+
+/// The default radius reduction of VCM and BPM (Georgiev et al. 2012 use 0.75).
+pub const DEFAULT_MERGE_ALPHA: f32 = 0.75;
+
+/// Merge radius where the camera sees nothing, as a fraction of the scene's diagonal (no
+/// merge can reach the image there anyway).
+const BLIND_MERGE_RADIUS_FRACTION: f32 = 1e-3;
+
+/// The settings of VCM (`connect` and `merge`), BPM (merges only) or VCM's connections alone,
+/// from the command line's: `--radius` (default `MERGE_RADIUS_PIXELS` pixel footprints) and
+/// `--alpha` (default `DEFAULT_MERGE_ALPHA`).
+pub fn vcm_settings(
+    data: &SceneData,
+    s: &RenderSettings,
+    connect: bool,
+    merge: bool,
+) -> BdptSettings {
+    let radius = s.photons.radius.unwrap_or_else(|| {
+        crate::components::photon_mapping::pixel_footprint(data).map_or_else(
+            || {
+                let sc = &data.scene;
+                BLIND_MERGE_RADIUS_FRACTION * (sc.bounds_max - sc.bounds_min).length()
+            },
+            |footprint| MERGE_RADIUS_PIXELS * footprint,
+        )
+    });
+    BdptSettings {
+        light_vertex_cache: 0,
+        merging: Some(VertexMerging {
+            radius,
+            alpha: s.photons.alpha.unwrap_or(DEFAULT_MERGE_ALPHA),
+            connect,
+            merge,
+        }),
+        ..BdptSettings::from(s)
+    }
 }
 
 /// Light subpaths traced before an LVC render to count the vertices a light subpath leaves
@@ -188,6 +231,7 @@ impl BdptState {
             },
             light_cache: LightVertexCache::default(),
             cache_pick: Vec::new(),
+            light_grid: LightVertexGrid::default(),
         }
     }
 
@@ -236,6 +280,27 @@ pub fn cached_graph() -> Graph<BdptState> {
     Graph::new("bdpt_lvc", nodes)
 }
 
+/// The graph of vertex connection and merging (`merging` set): BDPT's, and after the
+/// connections the wave's light vertices gathered into a hash grid and each camera vertex's
+/// merges with those within the radius (BPM: the same graph, only s = 0 connecting; VCM's
+/// connections alone: BDPT's graph, VCM's weights).
+pub fn vcm_graph(merge: bool) -> Graph<BdptState> {
+    let mut nodes = subpath_nodes();
+    nodes.extend([
+        Node::system(connect::strategies::ConnectStrategies),
+        Node::system(trace::shadow::TraceShadow),
+        Node::system(connect::weights::WeighConnections),
+    ]);
+    if merge {
+        nodes.extend([
+            Node::system(gather::light_vertex_grid::BuildLightVertexGrid),
+            Node::system(gather::merges::MergeLightVertices),
+        ]);
+    }
+    nodes.push(Node::system(gather::connections::AccumulateConnections));
+    Graph::new("vcm", nodes)
+}
+
 /// The evaluation part of the graph, without the film: subpaths, connections and their
 /// shadow rays. MLT runs it on its chains' proposals and gathers the connections itself.
 pub fn evaluation_graph() -> Graph<BdptState> {
@@ -279,7 +344,9 @@ impl IntegratorState for BdptState {
         "scratch",
     ];
     fn graph(_: &SceneData, settings: &BdptSettings) -> Graph<BdptState> {
-        if settings.light_vertex_cache > 0 {
+        if let Some(merging) = settings.merging {
+            vcm_graph(merging.merge)
+        } else if settings.light_vertex_cache > 0 {
             cached_graph()
         } else {
             graph()
@@ -301,6 +368,24 @@ impl WaveState for BdptState {
         &mut self.film
     }
     fn notes(&self) -> Vec<(&'static str, String)> {
+        if let Some(m) = self.settings.merging {
+            let footprint = crate::components::photon_mapping::pixel_footprint(&self.data);
+            let pixels = footprint.map_or(String::new(), |f| {
+                format!(" ({:.2} pixel footprints of {f:.4e})", m.radius / f)
+            });
+            let techniques = match (m.connect, m.merge) {
+                (true, true) => "connections and merges",
+                (false, _) => "merges and emitters hit (bpm)",
+                (true, false) => "connections alone",
+            };
+            return vec![(
+                "vertex merging",
+                format!(
+                    "{techniques}; first-pass radius {:.4e}{pixels}, alpha {}",
+                    m.radius, m.alpha
+                ),
+            )];
+        }
         let cache = &self.light_cache;
         if cache.per_camera_vertex == 0 {
             return Vec::new();
@@ -397,6 +482,14 @@ mod bindings {
             read wave, capacity, settings, numbers = sampler, subpath_len, data, vertices, pixels,
                 multiplex, connection_start, connections_len, connections;
             write shadow;
+        }
+        gather::light_vertex_grid::BuildLightVertexGrid {
+            read wave, capacity, settings, pixels, subpath_len, data, vertices;
+            write light_grid;
+        }
+        gather::merges::MergeLightVertices {
+            read wave, capacity, settings, pixels, subpath_len, data, vertices, light_grid;
+            write sample_radiance;
         }
         gather::connections::AccumulateConnections {
             read wave, shadow, connections, connection_start, connections_len, pixels,

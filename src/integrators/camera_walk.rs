@@ -26,6 +26,9 @@ pub fn from_camera_in_waves(loop_name: &'static str) -> Graph<CameraWalk> {
             name: "camera_waves",
             queue_len: CameraWalk::next_wave,
             body: vec![
+                // PPM's first pass may stop between waves of its eye rays (the pass, the
+                // only one with hit points to find, is then dropped whole).
+                Node::StopPoint,
                 Node::system(generate::camera_chains::GenerateCameraChains),
                 bounces(loop_name),
             ],

@@ -177,7 +177,8 @@ pub fn run_waves_of<S: WaveState>(
 
 /// Renders with a pass-based integrator: a sample budget is a number of passes, a time budget
 /// ends at the first pass boundary past it (at least one pass). A stop request ends the render
-/// at a pass boundary, keeping every finished pass.
+/// at a pass boundary, or inside a pass at a stop point of its graph (the photon mappers:
+/// between chunks of photons), keeping every finished pass and dropping the unfinished one.
 pub fn render_passes<S: PassState>(
     data: Arc<SceneData>,
     settings: S::Settings,
@@ -223,7 +224,11 @@ pub fn resume_passes<S: PassState>(
             break;
         }
         state.begin_pass(passes);
-        graph.run(&mut state, &mut stats);
+        // A stop inside the pass (at a stop point of its graph) drops it: the state holds
+        // the finished passes alone.
+        if !graph.run_until(&mut state, &mut stats, control.stop) {
+            break;
+        }
         passes += 1;
         (control.progress)(passes, total);
     }

@@ -69,7 +69,7 @@ const MLT_OPTIONS: &[&str] = &[
 ];
 
 /// Every integrator built into this binary, in the order reports list them.
-pub static REGISTRY: [IntegratorInfo; 8] = [
+pub static REGISTRY: [IntegratorInfo; 10] = [
     IntegratorInfo {
         name: "pt",
         description: "path tracing with next-event estimation and MIS",
@@ -98,6 +98,40 @@ pub static REGISTRY: [IntegratorInfo; 8] = [
             )
         },
         graph: |data, s| graph_report::<bdpt::BdptState>(data, &bdpt::BdptSettings::from(s)),
+    },
+    IntegratorInfo {
+        name: "vcm",
+        description: "vertex connection and merging: BDPT's connections and photon merges, MIS-weighted",
+        unbiased: false,
+        resumes: false,
+        options: &["--mis", "--radius", "--alpha"],
+        render: |data, s, budget, control, _| {
+            let settings = bdpt::vcm_settings(&data, s, true, true);
+            let wavefront = s.wavefront.unwrap_or(bdpt::WAVEFRONT);
+            driver::render_waves_of::<bdpt::BdptState>(
+                data, settings, budget, control, None, wavefront,
+            )
+        },
+        graph: |data, s| {
+            graph_report::<bdpt::BdptState>(data, &bdpt::vcm_settings(data, s, true, true))
+        },
+    },
+    IntegratorInfo {
+        name: "bpm",
+        description: "bidirectional photon mapping: VCM's merges alone (and emitters hit)",
+        unbiased: false,
+        resumes: false,
+        options: &["--mis", "--radius", "--alpha"],
+        render: |data, s, budget, control, _| {
+            let settings = bdpt::vcm_settings(&data, s, false, true);
+            let wavefront = s.wavefront.unwrap_or(bdpt::WAVEFRONT);
+            driver::render_waves_of::<bdpt::BdptState>(
+                data, settings, budget, control, None, wavefront,
+            )
+        },
+        graph: |data, s| {
+            graph_report::<bdpt::BdptState>(data, &bdpt::vcm_settings(data, s, false, true))
+        },
     },
     IntegratorInfo {
         name: "pm",
@@ -317,8 +351,9 @@ impl std::fmt::Display for IntegratorKind {
 pub struct PhotonSettings {
     /// Photons traced per pass (ppm, sppm).
     pub photons_per_pass: u64,
-    /// Fraction of a pass's photons each pixel keeps (ppm, sppm).
-    pub alpha: f32,
+    /// Fraction of a pass's photons each pixel keeps (ppm, sppm), or the radius reduction of
+    /// vcm and bpm (None: each one's default).
+    pub alpha: Option<f32>,
     /// Initial gather radius in scene units (default: a fraction of the scene diagonal).
     pub radius: Option<f32>,
     /// Eye-ray trees per pixel (ppm).
@@ -338,7 +373,7 @@ impl Default for PhotonSettings {
     fn default() -> Self {
         PhotonSettings {
             photons_per_pass: sppm::DEFAULT_PHOTONS_PER_PASS,
-            alpha: sppm::DEFAULT_ALPHA,
+            alpha: None,
             radius: None,
             eye_rays: sppm::DEFAULT_EYE_RAYS,
             photons: pm::DEFAULT_PHOTONS,

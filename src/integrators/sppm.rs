@@ -56,7 +56,7 @@ impl ProgressiveSettings {
         ProgressiveSettings {
             max_depth: s.max_depth,
             photons_per_pass: p.photons_per_pass,
-            alpha: p.alpha,
+            alpha: p.alpha.unwrap_or(DEFAULT_ALPHA),
             initial_radius: p.radius,
             eye_rays: p.eye_rays,
             sampler: s.sampler,
@@ -255,6 +255,14 @@ pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
             camera_walk::INPUTS,
         ),
         Node::system(shade::order_hit_points::OrderHitPoints),
+        // The photons before anything the pass adds to the estimates: a stop between chunks
+        // of photons drops the pass with the estimates as the last finished pass left them.
+        Node::nested(
+            crate::photons::graph(),
+            "photon_pass",
+            |s: &mut ProgressiveState| &mut s.photon_pass,
+            crate::photons::INPUTS,
+        ),
         Node::system(connect::sample_direct_light::SampleDirectLight),
         Node::system(trace::shadow::TraceShadow),
         Node::system(gather::direct_light::AddDirectLight),
@@ -263,12 +271,6 @@ pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
         nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
     }
     nodes.extend([
-        Node::nested(
-            crate::photons::graph(),
-            "photon_pass",
-            |s: &mut ProgressiveState| &mut s.photon_pass,
-            crate::photons::INPUTS,
-        ),
         Node::system(gather::photon_grid::BuildPhotonGrid),
         Node::system(gather::visible_point_photons::GatherPhotons),
         Node::system(gather::progressive_update::UpdatePixelEstimates),
@@ -359,8 +361,12 @@ impl PassState for ProgressiveState {
         let s = &self.data.scene;
         let diagonal = (s.bounds_max - s.bounds_min).length();
         let radius = self.settings.radius_in(&self.data);
+        let footprint = crate::components::photon_mapping::pixel_footprint(&self.data)
+            .map_or(String::new(), |f| {
+                format!(", {:.2} pixel footprints of {f:.4e}", radius / f)
+            });
         let radius = format!(
-            "initial {radius:.4e} ({:.3}% of the scene's diagonal {diagonal:.4e})",
+            "initial {radius:.4e} ({:.3}% of the scene's diagonal {diagonal:.4e}{footprint})",
             100.0 * radius / diagonal
         );
         vec![("state", line), ("radius", radius)]

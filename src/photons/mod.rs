@@ -174,6 +174,8 @@ pub fn graph() -> crate::pipeline::Graph<PhotonPass> {
             name: "photon_waves",
             queue_len: |s: &PhotonPass| s.tracing.remaining() as usize,
             body: vec![
+                // A stop between chunks of photons drops the pass (nothing kept yet).
+                Node::StopPoint,
                 Node::system(generate::photons::EmitPhotons),
                 Node::Loop {
                     name: "photon_bounces",

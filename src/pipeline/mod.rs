@@ -6,6 +6,7 @@
 //! body while a queue is non-empty. Each integrator declares its whole graph in one function,
 //! built from the scene, so a scene that has no use for a system never runs it.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 /// Items a system run took from its queue and emitted into the next.
@@ -238,6 +239,11 @@ pub enum Node<S> {
         needed: fn(&S) -> bool,
         body: Vec<Node<S>>,
     },
+    /// Where a run under a stop flag (`Graph::run_until`) gives up once the flag is set,
+    /// leaving the rest of the graph unrun: placed where the state holds nothing of the run
+    /// that must not be dropped (before each chunk of a photon pass), so the driver drops the
+    /// unfinished pass. A plain `run` passes it by.
+    StopPoint,
 }
 
 impl<S> Node<S> {
@@ -267,7 +273,8 @@ impl<S> Node<S> {
 
 /// A graph over part of a state `S`, as one node of a graph over `S`.
 pub trait NestedGraph<S>: Send + Sync {
-    fn run(&self, state: &mut S, stats: &mut Stats);
+    /// Runs the nested graph; false when a stop point gave up (see `Node::StopPoint`).
+    fn run(&self, state: &mut S, stats: &mut Stats, stop: Option<&AtomicBool>) -> bool;
     fn system_names(&self) -> Vec<&'static str>;
     /// The field of `S` the nested graph runs on.
     fn part_name(&self) -> &'static str;
@@ -284,8 +291,8 @@ struct Nested<S, T> {
 }
 
 impl<S, T> NestedGraph<S> for Nested<S, T> {
-    fn run(&self, state: &mut S, stats: &mut Stats) {
-        self.graph.run((self.part)(state), stats);
+    fn run(&self, state: &mut S, stats: &mut Stats, stop: Option<&AtomicBool>) -> bool {
+        run_nodes(&self.graph.nodes, (self.part)(state), stats, stop)
     }
     fn system_names(&self) -> Vec<&'static str> {
         self.graph.system_names()
@@ -374,6 +381,7 @@ impl<S> Graph<S> {
                     Node::System(s) => out.push(s.name()),
                     Node::Loop { body, .. } | Node::Once { body, .. } => walk(body, out),
                     Node::Nested(g) => out.extend(g.system_names()),
+                    Node::StopPoint => {}
                 }
             }
         }
@@ -405,7 +413,13 @@ impl<S> Graph<S> {
 
     /// Runs the graph once over `state`, recording each system's time and flow in `stats`.
     pub fn run(&self, state: &mut S, stats: &mut Stats) {
-        run_nodes(&self.nodes, state, stats);
+        run_nodes(&self.nodes, state, stats, None);
+    }
+
+    /// `run`, giving up at the first stop point reached once `stop` is set: false when it
+    /// did, the rest of the graph unrun.
+    pub fn run_until(&self, state: &mut S, stats: &mut Stats, stop: &AtomicBool) -> bool {
+        run_nodes(&self.nodes, state, stats, Some(stop))
     }
 }
 
@@ -438,6 +452,7 @@ fn check_nodes<'a, S>(
                 problems.extend(g.check());
                 written.push(g.part_name());
             }
+            Node::StopPoint => {}
         }
     }
 }
@@ -470,6 +485,7 @@ fn describe_nodes<S>(nodes: &[Node<S>], indent: usize, out: &mut String) {
                 let _ = writeln!(out, "{pad}on {}:", g.part_name());
                 g.describe(indent + 1, out);
             }
+            Node::StopPoint => {}
         }
     }
 }
@@ -482,7 +498,13 @@ fn list(columns: &[&str]) -> String {
     }
 }
 
-fn run_nodes<S>(nodes: &[Node<S>], state: &mut S, stats: &mut Stats) {
+/// Runs `nodes` in order; false when a stop point found `stop` set (the rest left unrun).
+fn run_nodes<S>(
+    nodes: &[Node<S>],
+    state: &mut S,
+    stats: &mut Stats,
+    stop: Option<&AtomicBool>,
+) -> bool {
     for node in nodes {
         match node {
             Node::System(system) => {
@@ -495,10 +517,14 @@ fn run_nodes<S>(nodes: &[Node<S>], state: &mut S, stats: &mut Stats) {
                 entry.taken += flow.taken as u64;
                 entry.emitted += flow.emitted as u64;
             }
-            Node::Nested(graph) => graph.run(state, stats),
+            Node::Nested(graph) => {
+                if !graph.run(state, stats, stop) {
+                    return false;
+                }
+            }
             Node::Once { needed, body, .. } => {
-                if needed(state) {
-                    run_nodes(body, state, stats);
+                if needed(state) && !run_nodes(body, state, stats, stop) {
+                    return false;
                 }
             }
             Node::Loop {
@@ -507,17 +533,30 @@ fn run_nodes<S>(nodes: &[Node<S>], state: &mut S, stats: &mut Stats) {
                 body,
             } => {
                 let mut iterations = 0;
+                let mut finished = true;
                 while queue_len(state) > 0 {
-                    run_nodes(body, state, stats);
                     iterations += 1;
+                    if !run_nodes(body, state, stats, stop) {
+                        finished = false;
+                        break;
+                    }
                 }
                 match stats.loops.iter_mut().find(|(l, _)| l == name) {
                     Some(l) => l.1 += iterations,
                     None => stats.loops.push((name, iterations)),
                 }
+                if !finished {
+                    return false;
+                }
+            }
+            Node::StopPoint => {
+                if stop.is_some_and(|s| s.load(Ordering::SeqCst)) {
+                    return false;
+                }
             }
         }
     }
+    true
 }
 
 #[cfg(test)]
@@ -589,6 +628,42 @@ mod tests {
         assert_eq!(s.emitted, 2 + 1);
         assert_eq!(stats.loops, vec![("bounces", 3)]);
         assert_eq!(graph.system_names(), vec!["countdown", "report"]);
+    }
+
+    /// A run under a set stop flag gives up at the loop's stop point: the body before it ran
+    /// once, nothing after it; unset, and under a plain run, the stop point changes nothing.
+    #[test]
+    fn a_stop_point_gives_up_the_rest_of_the_run_only_when_asked() {
+        let graph = Graph::new(
+            "stoppable",
+            vec![
+                Node::Loop {
+                    name: "bounces",
+                    queue_len: |s: &Counters| s.values.len(),
+                    body: vec![Node::system(Countdown), Node::StopPoint],
+                },
+                Node::system(Report),
+            ],
+        );
+        let fresh = || Counters {
+            values: vec![3, 1, 2],
+            decrements: 0,
+        };
+        let stop = AtomicBool::new(true);
+        let mut state = fresh();
+        let mut stats = Stats::default();
+        assert!(!graph.run_until(&mut state, &mut stats, &stop));
+        assert_eq!((state.values.clone(), state.decrements), (vec![2, 1], 3));
+        assert!(stats.entry("report").runs == 0);
+        stop.store(false, Ordering::SeqCst);
+        let mut state = fresh();
+        let mut stats = Stats::default();
+        assert!(graph.run_until(&mut state, &mut stats, &stop));
+        assert_eq!((state.values.len(), state.decrements), (0, 6));
+        assert_eq!(stats.entry("report").runs, 1);
+        let mut plain = fresh();
+        graph.run(&mut plain, &mut Stats::default());
+        assert_eq!(plain.decrements, 6);
     }
 
     #[test]

@@ -26,7 +26,7 @@ use crate::components::{
     split_ranges,
 };
 use crate::geometry::spawn_ray_to;
-use crate::path::{Joint, PathContext, Vertex, VertexKind, towards};
+use crate::path::{Joint, PathContext, Techniques, Vertex, VertexKind, towards};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, Stream};
 use crate::scene::{PreparedScene, SceneData};
@@ -64,7 +64,7 @@ fn slot_count(
                 own + picks
             })
             .sum(),
-        None if settings.strategies == StrategyFilter::All => {
+        None if settings.all_strategies() => {
             (1..=nc).map(|t| settings.light_vertices(t, nl).len()).sum()
         }
         None => (1..=nc)
@@ -226,7 +226,7 @@ pub fn connect_wave(
     let scene = &data.scene;
     let has_light = !scene.emitters.triangle.is_empty();
     // Every strategy within the depth bounds counts (no filter to ask).
-    let all = settings.strategies == StrategyFilter::All;
+    let all = settings.all_strategies();
     let made: usize = shadow
         .into_par_iter()
         .zip(conns)
@@ -278,11 +278,11 @@ pub fn connect_wave(
                             let weight = connection_weight(
                                 &ctx,
                                 &settings,
-                                &camera.vertices,
-                                &light.vertices,
+                                (&camera.vertices, &light.vertices),
                                 (s, t),
                                 strategy_count,
                                 connection_count,
+                                settings.techniques(wave, k, pixels),
                             );
                             let contribution = c * weight;
                             if contribution == Vec3::ZERO {
@@ -446,21 +446,24 @@ pub fn sampled_light_vertex(
 /// The factor a connection's unweighted contribution is multiplied by: its MIS weight (when
 /// every strategy counts) times the strategy count of a multiplexed sample (1 otherwise).
 /// `connection_count` is how many times as often the connection strategies are sampled as the
-/// others (1 but through a light-vertex cache).
+/// others (1 but through a light-vertex cache); `techniques` what VCM's weights count (read
+/// only with `settings.merging`).
 #[inline]
 pub fn connection_weight(
     ctx: &PathContext,
     settings: &BdptSettings,
-    camera: &[Vertex],
-    light: &[Vertex],
+    (camera, light): (&[Vertex], &[Vertex]),
     (s, t): (usize, usize),
     strategy_count: f32,
     connection_count: f32,
+    techniques: Techniques,
 ) -> f32 {
-    if settings.strategies == StrategyFilter::All {
-        ctx.mis_weight_counted(camera, light, s, t, settings.mis, connection_count) * strategy_count
-    } else {
+    if settings.strategies != StrategyFilter::All {
         strategy_count
+    } else if settings.merging.is_some() {
+        ctx.vcm_weight(camera, light, (s, t), None, settings.mis, techniques) * strategy_count
+    } else {
+        ctx.mis_weight_counted(camera, light, s, t, settings.mis, connection_count) * strategy_count
     }
 }
 

@@ -162,11 +162,11 @@ pub fn weigh_wave(
                     let weight = connection_weight(
                         &ctx,
                         &settings,
-                        &camera,
-                        light_side,
+                        (&camera, light_side),
                         (s, t),
                         strategy_count,
                         connection_count,
+                        settings.techniques(wave, k, pixels),
                     );
                     sh.contribution[this] *= weight;
                     weighed += 1;

@@ -15,7 +15,7 @@ fn settings(seed: u64, max_depth: u32) -> BdptSettings {
 
 /// |a - b| within `z` combined standard errors, per channel, and the errors small enough
 /// for the check to mean something.
-fn assert_agree(name: &str, a: ([f64; 3], [f64; 3]), b: ([f64; 3], [f64; 3]), z: f64) {
+pub(crate) fn assert_agree(name: &str, a: ([f64; 3], [f64; 3]), b: ([f64; 3], [f64; 3]), z: f64) {
     for c in 0..3 {
         let (ma, sa) = (a.0[c], a.1[c]);
         let (mb, sb) = (b.0[c], b.1[c]);
@@ -106,7 +106,7 @@ fn bdpt_agrees_with_pt_on_the_cornell_box() {
 
 /// Turns a camera subpath that ends on an emitter into the camera and light subpaths of the
 /// split (s, t), with the densities each walk would have stored.
-fn split(ctx: &PathContext, full: &[Vertex], t: usize) -> (Vec<Vertex>, Vec<Vertex>) {
+pub(crate) fn split(ctx: &PathContext, full: &[Vertex], t: usize) -> (Vec<Vertex>, Vec<Vertex>) {
     let camera = full[..t].to_vec();
     let mut light: Vec<Vertex> = full[t..].iter().rev().copied().collect();
     let s = light.len();
@@ -235,7 +235,7 @@ fn mis_weights_sum_to_one_in_every_scene() {
 }
 
 /// The top or bottom half of an image (region-wise checks: not only the mean must agree).
-fn half(image: Image, top: bool) -> Image {
+pub(crate) fn half(image: Image, top: bool) -> Image {
     let h = image.height / 2;
     let rows = if top { 0..h } else { h..image.height };
     Image {
@@ -247,10 +247,10 @@ fn half(image: Image, top: bool) -> Image {
     }
 }
 
-type MeanSe = ([f64; 3], [f64; 3]);
+pub(crate) type MeanSe = ([f64; 3], [f64; 3]);
 
 /// `mean_over_seeds` of the upper and the lower half, from one render per seed.
-fn halves_over_seeds(render: impl Fn(u64) -> Image, seeds: u64) -> [MeanSe; 2] {
+pub(crate) fn halves_over_seeds(render: impl Fn(u64) -> Image, seeds: u64) -> [MeanSe; 2] {
     let images: Vec<Image> = (0..seeds).map(&render).collect();
     [true, false].map(|top| mean_over_seeds(|seed| half(images[seed as usize].clone(), top), seeds))
 }

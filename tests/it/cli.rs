@@ -111,11 +111,11 @@ fn ctrl_c_case(integrator: &str) {
             ])
             .arg(&out),
     );
-    // The stop ends the render after the passes in flight, so the image has some once the
-    // first has started: loading and setting up take a fraction of a CPU second (a whole
-    // 4-spp render of this scene about 0.5 s). Two threads keep idle workers from adding CPU
-    // time without progress.
-    wait_for_progress(&mut child, 1.0);
+    // The stop drops the pass in flight (sppm: between chunks of photons), so the image has
+    // some once the first has finished: loading and setting up take a fraction of a CPU
+    // second (a whole 4-spp render of this scene about 0.5 s). Two threads keep idle workers
+    // from adding CPU time without progress.
+    wait_for_progress(&mut child, 3.0);
     let o = interrupt(child);
     assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
     let report = stdout(&o);
@@ -285,4 +285,142 @@ fn photon_mapper_options_are_checked() {
         "{}",
         stderr(&o)
     );
+}
+
+/// A second Ctrl-C ends the process at once, with 130, even inside a long pass: one PPM pass
+/// of `stretched_wall` (door_ajar's floor stretched to 1e10, whose one huge triangle makes
+/// every camera ray slow) takes over 20 s in a release build. Any output left is whole.
+#[test]
+fn a_second_ctrl_c_ends_the_process_at_once() {
+    let dir = temp_dir("cli-second-sigint");
+    let out = dir.join("long.exr");
+    let mut child = spawn(
+        stagelight_command()
+            .args([
+                "render",
+                "tests/scenes/stretched_wall.ron",
+                "--integrator",
+                "ppm",
+                "--photons-per-pass",
+                "2000",
+                "--spp",
+                "1000000",
+                "--threads",
+                "2",
+                "--quiet",
+                "-o",
+            ])
+            .arg(&out),
+    );
+    wait_for_progress(&mut child, 1.0);
+    let signal = |child: &std::process::Child| {
+        let sent = std::process::Command::new("kill")
+            .args(["-INT", &child.id().to_string()])
+            .status()
+            .expect("kill runs");
+        assert!(sent.success());
+    };
+    signal(&child);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let second = std::time::Instant::now();
+    signal(&child);
+    let o = child.wait_with_output().unwrap();
+    let took = second.elapsed().as_secs_f64();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(took < 5.0, "ended {took:.1} s after the second signal");
+    if out.exists() {
+        stagelight::film::Image::read_exr(&out).expect("a whole EXR or none");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A stop inside a photon pass drops that pass at once: PPM's first pass of `stretched_wall`
+/// (door_ajar's floor stretched to 1e10, over 20 s in a release build, its eye rays slowed by
+/// the one huge triangle) stops between waves of eye rays, writes nothing and exits 130.
+#[test]
+fn ctrl_c_inside_a_long_photon_pass_drops_it_at_once() {
+    let dir = temp_dir("cli-sigint-in-pass");
+    let out = dir.join("long.exr");
+    let mut child = spawn(
+        stagelight_command()
+            .args([
+                "render",
+                "tests/scenes/stretched_wall.ron",
+                "--integrator",
+                "ppm",
+                "--photons-per-pass",
+                "2000",
+                "--spp",
+                "1000000",
+                "--threads",
+                "2",
+                "--quiet",
+                "-o",
+            ])
+            .arg(&out),
+    );
+    wait_for_progress(&mut child, 1.0);
+    let sent = std::time::Instant::now();
+    let o = interrupt(child);
+    let took = sent.elapsed().as_secs_f64();
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    assert!(took < 30.0, "ended {took:.1} s after the signal");
+    let report = stdout(&o);
+    assert!(
+        report.contains("before the first pass finished"),
+        "{report}"
+    );
+    assert!(!out.exists(), "nothing is written for no finished pass");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// SPPM stopped inside a pass keeps exactly its finished passes: the image is byte for byte
+/// the uninterrupted render of that many passes (a pass's photons or direct light left in the
+/// estimates would change it).
+#[test]
+fn sppm_stopped_inside_a_pass_equals_the_render_of_its_finished_passes() {
+    let dir = temp_dir("cli-sigint-sppm-exact");
+    let scene = crate::common::shrunk_scene("cornell_box", 32, &dir.join("cb.ron"));
+    let run = |spp: &str, out: &std::path::Path| {
+        let mut command = stagelight_command();
+        command
+            .arg("render")
+            .arg(&scene)
+            // A small radius keeps the gathers (which have no stop point) short, so a stop
+            // mostly lands while photons are traced, inside a pass.
+            .args([
+                "--integrator",
+                "sppm",
+                "--photons-per-pass",
+                "300000",
+                "--radius",
+                "2",
+            ])
+            .args(["--spp", spp, "--threads", "2", "--quiet", "-o"])
+            .arg(out);
+        command
+    };
+    let stopped = dir.join("stopped.exr");
+    let mut child = spawn(&mut run("1000000", &stopped));
+    wait_for_progress(&mut child, 4.0);
+    let o = interrupt(child);
+    assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+    let report = stdout(&o);
+    let passes: u64 = report
+        .split("saved the ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no finished passes in {report}"));
+    assert!(passes >= 1);
+    let whole = dir.join("whole.exr");
+    let o = run(&passes.to_string(), &whole)
+        .output()
+        .expect("stagelight runs");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        std::fs::read(&stopped).unwrap() == std::fs::read(&whole).unwrap(),
+        "{passes} passes: the stopped render differs from the uninterrupted one"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

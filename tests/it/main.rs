@@ -37,4 +37,5 @@ mod scene_errors;
 mod scene_loading;
 mod shards;
 mod stability;
+mod vcm;
 mod window_room;

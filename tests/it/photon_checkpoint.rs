@@ -157,9 +157,12 @@ fn a_photon_checkpoint_continues_only_its_own_render() {
     let e = refused("sppm", &other, settings(3));
     assert!(e.contains("a different scene"), "{e}");
     let mut alpha = settings(3);
-    alpha.photons.alpha = 0.5;
+    alpha.photons.alpha = Some(0.5);
     let e = refused("sppm", &data, alpha);
-    assert!(e.contains("settings") && e.contains("alpha: 0.5"), "{e}");
+    assert!(
+        e.contains("settings") && e.contains("alpha: Some(0.5)"),
+        "{e}"
+    );
 
     // The image without the state (as `merge` writes one) cannot be continued.
     let (c, state) = Checkpoint::read_with_state(&checkpoint_path(&out)).unwrap();

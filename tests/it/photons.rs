@@ -171,6 +171,24 @@ fn hash_grid_finds_exactly_the_points_within_the_radius() {
             .collect();
         assert_eq!(found, expected, "query {j}");
     }
+    // The octant query of a grid with cells twice the radius finds the same points.
+    let wide = stagelight::photons::HashGrid::build_for_octants(&points, radius);
+    let mut nonempty = 0;
+    for (j, q) in random_points(300, 5).iter().enumerate() {
+        let r = if j % 2 == 0 { radius } else { radius * 0.5 };
+        let mut found = Vec::new();
+        wide.for_each_within_octants(&points, *q, r, |i| found.push(i));
+        found.sort_unstable();
+        let expected: Vec<u32> = (0..points.len() as u32)
+            .filter(|&i| points[i as usize].distance_squared(*q) <= r * r)
+            .collect();
+        nonempty += !expected.is_empty() as u32;
+        assert_eq!(found, expected, "octant query {j}");
+    }
+    assert!(
+        nonempty > 100,
+        "only {nonempty} octant queries found points"
+    );
 }
 
 #[test]
