@@ -100,6 +100,8 @@ pub struct ProgressiveState {
     pub photon_pass: PhotonPass,
     /// Grid over this pass's photons (built by `build_photon_grid`).
     pub grid: Option<HashGrid>,
+    /// Visible points gathered this pass (`gather_photons` runs in chunks).
+    pub gathered: usize,
     /// Photons emitted over all passes.
     pub photons_emitted: u64,
     /// NaN or Inf contributions dropped.
@@ -133,6 +135,7 @@ impl ProgressiveState {
             glossy_direct: vec![DVec3::ZERO; pixels],
             photon_pass,
             grid: None,
+            gathered: 0,
             photons_emitted: 0,
             nonfinite: 0,
         }
@@ -141,6 +144,7 @@ impl ProgressiveState {
     /// Prepares pass `pass`: whether it finds visible points, and its photons.
     pub fn begin_pass(&mut self, pass: u64) {
         self.pass = pass;
+        self.gathered = 0;
         let find_visible_points = self.settings.stochastic || pass == 0;
         self.camera_walk.sample_index = pass;
         let chains = if self.settings.stochastic {
@@ -265,16 +269,25 @@ pub fn graph(stochastic: bool, glossy: bool) -> Graph<ProgressiveState> {
         ),
         Node::system(connect::sample_direct_light::SampleDirectLight),
         Node::system(trace::shadow::TraceShadow),
+        Node::system(gather::photon_grid::BuildPhotonGrid),
+        Node::Loop {
+            name: "gather_chunks",
+            queue_len: |s: &ProgressiveState| s.camera_walk.points - s.gathered,
+            body: vec![
+                Node::StopPoint,
+                Node::system(gather::visible_point_photons::GatherPhotons),
+            ],
+        },
+        // What persists across passes is added last, after the stop points: a pass dropped
+        // at one leaves the estimates as the last finished pass left them.
         Node::system(gather::direct_light::AddDirectLight),
     ];
     if glossy {
         nodes.push(Node::system(gather::glossy_light::AddGlossyLight));
     }
-    nodes.extend([
-        Node::system(gather::photon_grid::BuildPhotonGrid),
-        Node::system(gather::visible_point_photons::GatherPhotons),
-        Node::system(gather::progressive_update::UpdatePixelEstimates),
-    ]);
+    nodes.push(Node::system(
+        gather::progressive_update::UpdatePixelEstimates,
+    ));
     Graph::new(if stochastic { "sppm" } else { "ppm" }, nodes)
 }
 
@@ -431,7 +444,7 @@ mod bindings {
         gather::visible_point_photons::GatherPhotons {
             read data, visible = camera_walk.visible, tracing = photon_pass.tracing, grid,
                 hit_points = camera_walk.points;
-            write estimates;
+            write estimates, gathered;
         }
         shade::order_hit_points::OrderHitPoints {
             read data, settings, tree = camera_walk.tree, starts = camera_walk.starts,

@@ -15,20 +15,27 @@ use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::Arc;
 
+/// Visible points gathered per run of `gather_photons`: a loop of runs, `gathered` counting the
+/// points done, with a stop point before each (a radius that takes in every photon makes a
+/// gather minutes long, and a stop must not wait for it).
+pub const GATHER_CHUNK: usize = 1 << 11;
+
 pub struct GatherPhotons;
 
 crate::system! {
     GatherPhotons = "gather_photons";
     read data: Arc<SceneData>, visible: VisiblePoints, tracing: PhotonTracing,
         grid: Option<HashGrid>, hit_points: usize;
-    write estimates: PixelEstimates;
+    write estimates: PixelEstimates, gathered: usize;
     run {
         let photons = &tracing.photons;
         let points = &photons.p[..tracing.stored];
         let grid = grid.as_ref();
-        let pixels = *hit_points;
+        let range = *gathered..(*gathered + GATHER_CHUNK).min(*hit_points);
+        *gathered = range.end;
+        let taken = range.len();
         let found: usize = estimates
-            .chunks_mut(0..pixels)
+            .chunks_mut(range)
             .into_par_iter()
             // One chunk per task: a pixel's cost is its photons in reach, which varies over
             // the image, and rayon's default split (a few pieces per thread) left a core
@@ -58,6 +65,6 @@ crate::system! {
                 found
             })
             .sum();
-        Flow::new(pixels, found)
+        Flow::new(taken, found)
     }
 }
