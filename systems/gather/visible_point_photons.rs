@@ -17,8 +17,9 @@ use std::sync::Arc;
 
 /// Visible points gathered per run of `gather_photons`: a loop of runs, `gathered` counting the
 /// points done, with a stop point before each (a radius that takes in every photon makes a
-/// gather minutes long, and a stop must not wait for it).
-pub const GATHER_CHUNK: usize = 1 << 11;
+/// gather minutes long, and a stop must not wait for it). Eight tasks of `CHUNK` points per
+/// run, so both cores stay busy however unevenly the points' costs fall.
+pub const GATHER_CHUNK: usize = 8 * crate::components::CHUNK;
 
 pub struct GatherPhotons;
 

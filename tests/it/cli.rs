@@ -339,7 +339,7 @@ fn a_second_ctrl_c_ends_the_process_at_once() {
 }
 
 /// A stop inside a photon pass drops that pass: PPM's first pass made slow on purpose (a
-/// radius that takes in every photon: its gather, in chunks of 2,048 points, takes tens of
+/// radius that takes in every photon: its gather, in chunks of 8,192 points, takes tens of
 /// seconds) is stopped between chunks of its gather, nothing is written and the exit is 130.
 /// Were the stop to wait for the pass, its image would be written ("saved the 1 finished
 /// passes").
