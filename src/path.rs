@@ -101,8 +101,8 @@ pub struct PathContext<'a> {
     pub camera: Frustum,
 }
 
-/// `0 -> 1`: a zero density (a delta lobe's neighbour) stands for "no choice here" in the
-/// ratio walk, and the delta checks drop the strategies that would need it.
+/// `0 -> 1`: a zero density (a subpath's end, where no walk went on) stands for "no choice
+/// here" in the ratio walk, and the delta checks drop the strategies that would need it.
 #[inline]
 fn remap0(x: f32) -> f32 {
     if x != 0.0 { x } else { 1.0 }
@@ -233,11 +233,17 @@ impl PathContext<'_> {
 
     /// Solid-angle density with which the subpath at `v`, arrived from direction `wo`,
     /// samples `wi`. At a camera vertex: the camera's ray density; at a light vertex: the
-    /// emission's cosine density.
+    /// emission's cosine density. At a smooth dielectric, 1: the direction is fixed, and the
+    /// choice of reflection or refraction is as likely from either side (Fresnel's
+    /// reciprocity), so it cancels in every ratio of two techniques' densities; what does not
+    /// cancel, and what a 0 read as "no choice" used to drop, is the area conversion (cosine
+    /// over squared distance) on both sides of the specular vertex. Without it, a glass face
+    /// 0.01 above a floor made the floor's merges 10^4 times too unlikely in VCM's weights.
     pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
         match v.kind {
             VertexKind::Camera => self.camera.pdf_dir(wi),
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
+            VertexKind::Surface if !self.is_connectible(v) => 1.0,
             VertexKind::Surface => {
                 if wi.dot(v.ng) * wo.dot(v.ng) <= 0.0 {
                     return 0.0;

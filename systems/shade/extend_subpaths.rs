@@ -221,7 +221,9 @@ fn scatter(
     }
     let (pdf_dir, pdf_rev_dir) = if bs.delta {
         here.delta = true;
-        (0.0, 0.0)
+        // A delta lobe's direction counts 1 both ways (`PathContext::pdf_dir`): the area
+        // conversion it then gets is the Jacobian MIS needs across the specular vertex.
+        (1.0, 1.0)
     } else {
         (bs.pdf, material.pdf(bs.wi, wo_local))
     };

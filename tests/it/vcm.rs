@@ -8,6 +8,7 @@ use crate::common::{load_small, mean_over_seeds};
 use crate::common::{render_bdpt, shrunk_scene, stagelight_command, stderr, temp_dir};
 use stagelight::integrators::SceneData;
 use stagelight::integrators::bdpt::{self, BdptSettings, StrategyFilter, VertexMerging};
+use stagelight::mlt::path_space::PathSpace;
 use stagelight::path::{MisHeuristic, PathContext, Techniques, Vertex, VertexKind};
 use std::sync::Arc;
 
@@ -18,28 +19,32 @@ fn remap0(x: f64) -> f64 {
 
 /// Each technique's weight by brute force: the path x_0 (on the emitter) .. x_{n-1} (the
 /// camera), each vertex's light-side and camera-side area densities recomputed from its
-/// neighbours, each technique's density the product over the path (in f64), and the weight
-/// h(p) over the sum of h over the techniques the estimator uses. Returns the weights of the
-/// connections (by s) and of the merges (by the merged vertex's index, 0 where none).
+/// neighbours by path-space MLT's `PathSpace::density` (its own formulation: a specular
+/// vertex's density is its Fresnel lobe's probability, converted to area like any other), each
+/// technique's density the product over the path (in f64), and the weight h(p) over the sum
+/// of h over the techniques the estimator uses. Returns the weights of the connections (by s)
+/// and of the merges (by the merged vertex's index, 0 where none).
 fn brute_force_weights(
-    ctx: &PathContext,
+    data: &SceneData,
     camera_first: &[Vertex],
     heuristic: MisHeuristic,
     techniques: Techniques,
 ) -> (Vec<f64>, Vec<f64>) {
+    let space = PathSpace::new(data);
+    let ctx = &space.ctx;
     let n = camera_first.len();
     let (_, light_all) = split(ctx, camera_first, 1); // x_0 .. x_{n-2}, light side
     let mut x: Vec<Vertex> = light_all.clone();
     x.push(camera_first[0]);
+    PathSpace::fix_kinds(&mut x);
     let delta =
         |i: usize| i + 1 < n && x[i].kind == VertexKind::Surface && !ctx.is_connectible(&x[i]);
     // Light-side density of x_i (i <= n - 2) and camera-side density of x_i (i <= n - 2).
-    let p_light: Vec<f64> = (0..n - 1).map(|i| light_all[i].pdf_fwd as f64).collect();
+    let p_light: Vec<f64> = (0..n - 1)
+        .map(|i| space.density(&x, i.checked_sub(1), i) as f64)
+        .collect();
     let p_camera: Vec<f64> = (0..n - 1)
-        .map(|i| {
-            let prev = if i + 2 < n { Some(&x[i + 2]) } else { None };
-            ctx.pdf_area(&x[i + 1], prev, &x[i]) as f64
-        })
+        .map(|i| space.density(&x, Some(i + 1), i) as f64)
         .collect();
     let vc = |s: usize| -> f64 {
         (0..s).map(|i| remap0(p_light[i])).product::<f64>()
@@ -125,7 +130,7 @@ fn check_vcm_weights(scene_name: &str) {
                         },
                     ] {
                         let (want_vc, want_vm) =
-                            brute_force_weights(&ctx, full, heuristic, techniques);
+                            brute_force_weights(&data, full, heuristic, techniques);
                         let mut sum = 0.0f64;
                         for t in 1..=n {
                             let s = n - t;
