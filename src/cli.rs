@@ -207,7 +207,8 @@ pub struct KernelArgs {
     /// `megakernel` (each thread carries one path from the camera to its end).
     #[arg(long, value_enum, default_value_t = KernelName::Wavefront)]
     pub kernel: KernelName,
-    /// Samples in flight per wave (pt, bdpt; default 262144 for pt, 32768 for bdpt).
+    /// Samples in flight per wave (pt, bdpt, vcm, bpm; default 262144 for pt, 32768 for the
+    /// others). vcm and bpm merge with the light subpaths of the same wave.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
     pub wavefront: Option<u64>,
 }

@@ -176,13 +176,13 @@ pub fn render_memory(
 }
 
 /// Refuses `--kernel megakernel` for an integrator that has none (only pt has one) and
-/// `--wavefront` for one that does not render in waves of samples (only pt and bdpt do).
+/// `--wavefront` for one that does not render in waves of samples (pt, bdpt, vcm, bpm do).
 pub fn check_kernel(kind: IntegratorKind, settings: &RenderSettings) -> Result<()> {
     if settings.kernel == Kernel::Megakernel && kind.as_str() != "pt" {
         bail!("--kernel megakernel: only pt has a megakernel, not {kind}");
     }
-    if settings.wavefront.is_some() && !matches!(kind.as_str(), "pt" | "bdpt") {
-        bail!("--wavefront: only pt and bdpt render in waves of samples, not {kind}");
+    if settings.wavefront.is_some() && !matches!(kind.as_str(), "pt" | "bdpt" | "vcm" | "bpm") {
+        bail!("--wavefront: only pt, bdpt, vcm and bpm render in waves of samples, not {kind}");
     }
     Ok(())
 }

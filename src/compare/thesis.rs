@@ -30,6 +30,9 @@ pub const SCENES: [(&str, &str); 3] = [
 pub const UNBIASED_SPP: [u64; 3] = [25, 400, 841];
 /// The unbiased algorithms, by integrator name.
 pub const UNBIASED: [&str; 3] = ["pt", "bdpt", "mlt"];
+/// Algorithms the study did not have, run at the same samples per pixel beside it: vertex
+/// connection and merging and its merges alone (consistent, not unbiased).
+pub const SINCE: [&str; 2] = ["vcm", "bpm"];
 
 /// Photons per pass of the biased algorithms' runs.
 pub const PHOTONS_PER_PASS: [u64; 2] = [250_000, 500_000];
@@ -89,10 +92,12 @@ pub fn thesis_biased(scene: &str, label: &str) -> Option<[f64; 2]> {
         .map(|r| r.2)
 }
 
-/// The unbiased integrators of the study this binary has.
+/// The integrators run by samples per pixel (the study's unbiased ones, then `SINCE`) this
+/// binary has.
 pub fn unbiased_built() -> Vec<IntegratorKind> {
     UNBIASED
         .iter()
+        .chain(&SINCE)
         .filter_map(|n| IntegratorKind::from_name(n).ok())
         .collect()
 }
@@ -113,7 +118,7 @@ pub fn page_labels(c: &Comparison, photon_budgets: &[u64]) -> Vec<page::RunLabel
     c.results
         .iter()
         .map(|r| {
-            if UNBIASED.contains(&r.integrator.as_str()) {
+            if UNBIASED.contains(&r.integrator.as_str()) || SINCE.contains(&r.integrator.as_str()) {
                 return page::RunLabel {
                     method: display_name(r.integrator.as_str()),
                     group: format!("{} spp", r.budget),
@@ -277,37 +282,15 @@ pub fn summary_markdown(
     let mut missing: Vec<String> = Vec::new();
 
     let _ = writeln!(s, "## Unbiased algorithms, by samples per pixel\n");
-    let mut head = String::from("| scene | algorithm |");
-    let mut rule = String::from("|---|---|");
-    for spp in UNBIASED_SPP {
-        let _ = write!(head, " {spp} spp: s | thesis s | relMSE |");
-        rule += "---|---|---|";
-    }
-    let _ = writeln!(s, "{head}\n{rule}");
-    for scene in scenes {
-        let label = scene_label(scene.key);
-        for integrator in UNBIASED {
-            let thesis = thesis_unbiased(scene.key, integrator);
-            let _ = write!(s, "| {label} | {} |", display_name(integrator));
-            let built = IntegratorKind::from_name(integrator).ok();
-            if built.is_none() && !missing.contains(&integrator.to_string()) {
-                missing.push(integrator.to_string());
-            }
-            for (j, spp) in UNBIASED_SPP.iter().enumerate() {
-                let thesis_s = thesis.map_or("".to_string(), |t| format!("{}", t[j]));
-                let run: Option<&RunResult> = built.and_then(|kind| {
-                    scene.comparison.and_then(|c| {
-                        c.results
-                            .iter()
-                            .find(|r| r.integrator == kind && r.budget == *spp as f64)
-                    })
-                });
-                s += &cells(built.is_some(), run, &thesis_s);
-            }
-            s.push('\n');
-        }
-    }
-    s.push('\n');
+    spp_table(&mut s, scenes, &UNBIASED, &mut missing);
+    let _ = writeln!(s, "## Since the study: VCM and BPM, by samples per pixel\n");
+    let _ = writeln!(
+        s,
+        "Vertex connection and merging (Georgiev et al. 2012) and its merges alone, which the \
+         thesis did not have, at the same samples per pixel (each sample one camera and one \
+         light subpath; a pass of as many samples as pixels shrinks the merge radius once).\n"
+    );
+    spp_table(&mut s, scenes, &SINCE, &mut missing);
 
     let _ = writeln!(s, "## Biased algorithms, by photons per pass\n");
     let _ = writeln!(
@@ -397,6 +380,47 @@ pub fn summary_markdown(
         }
     }
     s
+}
+
+/// One row per scene and integrator of `integrators`: seconds, the thesis' seconds and relMSE
+/// at each of `UNBIASED_SPP`; integrators this binary lacks go into `missing`.
+fn spp_table(
+    s: &mut String,
+    scenes: &[SceneResult],
+    integrators: &[&str],
+    missing: &mut Vec<String>,
+) {
+    let mut head = String::from("| scene | algorithm |");
+    let mut rule = String::from("|---|---|");
+    for spp in UNBIASED_SPP {
+        let _ = write!(head, " {spp} spp: s | thesis s | relMSE |");
+        rule += "---|---|---|";
+    }
+    let _ = writeln!(s, "{head}\n{rule}");
+    for scene in scenes {
+        let label = scene_label(scene.key);
+        for &integrator in integrators {
+            let thesis = thesis_unbiased(scene.key, integrator);
+            let _ = write!(s, "| {label} | {} |", display_name(integrator));
+            let built = IntegratorKind::from_name(integrator).ok();
+            if built.is_none() && !missing.contains(&integrator.to_string()) {
+                missing.push(integrator.to_string());
+            }
+            for (j, spp) in UNBIASED_SPP.iter().enumerate() {
+                let thesis_s = thesis.map_or("".to_string(), |t| format!("{}", t[j]));
+                let run: Option<&RunResult> = built.and_then(|kind| {
+                    scene.comparison.and_then(|c| {
+                        c.results
+                            .iter()
+                            .find(|r| r.integrator == kind && r.budget == *spp as f64)
+                    })
+                });
+                *s += &cells(built.is_some(), run, &thesis_s);
+            }
+            s.push('\n');
+        }
+    }
+    s.push('\n');
 }
 
 /// One budget's three cells (our seconds, the thesis' seconds, our relMSE) of a row.
@@ -522,7 +546,7 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
     Ok(exit_code(interrupted))
 }
 
-/// The preset's unbiased runs: PT, BDPT and MLT at `UNBIASED_SPP`.
+/// The preset's runs by samples per pixel: PT, BDPT, MLT, VCM and BPM at `UNBIASED_SPP`.
 pub(crate) fn unbiased_plan(o: &ThesisOptions) -> ComparePlan {
     ComparePlan {
         integrators: unbiased_built(),

@@ -442,6 +442,14 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         .find(|l| l.starts_with("| room | BDPT |"))
         .expect("a BDPT row");
     assert!(!bdpt_row.contains("missing"), "{bdpt_row}");
+    // VCM and BPM, which the study did not have, run at its samples per pixel beside it.
+    for row in ["| torus | VCM |", "| room | BPM |"] {
+        let line = md.lines().find(|l| l.starts_with(row)).expect(row);
+        let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+        assert!(cells[3].parse::<f64>().is_ok(), "seconds cell: {line}");
+        assert_eq!(cells[4], "", "no thesis seconds: {line}");
+        assert!(cells[5].parse::<f64>().is_ok(), "relMSE cell: {line}");
+    }
     // The biased rows have our seconds and relMSE at the photon budgets asked for, and no
     // thesis seconds (it measured 250k and 500k only).
     assert!(
@@ -481,14 +489,15 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
                 .unwrap()
                 .count()
         };
-        assert_eq!((count("index_data"), count("runs")), (16, 15), "{name}");
+        assert_eq!((count("index_data"), count("runs")), (22, 21), "{name}");
     }
     let mut reader = csv::Reader::from_path(out.join("results.csv")).unwrap();
     assert_eq!(&reader.headers().unwrap()[0], "scene");
     assert_eq!(
         reader.records().count(),
-        45,
-        "3 scenes x (PT, BDPT and MLT (mmlt) at 3 budgets + PM, PPM 3 and PPM 75 at 2 photon budgets)"
+        63,
+        "3 scenes x (PT, BDPT, MLT, VCM and BPM at 3 budgets + PM, PPM 3 and PPM 75 at 2 photon \
+         budgets)"
     );
 
     // Given references: a folder without them is refused before any run, naming the file;
@@ -600,7 +609,7 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         );
     }
     let all = untimed_figures(&out_given.join("results.csv"));
-    assert_eq!(all.len(), 3 * (9 + 3));
+    assert_eq!(all.len(), 3 * (15 + 3));
     assert_eq!(all, untimed_figures(&sharded.join("results.csv")));
     let (a, b) = (
         std::fs::read_to_string(out_given.join("summary.md")).unwrap(),
@@ -618,7 +627,7 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
             })
             .collect()
     };
-    assert_eq!(rows(&a).len(), 18);
+    assert_eq!(rows(&a).len(), 24);
     assert_eq!(rows(&a), rows(&b));
     assert!(b.contains("Rendered as shards by the 5 tasks"), "{b}");
     let _ = std::fs::remove_dir_all(&dir);
