@@ -517,87 +517,11 @@ impl PathContext<'_> {
         heuristic: MisHeuristic,
         connection_count: f32,
     ) -> f32 {
-        // Reverse densities at the joint, as the connection makes them.
-        let z_last = camera.get(t.wrapping_sub(1)).filter(|_| t >= 1);
-        let y_last = light.get(s.wrapping_sub(1)).filter(|_| s >= 1);
-        let mut z_rev = [0.0f32; 2]; // for z_{t-1}, z_{t-2}
-        let mut y_rev = [0.0f32; 2]; // for y_{s-1}, y_{s-2}
-        if let Some(z) = z_last {
-            z_rev[0] = if s > 0 {
-                let y = y_last.expect("s > 0");
-                self.pdf_area(y, if s >= 2 { Some(&light[s - 2]) } else { None }, z)
-            } else {
-                self.pdf_light_origin(z)
-            };
-            if t >= 2 {
-                z_rev[1] = if s > 0 {
-                    self.pdf_area(z, y_last, &camera[t - 2])
-                } else {
-                    self.pdf_light_dir(z, &camera[t - 2])
-                };
-            }
-        }
-        if let Some(y) = y_last {
-            let z = z_last.expect("t >= 1");
-            y_rev[0] = self.pdf_area(z, if t >= 2 { Some(&camera[t - 2]) } else { None }, y);
-            if s >= 2 {
-                y_rev[1] = self.pdf_area(y, z_last, &light[s - 2]);
-            }
-        }
-        let h = |r: f32| match heuristic {
-            MisHeuristic::Power => r * r,
-            MisHeuristic::Balance => r,
+        let techniques = Techniques {
+            connection_count,
+            ..Techniques::CONNECTIONS
         };
-        // The joined vertices are connectible, so never delta for this walk.
-        let camera_rev = |i: usize| {
-            if i + 1 == t {
-                z_rev[0]
-            } else if i + 2 == t {
-                z_rev[1]
-            } else {
-                camera[i].pdf_rev
-            }
-        };
-        let camera_delta = |i: usize| i + 1 != t && camera[i].delta;
-        let light_rev = |i: usize| {
-            if i + 1 == s {
-                y_rev[0]
-            } else if i + 2 == s {
-                y_rev[1]
-            } else {
-                light[i].pdf_rev
-            }
-        };
-        let light_delta = |i: usize| i + 1 != s && light[i].delta;
-
-        // n_j / n_{(s, t)}: the count of strategy (sj, tj) relative to this one's.
-        let is_connection = |s: usize, t: usize| s >= 2 && t >= 2;
-        let this_connects = is_connection(s, t);
-        let relative_count = |sj: usize, tj: usize| match (is_connection(sj, tj), this_connects) {
-            (true, false) => connection_count,
-            (false, true) => 1.0 / connection_count,
-            _ => 1.0,
-        };
-        let mut sum = 0.0f32;
-        let mut ratio = 1.0f32;
-        // Strategies with fewer camera vertices: (s + 1, t - 1), (s + 2, t - 2), ..., down
-        // to t = 1 (a pinhole camera is never hit, so t = 0 does not exist).
-        for i in (1..t).rev() {
-            ratio *= remap0(camera_rev(i)) / remap0(camera[i].pdf_fwd);
-            if !camera_delta(i) && !camera_delta(i - 1) {
-                sum += h(ratio * relative_count(s + t - i, i));
-            }
-        }
-        // Strategies with fewer light vertices, down to s = 0 (area lights are not delta).
-        ratio = 1.0;
-        for i in (0..s).rev() {
-            ratio *= remap0(light_rev(i)) / remap0(light[i].pdf_fwd);
-            let delta_before = i > 0 && light_delta(i - 1);
-            if !light_delta(i) && !delta_before {
-                sum += h(ratio * relative_count(i, s + t - i));
-            }
-        }
-        1.0 / (1.0 + sum)
+        self.vcm_weight(camera, light, (s, t), None, heuristic, techniques)
     }
 }
 
@@ -612,6 +536,9 @@ pub struct Techniques {
     /// sampled with the density of the connection that ends its light subpath just before x,
     /// times x's light-side area density, times this. 0: no merging.
     pub merge_count: f32,
+    /// How many times as often each join (s >= 2, t >= 2) is sampled as the other
+    /// connections (a light-vertex cache: Davidovic et al. 2014): strategy j weighs n_j p_j.
+    pub connection_count: f32,
 }
 
 impl Techniques {
@@ -619,6 +546,7 @@ impl Techniques {
     pub const CONNECTIONS: Techniques = Techniques {
         connect: true,
         merge_count: 0.0,
+        connection_count: 1.0,
     };
 }
 
@@ -713,6 +641,16 @@ impl PathContext<'_> {
         };
         let light_delta = |i: usize| (merged.is_some() || i + 1 != s) && light[i].delta;
         let merging = eta > 0.0;
+        // n_j / n_own for connection (sj, tj): joins count `connection_count`, all else 1.
+        let count = |sj: usize, tj: usize| {
+            if sj >= 2 && tj >= 2 {
+                techniques.connection_count
+            } else {
+                1.0
+            }
+        };
+        let own_count = if merged.is_none() { count(s, t) } else { 1.0 };
+        let relative = |sj: usize, tj: usize| count(sj, tj) / own_count;
 
         // The technique's own density over p_VC(s, t).
         let own = match merged {
@@ -722,7 +660,7 @@ impl PathContext<'_> {
         // Connection (s, t) itself: for a merge, only when its joint is not delta.
         let mut sum = match merged {
             None => 1.0,
-            Some(_) if connect && !light_delta(s - 1) => 1.0,
+            Some(_) if connect && !light_delta(s - 1) => h(relative(s, t)),
             Some(_) => 0.0,
         };
         // Fewer camera vertices: (s + 1, t - 1), ... down to t = 1; the merge at camera
@@ -734,7 +672,7 @@ impl PathContext<'_> {
             }
             ratio *= remap0(camera_rev(i)) / remap0(camera[i].pdf_fwd);
             if connect && !camera_delta(i) && !camera_delta(i - 1) {
-                sum += h(ratio);
+                sum += h(ratio * relative(s + t - i, i));
             }
         }
         // Fewer light vertices, down to s = 0; merges at light vertices past the emitter.
@@ -746,7 +684,7 @@ impl PathContext<'_> {
             ratio *= remap0(light_rev(i)) / remap0(light[i].pdf_fwd);
             let delta_before = i > 0 && light_delta(i - 1);
             if (connect || i == 0) && !light_delta(i) && !delta_before {
-                sum += h(ratio);
+                sum += h(ratio * relative(i, s + t - i));
             }
         }
         own / sum

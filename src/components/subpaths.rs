@@ -315,6 +315,7 @@ impl BdptSettings {
                 Techniques {
                     connect: m.connect,
                     merge_count,
+                    connection_count: 1.0,
                 }
             }
         }

@@ -185,7 +185,7 @@ fn the_kernel_and_wavefront_options_run_and_refuse_what_does_not_apply() {
         ),
         (
             vec!["--integrator", "sppm", "--wavefront", "64"],
-            "only pt and bdpt",
+            "only pt, bdpt, vcm and bpm",
         ),
         (vec!["--wavefront", "0"], "--wavefront"),
         (vec!["--kernel", "simd"], "--kernel"),

@@ -117,17 +117,15 @@ fn check_vcm_weights(scene_name: &str) {
                     let eta = std::f32::consts::PI * (0.01 * diagonal).powi(2) * 1e4 * scale;
                     for techniques in [
                         Techniques {
-                            connect: true,
                             merge_count: eta,
+                            ..Techniques::CONNECTIONS
                         },
                         Techniques {
                             connect: false,
                             merge_count: eta,
+                            ..Techniques::CONNECTIONS
                         },
-                        Techniques {
-                            connect: true,
-                            merge_count: 0.0,
-                        },
+                        Techniques::CONNECTIONS,
                     ] {
                         let (want_vc, want_vm) =
                             brute_force_weights(&data, full, heuristic, techniques);
