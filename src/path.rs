@@ -557,7 +557,8 @@ impl PathContext<'_> {
     /// light subpath's next vertex after `light[s - 1]`, found within the radius of z_{t-1}),
     /// the path being y_0..y_{s-1} z_{t-1}..z_0.
     ///
-    /// Veach's ratio walk of `mis_weight` over every connection (s', t') of the path, with a
+    /// Veach's ratio walk over every connection (s', t') of the path (BDPT's `mis_weight` is
+    /// this with no merges), with a
     /// merge term at each vertex where merging is allowed (not delta, neither the emitter's
     /// nor the camera's vertex): p_VM(x_i) = p_VC(light reaching x_{i-1}) p_light(x_i)
     /// merge_count, read off the walk before it steps past x_i. For a merge, the densities at
