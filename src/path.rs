@@ -558,9 +558,8 @@ impl PathContext<'_> {
     /// the path being y_0..y_{s-1} z_{t-1}..z_0.
     ///
     /// Veach's ratio walk over every connection (s', t') of the path (BDPT's `mis_weight` is
-    /// this with no merges), with a
-    /// merge term at each vertex where merging is allowed (not delta, neither the emitter's
-    /// nor the camera's vertex): p_VM(x_i) = p_VC(light reaching x_{i-1}) p_light(x_i)
+    /// this with no merges), with a merge term at each vertex where merging is allowed (not
+    /// delta, neither the emitter's nor the camera's vertex): p_VM(x_i) = p_VC(light reaching x_{i-1}) p_light(x_i)
     /// merge_count, read off the walk before it steps past x_i. For a merge, the densities at
     /// the joint come from the light subpath's own direction into y_s and the camera's BSDF
     /// at z_{t-1} (its neighbours' densities as the merged path makes them).
