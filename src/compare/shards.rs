@@ -281,7 +281,7 @@ fn study_of(request: &CompareRequest) -> Result<Vec<SceneStudy>> {
             }])
         }
         CompareRequest::Thesis(o) => {
-            let plan = thesis::unbiased_plan(o);
+            let plan = thesis::by_spp_plan(o);
             let given = thesis::given_references(o)?;
             let biased = thesis::biased_runs_of(&plan, o)?;
             let mut scenes = Vec::new();

@@ -94,7 +94,7 @@ pub fn thesis_biased(scene: &str, label: &str) -> Option<[f64; 2]> {
 
 /// The integrators run by samples per pixel (the study's unbiased ones, then `SINCE`) this
 /// binary has.
-pub fn unbiased_built() -> Vec<IntegratorKind> {
+pub fn by_spp_built() -> Vec<IntegratorKind> {
     UNBIASED
         .iter()
         .chain(&SINCE)
@@ -472,7 +472,7 @@ pub struct ThesisOptions {
 /// the exit code: 0, or `EXIT_INTERRUPTED` when Ctrl-C stopped it.
 pub fn run(o: &ThesisOptions) -> Result<i32> {
     let out_dir = &o.output;
-    let plan = unbiased_plan(o);
+    let plan = by_spp_plan(o);
     let given = given_references(o)?;
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
@@ -547,9 +547,9 @@ pub fn run(o: &ThesisOptions) -> Result<i32> {
 }
 
 /// The preset's runs by samples per pixel: PT, BDPT, MLT, VCM and BPM at `UNBIASED_SPP`.
-pub(crate) fn unbiased_plan(o: &ThesisOptions) -> ComparePlan {
+pub(crate) fn by_spp_plan(o: &ThesisOptions) -> ComparePlan {
     ComparePlan {
-        integrators: unbiased_built(),
+        integrators: by_spp_built(),
         unit: BudgetUnit::Spp,
         budgets: UNBIASED_SPP.iter().map(|&s| s as f64).collect(),
         settings: RenderSettings {

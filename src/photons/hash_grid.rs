@@ -76,7 +76,7 @@ impl HashGrid {
         points: &[Vec3],
         q: Vec3,
         radius: f32,
-        mut f: impl FnMut(u32),
+        f: impl FnMut(u32),
     ) {
         debug_assert!(2.0 * radius <= self.cell);
         let r2 = radius * radius;
@@ -100,7 +100,21 @@ impl HashGrid {
                 count += 1;
             }
         }
-        for &b in &buckets[..count] {
+        self.scan_buckets(&buckets[..count], points, q, r2, f);
+    }
+
+    /// Calls `f(index)` for every point of the distinct `buckets` within squared distance `r2`
+    /// of `q`, bucket by bucket.
+    #[inline]
+    fn scan_buckets(
+        &self,
+        buckets: &[u32],
+        points: &[Vec3],
+        q: Vec3,
+        r2: f32,
+        mut f: impl FnMut(u32),
+    ) {
+        for &b in buckets {
             let range = self.start[b as usize] as usize..self.start[b as usize + 1] as usize;
             for &i in &self.indices[range] {
                 if points[i as usize].distance_squared(q) <= r2 {
@@ -113,7 +127,7 @@ impl HashGrid {
     /// Calls `f(index)` for every point within `radius` (<= the build radius) of `q`, each
     /// once, in a fixed order.
     #[inline]
-    pub fn for_each_within(&self, points: &[Vec3], q: Vec3, radius: f32, mut f: impl FnMut(u32)) {
+    pub fn for_each_within(&self, points: &[Vec3], q: Vec3, radius: f32, f: impl FnMut(u32)) {
         debug_assert!(radius <= self.cell);
         let r2 = radius * radius;
         let c = (q * self.inv_cell).floor().as_ivec3();
@@ -131,14 +145,7 @@ impl HashGrid {
                 }
             }
         }
-        for &b in &buckets[..count] {
-            let range = self.start[b as usize] as usize..self.start[b as usize + 1] as usize;
-            for &i in &self.indices[range] {
-                if points[i as usize].distance_squared(q) <= r2 {
-                    f(i);
-                }
-            }
-        }
+        self.scan_buckets(&buckets[..count], points, q, r2, f);
     }
 
     /// The (at most) `k` points nearest to `q` within `max_radius` (<= the build radius): the

@@ -80,13 +80,12 @@ crate::system! {
                             if !weighted && !settings.strategies.keeps(s, t) {
                                 return;
                             }
-                            light.clear();
-                            for (d, store) in stores.iter().enumerate().take(s + 1) {
-                                light.push(Vertex::from_store(store, sub, d));
-                            }
-                            let y = &light[s];
-                            let w_light = towards(y, &light[s - 1]);
-                            if !same_surface(&gather_point, y, w_light) {
+                            // The light vertex and where it came from first: most
+                            // candidates end at the surface test, before the whole subpath.
+                            let y = Vertex::from_store(&stores[s], sub, s);
+                            let y_prev = Vertex::from_store(&stores[s - 1], sub, s - 1);
+                            let w_light = towards(&y, &y_prev);
+                            if !same_surface(&gather_point, &y, w_light) {
                                 return;
                             }
                             let f = ctx.f(z, wo, w_light, TransportMode::Radiance);
@@ -94,11 +93,15 @@ crate::system! {
                                 return;
                             }
                             let weight = if weighted {
+                                light.clear();
+                                for (d, store) in stores.iter().enumerate().take(s) {
+                                    light.push(Vertex::from_store(store, sub, d));
+                                }
                                 ctx.vcm_weight(
                                     &camera[..t],
-                                    &light[..s],
+                                    &light,
                                     (s, t),
-                                    Some(y),
+                                    Some(&y),
                                     settings.mis,
                                     techniques,
                                 )
