@@ -30,6 +30,7 @@ pub mod scene;
 pub mod sysinfo;
 pub mod units;
 pub mod viewer;
+pub mod weight_tails;
 
 #[path = "../systems/mod.rs"]
 pub mod systems;

@@ -104,7 +104,7 @@ pub struct PathContext<'a> {
 /// `0 -> 1`: a zero density (a subpath's end, where no walk went on) stands for "no choice
 /// here" in the ratio walk, and the delta checks drop the strategies that would need it.
 #[inline]
-fn remap0(x: f32) -> f32 {
+pub fn remap0(x: f32) -> f32 {
     if x != 0.0 { x } else { 1.0 }
 }
 

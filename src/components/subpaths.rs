@@ -7,6 +7,7 @@ use crate::components::{Rays, Walkers, Wave};
 use crate::path::{Joint, MisHeuristic, PathContext, Techniques, Vertex};
 use crate::photons::HashGrid;
 use crate::sampling::{PrimarySamples, SampleKey, Sampler, SamplerKind, Stream};
+use crate::weight_tails::MergedLight;
 use glam::Vec3;
 
 /// Samples per wave. Each holds two subpaths and their connections, about ten times a path
@@ -256,18 +257,27 @@ impl VertexMerging {
 #[derive(Default)]
 pub struct LightVertexGrid {
     pub p: Vec<Vec3>,
-    /// The vertex's light subpath (its slot) and depth.
-    pub subpath: Vec<u32>,
-    pub depth: Vec<u32>,
+    /// All else a merge reads of the vertex, beside `p` so merges never visit the subpaths.
+    pub vertex: Vec<MergeableVertex>,
     /// Over `p`, for queries up to the largest radius of the wave's passes (None: no vertex).
     pub grid: Option<HashGrid>,
+}
+
+/// A light vertex as a merge reads it.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MergeableVertex {
+    pub ng: Vec3,
+    /// Unit direction to the vertex before it on its light subpath.
+    pub w_light: Vec3,
+    pub beta: Vec3,
+    /// Its depth and what the merge's MIS weight reads of its subpath.
+    pub weight: MergedLight,
 }
 
 impl LightVertexGrid {
     pub fn clear(&mut self) {
         self.p.clear();
-        self.subpath.clear();
-        self.depth.clear();
+        self.vertex.clear();
         self.grid = None;
     }
 }

@@ -488,7 +488,7 @@ mod bindings {
             write light_grid;
         }
         gather::merges::MergeLightVertices {
-            read wave, capacity, settings, pixels, subpath_len, data, vertices, light_grid;
+            read wave, settings, pixels, subpath_len, data, vertices, light_grid;
             write sample_radiance;
         }
         gather::connections::AccumulateConnections {

@@ -30,6 +30,7 @@ use crate::path::{Joint, PathContext, Techniques, Vertex, VertexKind, towards};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, Stream};
 use crate::scene::{PreparedScene, SceneData};
+use crate::weight_tails::WeightTail;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -280,9 +281,9 @@ pub fn connect_wave(
                                 &settings,
                                 (&camera.vertices, &light.vertices),
                                 (s, t),
-                                strategy_count,
-                                connection_count,
+                                (strategy_count, connection_count),
                                 settings.techniques(wave, k, pixels),
+                                None,
                             );
                             let contribution = c * weight;
                             if contribution == Vec3::ZERO {
@@ -444,22 +445,31 @@ pub fn sampled_light_vertex(
 }
 
 /// The factor a connection's unweighted contribution is multiplied by: its MIS weight (when
-/// every strategy counts) times the strategy count of a multiplexed sample (1 otherwise).
+/// every strategy counts) times `strategy_count`, that of a multiplexed sample (1 otherwise).
 /// `connection_count` is how many times as often the connection strategies are sampled as the
 /// others (1 but through a light-vertex cache); `techniques` what VCM's weights count (read
-/// only with `settings.merging`).
+/// only with `settings.merging`). With both subpaths' `weight_tails` (`tails`) and no cache,
+/// the weight takes constant time; without, it walks the path.
 #[inline]
 pub fn connection_weight(
     ctx: &PathContext,
     settings: &BdptSettings,
     (camera, light): (&[Vertex], &[Vertex]),
     (s, t): (usize, usize),
-    strategy_count: f32,
-    connection_count: f32,
+    (strategy_count, connection_count): (f32, f32),
     techniques: Techniques,
+    tails: Option<(&[WeightTail], &[WeightTail])>,
 ) -> f32 {
     if settings.strategies != StrategyFilter::All {
         strategy_count
+    } else if let Some((camera_tails, light_tails)) = tails.filter(|_| connection_count == 1.0) {
+        ctx.connection_weight_from_tails(
+            (camera, camera_tails),
+            (light, light_tails),
+            (s, t),
+            settings.mis,
+            techniques,
+        ) * strategy_count
     } else if settings.merging.is_some() {
         ctx.vcm_weight(camera, light, (s, t), None, settings.mis, techniques) * strategy_count
     } else {

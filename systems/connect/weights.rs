@@ -16,6 +16,7 @@ use crate::pipeline::Flow;
 use crate::sampling::Stream;
 use crate::scene::SceneData;
 use crate::systems::connect::strategies::{connection_weight, sampled_light_vertex};
+use crate::weight_tails::{Side, weight_tails};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -100,6 +101,7 @@ pub fn weigh_wave(
             let mut camera: Vec<Vertex> = Vec::new();
             let mut light: Vec<Vertex> = Vec::new();
             let mut picked: Vec<Vertex> = Vec::new();
+            let (mut camera_tails, mut light_tails) = (Vec::new(), Vec::new());
             let mut weighed = 0;
             let first_sample = c * CONNECT_CHUNK;
             for k in first_sample..(first_sample + CONNECT_CHUNK).min(n) {
@@ -129,6 +131,12 @@ pub fn weigh_wave(
                 }
                 for (d, store) in vertices.iter().enumerate().take(nl) {
                     light.push(Vertex::from_store(store, cap + k, d));
+                }
+                // Each connection's weight in constant time from these (not through a cache,
+                // whose picks are other subpaths).
+                if cache.is_none() {
+                    weight_tails(&camera, Side::Camera, settings.mis, &mut camera_tails);
+                    weight_tails(&light, Side::Light, settings.mis, &mut light_tails);
                 }
                 for slot in slots {
                     let this = slot - sh.start;
@@ -164,9 +172,11 @@ pub fn weigh_wave(
                         &settings,
                         (&camera, light_side),
                         (s, t),
-                        strategy_count,
-                        connection_count,
+                        (strategy_count, connection_count),
                         settings.techniques(wave, k, pixels),
+                        cache
+                            .is_none()
+                            .then_some((&camera_tails[..], &light_tails[..])),
                     );
                     sh.contribution[this] *= weight;
                     weighed += 1;

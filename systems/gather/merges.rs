@@ -18,6 +18,7 @@ use crate::path::{PathContext, Vertex, towards};
 use crate::photons::{NORMAL_COSINE, VISIBILITY_LIFT, VISIBILITY_MARGIN};
 use crate::pipeline::Flow;
 use crate::scene::SceneData;
+use crate::weight_tails::{Side, weight_tails};
 use glam::Vec3;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -26,7 +27,7 @@ pub struct MergeLightVertices;
 
 crate::system! {
     MergeLightVertices = "merge_light_vertices";
-    read wave: Wave, capacity: usize, settings: BdptSettings, pixels: u64,
+    read wave: Wave, settings: BdptSettings, pixels: u64,
         subpath_len: Vec<u32>, data: Arc<SceneData>, vertices: Vec<PathVertices>,
         light_grid: LightVertexGrid;
     write sample_radiance: Vec<Vec3>;
@@ -36,7 +37,6 @@ crate::system! {
         else {
             return Flow::new(n, 0);
         };
-        let cap = *capacity;
         let ctx = PathContext::new(&data.scene);
         let stores: Vec<_> = vertices.iter().map(|v| v.view(0..v.capacity())).collect();
         let weighted = settings.strategies == StrategyFilter::All;
@@ -48,7 +48,7 @@ crate::system! {
             .enumerate()
             .map(|(c, out)| {
                 let mut camera: Vec<Vertex> = Vec::new();
-                let mut light: Vec<Vertex> = Vec::new();
+                let mut camera_tails = Vec::new();
                 let mut merged = 0;
                 for (local, value) in out.iter_mut().enumerate() {
                     let k = c * CHUNK + local;
@@ -60,6 +60,9 @@ crate::system! {
                     for (d, store) in stores.iter().enumerate().take(subpath_len[k] as usize) {
                         camera.push(Vertex::from_store(store, k, d));
                     }
+                    if weighted {
+                        weight_tails(&camera, Side::Camera, settings.mis, &mut camera_tails);
+                    }
                     let mut sum = Vec3::ZERO;
                     for t in 2..=camera.len() {
                         let z = &camera[t - 1];
@@ -69,8 +72,8 @@ crate::system! {
                         let wo = towards(z, &camera[t - 2]);
                         let gather_point = GatherPoint::at(z, wo, margin, &data.accel);
                         grid.for_each_within_octants(&light_grid.p, z.p, radius, |i| {
-                            let i = i as usize;
-                            let (sub, s) = (light_grid.subpath[i] as usize, light_grid.depth[i] as usize);
+                            let y = &light_grid.vertex[i as usize];
+                            let s = y.weight.depth as usize;
                             // The merged path y_0..y_{s-1} z_{t-1}..z_0: s + t vertices.
                             let depth = s + t - 2;
                             if depth < min_depth || depth > max_depth {
@@ -80,28 +83,20 @@ crate::system! {
                             if !weighted && !settings.strategies.keeps(s, t) {
                                 return;
                             }
-                            // The light vertex and where it came from first: most
-                            // candidates end at the surface test, before the whole subpath.
-                            let y = Vertex::from_store(&stores[s], sub, s);
-                            let y_prev = Vertex::from_store(&stores[s - 1], sub, s - 1);
-                            let w_light = towards(&y, &y_prev);
-                            if !same_surface(&gather_point, &y, w_light) {
+                            let y_p = light_grid.p[i as usize];
+                            if !same_surface(&gather_point, y_p, y.ng, y.w_light) {
                                 return;
                             }
-                            let f = ctx.f(z, wo, w_light, TransportMode::Radiance);
+                            let f = ctx.f(z, wo, y.w_light, TransportMode::Radiance);
                             if f == Vec3::ZERO {
                                 return;
                             }
                             let weight = if weighted {
-                                light.clear();
-                                for (d, store) in stores.iter().enumerate().take(s) {
-                                    light.push(Vertex::from_store(store, sub, d));
-                                }
-                                ctx.vcm_weight(
-                                    &camera[..t],
-                                    &light,
-                                    (s, t),
-                                    Some(&y),
+                                ctx.merge_weight_from_tails(
+                                    (&camera[..t], &camera_tails),
+                                    t,
+                                    &y.weight,
+                                    y.w_light,
                                     settings.mis,
                                     techniques,
                                 )
@@ -146,21 +141,17 @@ impl<'a> GatherPoint<'a> {
     }
 }
 
-/// Whether light vertex `y`, reached from direction `w_light` (unit, towards its previous
-/// vertex), lies on the gather point's plane and side and sees it.
+/// Whether a light vertex at `p` with normal `ng`, reached from direction `w_light` (unit,
+/// towards its previous vertex), lies on the gather point's plane and side and sees it.
 #[inline]
-fn same_surface(point: &GatherPoint, y: &Vertex, w_light: Vec3) -> bool {
-    let side = if w_light.dot(y.ng) >= 0.0 {
-        y.ng
-    } else {
-        -y.ng
-    };
+fn same_surface(point: &GatherPoint, p: Vec3, ng: Vec3, w_light: Vec3) -> bool {
+    let side = if w_light.dot(ng) >= 0.0 { ng } else { -ng };
     if side.dot(point.ng) < NORMAL_COSINE || w_light.dot(point.ng) <= 0.0 {
         return false;
     }
-    let lift = VISIBILITY_LIFT * (y.p - point.p).length() + point.clearance;
+    let lift = VISIBILITY_LIFT * (p - point.p).length() + point.clearance;
     let start = point.p + lift * point.ng;
-    let to = y.p + lift * side;
+    let to = p + lift * side;
     let Some(dir) = (to - start).try_normalize() else {
         return true;
     };

@@ -9,7 +9,8 @@ use crate::common::{render_bdpt, shrunk_scene, stagelight_command, stderr, temp_
 use stagelight::integrators::SceneData;
 use stagelight::integrators::bdpt::{self, BdptSettings, StrategyFilter, VertexMerging};
 use stagelight::mlt::path_space::PathSpace;
-use stagelight::path::{MisHeuristic, PathContext, Techniques, Vertex, VertexKind};
+use stagelight::path::{MisHeuristic, PathContext, Techniques, Vertex, VertexKind, towards};
+use stagelight::weight_tails::{MergedLight, Side, weight_tails};
 use std::sync::Arc;
 
 /// `0 -> 1`, as the ratio walk reads a delta neighbour's zero density.
@@ -92,6 +93,8 @@ fn check_vcm_weights(scene_name: &str) {
     let s = &data.scene;
     let diagonal = (s.bounds_max - s.bounds_min).length();
     let (mut checked, mut merges_checked, mut caustic_merges) = (0, 0, 0);
+    let (mut camera_tails, mut light_tails) = (Vec::new(), Vec::new());
+    let mut fast_checked = 0;
     for (camera, _) in &subpaths {
         for k in 1..camera.len() {
             let z = &camera[k];
@@ -141,6 +144,21 @@ fn check_vcm_weights(scene_name: &str) {
                             let w =
                                 ctx.vcm_weight(&cam, &light, (s, t), None, heuristic, techniques)
                                     as f64;
+                            weight_tails(&cam, Side::Camera, heuristic, &mut camera_tails);
+                            weight_tails(&light, Side::Light, heuristic, &mut light_tails);
+                            let fast = ctx.connection_weight_from_tails(
+                                (&cam, &camera_tails),
+                                (&light, &light_tails),
+                                (s, t),
+                                heuristic,
+                                techniques,
+                            ) as f64;
+                            assert!(
+                                (fast - w).abs() <= 1e-4 * w + 1e-6,
+                                "{scene_name} {heuristic:?} {techniques:?}: connection ({s},{t}) \
+                                 of a {n}-vertex path weighs {fast} from tails, {w} by the walk"
+                            );
+                            fast_checked += 1;
                             assert!(
                                 (w - want_vc[s]).abs() < 2e-3,
                                 "{scene_name} {heuristic:?} {techniques:?}: connection ({s},{t}) \
@@ -168,6 +186,24 @@ fn check_vcm_weights(scene_name: &str) {
                                     heuristic,
                                     techniques,
                                 ) as f64;
+                                weight_tails(&cam, Side::Camera, heuristic, &mut camera_tails);
+                                weight_tails(&light, Side::Light, heuristic, &mut light_tails);
+                                let merged_light = MergedLight::new(&light[..=s], &light_tails);
+                                let fast = ctx.merge_weight_from_tails(
+                                    (&cam, &camera_tails),
+                                    t,
+                                    &merged_light,
+                                    towards(&merged, &light[s - 1]),
+                                    heuristic,
+                                    techniques,
+                                ) as f64;
+                                assert!(
+                                    (fast - w).abs() <= 1e-4 * w + 1e-6,
+                                    "{scene_name} {heuristic:?} {techniques:?}: merge at x_{s} \
+                                     of a {n}-vertex path weighs {fast} from tails, {w} by the \
+                                     walk"
+                                );
+                                fast_checked += 1;
                                 assert!(
                                     (w - want_vm[s]).abs() < 2e-3,
                                     "{scene_name} {heuristic:?} {techniques:?}: merge at x_{s} \
@@ -195,6 +231,10 @@ fn check_vcm_weights(scene_name: &str) {
     assert!(
         checked > 30,
         "{scene_name}: only {checked} paths reached a light"
+    );
+    assert!(
+        fast_checked > 100,
+        "{scene_name}: only {fast_checked} weights from tails"
     );
     assert!(
         merges_checked > 100,
