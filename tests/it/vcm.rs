@@ -1,6 +1,7 @@
 //! Vertex connection and merging (`vcm`, `bpm`): its MIS weights sum to one over every
 //! connection and merge of a path and equal the weights found by brute force from each
-//! technique's full path density; its connections alone under its weights are BDPT's
+//! technique's full path density, and the constant-time weights from the subpaths' tails
+//! equal the ratio walk's; its connections alone under its weights are BDPT's
 //! estimator; the furnace gives 2; the image does not depend on the thread count.
 
 use crate::bdpt::{assert_agree, halves_over_seeds, split};
