@@ -13,6 +13,7 @@ use crate::components::Surfaces;
 use crate::components::path_tracing::MaterialRanges;
 use crate::components::path_tracing::Scratch;
 use crate::components::{CHUNK, MISS};
+use crate::components::{PathsChunk, SurfacesChunk};
 use crate::geometry::{SurfacePoint, TriangleColumns, surface_point};
 use crate::pipeline::Flow;
 use crate::scene::PreparedScene;
@@ -44,6 +45,11 @@ crate::system! {
         let chunks = taken.div_ceil(CHUNK);
         scratch.chunk_counts.clear();
         scratch.chunk_counts.resize(chunks, [0; QUEUES]);
+        // A scene of one material kind has one queue, and a path's queue needs no look-up of
+        // its triangle's material (a cache miss per path on big scenes).
+        let only_kind = scene.materials.first().map(|m| m.kind()).filter(|&kind| {
+            scene.materials.iter().all(|m| m.kind() == kind)
+        });
         // Pass 1, per chunk in parallel: each slot's queue and the chunk's count per queue.
         {
             let (hits, depth) = (&*hits, &paths.depth);
@@ -57,6 +63,8 @@ crate::system! {
                         let tri = hits.triangle[slot];
                         *q = if tri == MISS || depth[slot] >= max_depth {
                             DROPPED
+                        } else if let Some(kind) = only_kind {
+                            queue_of(kind)
                         } else {
                             let material = scene.triangles.material[tri as usize];
                             queue_of(scene.materials[material as usize].kind())
@@ -121,6 +129,7 @@ crate::system! {
         // until shading and tracing write them again.
         {
             let tris = &scene.triangles;
+            let prefetch = tris.memory_bytes() >= PREFETCH_FROM_BYTES;
             let (from_paths, from_dir, from_hits) = (&*paths, &rays.dir, &*hits);
             let dirs = scratch.rays.dir[..kept].par_chunks_mut(CHUNK);
             let triangles = scratch.hits.triangle[..kept].par_chunks_mut(CHUNK);
@@ -132,18 +141,12 @@ crate::system! {
                 .zip(dirs)
                 .zip(triangles)
                 .zip(order.par_chunks(CHUNK))
-                .for_each(|((((mut p, s), dir), triangle), from)| {
-                    for (i, &slot) in from.iter().enumerate() {
-                        let slot = slot as usize;
-                        p.set(i, from_paths.get(slot));
-                        dir[i] = from_dir[slot];
-                        let t = from_hits.triangle[slot];
-                        triangle[i] = t;
-                        let sp = shading_point(tris, t, from_hits.b1[slot], from_hits.b2[slot]);
-                        s.p[i] = sp.p;
-                        s.p_error[i] = sp.p_error;
-                        s.ng[i] = sp.ng;
-                        s.ns[i] = sp.ns;
+                .for_each(|((((p, s), dir), triangle), from)| {
+                    let chunk = KeptChunk { p, s, dir, triangle };
+                    if prefetch {
+                        move_kept::<true>(tris, from_paths, from_dir, from_hits, chunk, from);
+                    } else {
+                        move_kept::<false>(tris, from_paths, from_dir, from_hits, chunk, from);
                     }
                 });
             std::mem::swap(paths, &mut scratch.paths);
@@ -158,6 +161,98 @@ crate::system! {
             dielectric: counts[0] + counts[1]..kept,
         };
         Flow::new(taken, kept)
+    }
+}
+
+/// One chunk of the destination of the kept paths.
+struct KeptChunk<'a> {
+    p: PathsChunk<'a>,
+    s: SurfacesChunk<'a>,
+    dir: &'a mut [Vec3],
+    triangle: &'a mut [u32],
+}
+
+/// Moves the kept paths of slots `from` into `to` and interpolates their surface points,
+/// prefetching the triangles ahead where `PREFETCH` (a copy of the loop each way, so that
+/// small scenes run the loop without it).
+#[inline(always)]
+fn move_kept<const PREFETCH: bool>(
+    tris: &TriangleColumns,
+    from_paths: &Paths,
+    from_dir: &[Vec3],
+    from_hits: &Hits,
+    to: KeptChunk,
+    from: &[u32],
+) {
+    let KeptChunk {
+        mut p,
+        s,
+        dir,
+        triangle,
+    } = to;
+    for (i, &slot) in from.iter().enumerate() {
+        if PREFETCH {
+            if let Some(&ahead) = from.get(i + PREFETCH_AHEAD) {
+                prefetch_triangle(tris, from_hits.triangle[ahead as usize]);
+            }
+            if let Some(&near) = from.get(i + PREFETCH_AHEAD / 2) {
+                prefetch_vertex_normals(tris, from_hits.triangle[near as usize]);
+            }
+        }
+        let slot = slot as usize;
+        p.set(i, from_paths.get(slot));
+        dir[i] = from_dir[slot];
+        let t = from_hits.triangle[slot];
+        triangle[i] = t;
+        let sp = shading_point(tris, t, from_hits.b1[slot], from_hits.b2[slot]);
+        s.p[i] = sp.p;
+        s.p_error[i] = sp.p_error;
+        s.ng[i] = sp.ng;
+        s.ns[i] = sp.ns;
+    }
+}
+
+/// Scenes whose triangle columns take at least this many bytes prefetch the triangles of the
+/// hits ahead while interpolating surface points: their columns are far beyond the caches,
+/// and each surface point reads five of them (and the vertex normals) at a random triangle.
+/// Smaller scenes stay in the caches, where prefetches only cost instructions.
+const PREFETCH_FROM_BYTES: usize = 4 << 20;
+
+/// How many paths ahead of the one being moved its triangle's columns are asked for (the
+/// vertex normals, which need the triangle's `smooth` entry, half as far ahead).
+const PREFETCH_AHEAD: usize = 16;
+
+/// Asks the CPU to bring into the cache what `surface_point` reads of `triangle`.
+#[inline(always)]
+fn prefetch_triangle(tris: &TriangleColumns, triangle: u32) {
+    let i = triangle as usize;
+    if i < tris.len() {
+        prefetch_line(&tris.p0[i]);
+        prefetch_line(&tris.p1[i]);
+        prefetch_line(&tris.p2[i]);
+        prefetch_line(&tris.normal[i]);
+        prefetch_line(&tris.smooth[i]);
+    }
+}
+
+/// Asks the CPU to bring into the cache the vertex normals of `triangle`, if it has them.
+#[inline(always)]
+fn prefetch_vertex_normals(tris: &TriangleColumns, triangle: u32) {
+    if let Some(&k) = tris.smooth.get(triangle as usize)
+        && let Some(normals) = tris.vertex_normals.get(k as usize)
+    {
+        prefetch_line(normals);
+    }
+}
+
+#[inline(always)]
+fn prefetch_line<T>(item: &T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: a prefetch is a hint that never faults, whatever the address (this one is
+        // a reference's, so valid anyway).
+        unsafe { _mm_prefetch::<_MM_HINT_T0>((item as *const T).cast::<i8>()) };
     }
 }
 
