@@ -1,15 +1,15 @@
 //! Generates one camera ray per sample of the wave: a pinhole camera, each sample uniform
 //! inside its pixel (a one-pixel box filter).
 
-use crate::components::Paths;
-use crate::components::Rays;
 use crate::components::Wave;
 use crate::components::path_tracing::DIM_PIXEL;
+use crate::components::{CHUNK, Paths, PathsChunk, Rays, RaysChunk};
 use crate::components::{Path, PathFlags};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, Stream};
 use crate::scene::Camera;
 use crate::scene::Frustum;
+use crate::systems::shade::lanes::{F, LANES, V3, lanes_of};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -23,32 +23,123 @@ crate::system! {
         let n = wave.len;
         let cam = camera.frustum();
         let (first, pixels) = (wave.first, *pixels);
-        sample_radiance[..n].fill(Vec3::ZERO);
         let rays = rays.chunks_mut(0..n);
         let paths = paths.chunks_mut(0..n);
-        rays.into_par_iter().zip(paths).for_each(|(r, mut p)| {
-            for i in 0..r.len() {
-                let slot = r.start + i;
-                let ray = camera_ray(sampler, &cam, pixels, first + slot as u64);
-                r.origin[i] = ray.origin;
-                r.dir[i] = ray.dir;
-                p.set(
-                    i,
-                    Path {
-                        sample: slot as u32,
-                        key: ray.key,
-                        throughput: Vec3::ONE,
-                        radiance: Vec3::ZERO,
-                        depth: 0,
-                        bsdf_pdf: 0.0,
-                        flags: PathFlags(PathFlags::SPECULAR),
-                    },
-                );
+        // Each chunk zeroes its own samples' radiance (a serial fill was a stretch with one
+        // core idle); slot i holds sample i here.
+        let radiance = sample_radiance[..n].par_chunks_mut(CHUNK);
+        rays.into_par_iter().zip(paths).zip(radiance).for_each(|((r, p), radiance)| {
+            radiance.fill(Vec3::ZERO);
+            #[cfg(target_arch = "x86_64")]
+            if crate::cpu::has_avx512() {
+                // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+                return unsafe { generate_chunk_avx512(sampler, &cam, pixels, first, r, p) };
             }
+            generate_chunk(sampler, &cam, pixels, first, r, p)
         });
         *active = n;
         Flow::new(n, n)
     }
+}
+
+/// `generate_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`): the keys' 64-bit
+/// hashes in vector lanes need its 64-bit multiplies.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+fn generate_chunk_avx512(
+    sampler: &Sampler,
+    cam: &Frustum,
+    pixels: u64,
+    first: u64,
+    r: RaysChunk,
+    p: PathsChunk,
+) {
+    generate_chunk(sampler, cam, pixels, first, r, p)
+}
+
+/// The camera rays and fresh paths of one chunk of the wave's slots (slot i is global sample
+/// `first + i`): under the independent sampler `LANES` at a time, the rest one by one.
+#[inline(always)]
+fn generate_chunk(
+    sampler: &Sampler,
+    cam: &Frustum,
+    pixels: u64,
+    first: u64,
+    r: RaysChunk,
+    mut p: PathsChunk,
+) {
+    let path = |slot: usize, key: SampleKey| Path {
+        sample: slot as u32,
+        key,
+        throughput: Vec3::ONE,
+        radiance: Vec3::ZERO,
+        depth: 0,
+        bsdf_pdf: 0.0,
+        flags: PathFlags(PathFlags::SPECULAR),
+    };
+    let mut i = 0;
+    if let Sampler::Independent { seed } = *sampler {
+        while i + LANES <= r.len() {
+            let slot = r.start + i;
+            let (keys, dir) = camera_ray_lanes(seed, cam, pixels, first + slot as u64);
+            for (l, &key) in keys.iter().enumerate() {
+                r.origin[i + l] = cam.position;
+                r.dir[i + l] = dir.lane(l);
+                p.set(i + l, path(slot + l, key));
+            }
+            i += LANES;
+        }
+    }
+    for i in i..r.len() {
+        let slot = r.start + i;
+        let ray = camera_ray(sampler, cam, pixels, first + slot as u64);
+        r.origin[i] = ray.origin;
+        r.dir[i] = ray.dir;
+        p.set(i, path(slot, ray.key));
+    }
+}
+
+/// `camera_ray` of the `LANES` global samples from `g` on, under the independent sampler
+/// of `seed`: the keys' hashes and the directions in lanes, lane by lane the same operations
+/// (`Sampler::key`, `Sampler::get2`, `Frustum::direction`), so the same bits.
+#[inline(always)]
+fn camera_ray_lanes(seed: u64, cam: &Frustum, pixels: u64, g: u64) -> ([SampleKey; LANES], V3) {
+    let w = cam.width as u64;
+    // Pixels and sample indices stepped from the first lane's (no divisions per lane).
+    let (mut pixel, mut sample) = (g % pixels, g / pixels);
+    let (mut x, mut y) = (pixel % w, pixel / w);
+    let mut lane_pixel = [0u64; LANES];
+    let mut lane_sample = [0u64; LANES];
+    let mut raster_x = F::splat(0.0);
+    let mut raster_y = F::splat(0.0);
+    for l in 0..LANES {
+        lane_pixel[l] = pixel;
+        lane_sample[l] = sample;
+        raster_x.0[l] = x as f32;
+        raster_y.0[l] = y as f32;
+        pixel += 1;
+        x += 1;
+        if x == w {
+            (x, y) = (0, y + 1);
+        }
+        if pixel == pixels {
+            (pixel, sample, x, y) = (0, sample + 1, 0, 0);
+        }
+    }
+    let tag = Stream::Camera.independent_tag();
+    let keys: [SampleKey; LANES] =
+        lanes_of(|l| SampleKey::new(seed, lane_pixel[l] | tag, lane_sample[l]));
+    let (jitter_x, jitter_y) = (
+        F(SampleKey::get_lanes(&keys, &[DIM_PIXEL; LANES])),
+        F(SampleKey::get_lanes(&keys, &[DIM_PIXEL + 1; LANES])),
+    );
+    let (raster_x, raster_y) = (raster_x + jitter_x, raster_y + jitter_y);
+    // Frustum::direction
+    let (w, h) = (cam.width as f32, cam.height as f32);
+    let sx = (2.0 * raster_x / w - 1.0) * cam.tan_half * cam.aspect;
+    let sy = (1.0 - 2.0 * raster_y / h) * cam.tan_half;
+    let dir = V3::splat(cam.forward) + V3::splat(cam.right) * sx + V3::splat(cam.up) * sy;
+    (keys, dir.normalize())
 }
 
 /// The camera ray of one sample and the key of its random numbers.
