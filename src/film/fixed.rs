@@ -194,7 +194,7 @@ impl FixedRgb {
     }
 
     /// Adds a sample in units of 2^(exponent - 64) (nothing is added when it is rejected).
-    #[inline]
+    #[inline(always)]
     pub fn add_sample(&mut self, value: Vec3, exponent: i32) -> Result<(), Rejected> {
         let units = FixedRgb::of(value, exponent)?;
         *self = self.checked_add(&units).ok_or(Rejected::OutOfRange)?;

@@ -159,9 +159,15 @@ impl Film {
                 if !covered(first) && !(first..first + sums.len()).contains(&offset) {
                     return (0, 0);
                 }
-                for (j, (sum, count)) in sums.iter_mut().zip(counts).enumerate() {
-                    let pixel = block * BLOCK + j;
-                    let mut i = (pixel + pixels - offset) % pixels;
+                // The block's first pixel's first sample, then stepped pixel by pixel rather
+                // than divided out for each pixel.
+                let mut first_sample = (first + pixels - offset) % pixels;
+                for (sum, count) in sums.iter_mut().zip(counts) {
+                    let mut i = first_sample;
+                    first_sample += 1;
+                    if first_sample == pixels {
+                        first_sample = 0;
+                    }
                     while i < values.len() {
                         *count += 1;
                         match sum.add_sample(values[i], exponent) {
