@@ -26,6 +26,8 @@ pub struct WeightTail {
     pub emitter: f32,
 }
 
+/// Which subpath a tail is of: the walk steps past every light vertex, but never past the
+/// camera's own vertex, and only the light side holds the emitter strategy (s = 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Side {
     Camera,
@@ -45,7 +47,7 @@ impl WeightTail {
     /// `v` is vertex i, `prev_delta` whether vertex i - 1 is delta (false at i = 0). The walk
     /// never steps past the camera's own vertex.
     #[inline]
-    pub fn extend(
+    fn extend(
         self,
         v: &Vertex,
         i: usize,
