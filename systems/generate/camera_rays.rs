@@ -78,10 +78,10 @@ fn generate_chunk(
         flags: PathFlags(PathFlags::SPECULAR),
     };
     let mut i = 0;
-    if let Sampler::Independent { seed } = *sampler {
+    if let Sampler::Independent { .. } = *sampler {
         while i + LANES <= r.len() {
             let slot = r.start + i;
-            let (keys, dir) = camera_ray_lanes(seed, cam, pixels, first + slot as u64);
+            let (keys, dir) = camera_ray_lanes(sampler, cam, pixels, first + slot as u64);
             for (l, &key) in keys.iter().enumerate() {
                 r.origin[i + l] = cam.position;
                 r.dir[i + l] = dir.lane(l);
@@ -99,11 +99,16 @@ fn generate_chunk(
     }
 }
 
-/// `camera_ray` of the `LANES` global samples from `g` on, under the independent sampler
-/// of `seed`: the keys' hashes and the directions in lanes, lane by lane the same operations
-/// (`Sampler::key`, `Sampler::get2`, `Frustum::direction`), so the same bits.
+/// `camera_ray` of the `LANES` global samples from `g` on, under the independent sampler:
+/// the jitter's hashes and the directions in lanes, lane by lane the same operations
+/// (`Sampler::get2`, `Frustum::direction`), so the same bits (the megakernel's test compares).
 #[inline(always)]
-fn camera_ray_lanes(seed: u64, cam: &Frustum, pixels: u64, g: u64) -> ([SampleKey; LANES], V3) {
+fn camera_ray_lanes(
+    sampler: &Sampler,
+    cam: &Frustum,
+    pixels: u64,
+    g: u64,
+) -> ([SampleKey; LANES], V3) {
     let w = cam.width as u64;
     // Pixels and sample indices stepped from the first lane's (no divisions per lane).
     let (mut pixel, mut sample) = (g % pixels, g / pixels);
@@ -126,9 +131,8 @@ fn camera_ray_lanes(seed: u64, cam: &Frustum, pixels: u64, g: u64) -> ([SampleKe
             (pixel, sample, x, y) = (0, sample + 1, 0, 0);
         }
     }
-    let tag = Stream::Camera.independent_tag();
     let keys: [SampleKey; LANES] =
-        lanes_of(|l| SampleKey::new(seed, lane_pixel[l] | tag, lane_sample[l]));
+        lanes_of(|l| sampler.key(Stream::Camera, lane_pixel[l], lane_sample[l]));
     let (jitter_x, jitter_y) = (
         F(SampleKey::get_lanes(&keys, &[DIM_PIXEL; LANES])),
         F(SampleKey::get_lanes(&keys, &[DIM_PIXEL + 1; LANES])),
