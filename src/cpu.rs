@@ -37,3 +37,17 @@ pub fn has_avx512() -> bool {
         false
     }
 }
+
+/// Asks the CPU to bring the cache line holding `address` into the cache (nothing where the
+/// target has no prefetch instruction). Any address will do: a prefetch never faults.
+#[inline(always)]
+pub fn prefetch<T>(address: *const T) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
+        // SAFETY: a prefetch is a hint that never faults, whatever the address.
+        unsafe { _mm_prefetch::<_MM_HINT_T0>(address.cast::<i8>()) };
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    let _ = address;
+}

@@ -124,30 +124,23 @@ impl Bvh8 {
     /// Asks the CPU to bring the node or packet `reference` into the cache.
     #[inline(always)]
     fn prefetch(&self, tris: &LeafTriangles, reference: u32) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-            let (start, bytes) = if reference & LEAF != 0 {
-                let packet = ((reference & !LEAF) >> LANES) as usize;
-                (
-                    tris.packets.as_ptr().wrapping_add(packet).cast::<i8>(),
-                    std::mem::size_of::<TrianglePacket>(),
-                )
-            } else {
-                (
-                    self.nodes
-                        .as_ptr()
-                        .wrapping_add(reference as usize)
-                        .cast::<i8>(),
-                    std::mem::size_of::<Node>(),
-                )
-            };
-            let mut offset = 0;
-            while offset < bytes {
-                // SAFETY: a prefetch is a hint that never faults, whatever the address.
-                unsafe { _mm_prefetch::<_MM_HINT_T0>(start.wrapping_add(offset)) };
-                offset += 64;
-            }
+        let (start, bytes) = if reference & LEAF != 0 {
+            let packet = ((reference & !LEAF) >> LANES) as usize;
+            (
+                tris.packets.as_ptr().wrapping_add(packet).cast::<u8>(),
+                std::mem::size_of::<TrianglePacket>(),
+            )
+        } else {
+            (
+                self.nodes
+                    .as_ptr()
+                    .wrapping_add(reference as usize)
+                    .cast::<u8>(),
+                std::mem::size_of::<Node>(),
+            )
+        };
+        for offset in (0..bytes).step_by(64) {
+            crate::cpu::prefetch(start.wrapping_add(offset));
         }
     }
 

@@ -227,11 +227,11 @@ const PREFETCH_AHEAD: usize = 16;
 fn prefetch_triangle(tris: &TriangleColumns, triangle: u32) {
     let i = triangle as usize;
     if i < tris.len() {
-        prefetch_line(&tris.p0[i]);
-        prefetch_line(&tris.p1[i]);
-        prefetch_line(&tris.p2[i]);
-        prefetch_line(&tris.normal[i]);
-        prefetch_line(&tris.smooth[i]);
+        crate::cpu::prefetch(&tris.p0[i]);
+        crate::cpu::prefetch(&tris.p1[i]);
+        crate::cpu::prefetch(&tris.p2[i]);
+        crate::cpu::prefetch(&tris.normal[i]);
+        crate::cpu::prefetch(&tris.smooth[i]);
     }
 }
 
@@ -241,18 +241,7 @@ fn prefetch_vertex_normals(tris: &TriangleColumns, triangle: u32) {
     if let Some(&k) = tris.smooth.get(triangle as usize)
         && let Some(normals) = tris.vertex_normals.get(k as usize)
     {
-        prefetch_line(normals);
-    }
-}
-
-#[inline(always)]
-fn prefetch_line<T>(item: &T) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        use std::arch::x86_64::{_MM_HINT_T0, _mm_prefetch};
-        // SAFETY: a prefetch is a hint that never faults, whatever the address (this one is
-        // a reference's, so valid anyway).
-        unsafe { _mm_prefetch::<_MM_HINT_T0>((item as *const T).cast::<i8>()) };
+        crate::cpu::prefetch(normals);
     }
 }
 
