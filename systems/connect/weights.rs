@@ -132,6 +132,8 @@ pub fn weigh_wave(
                 for (d, store) in vertices.iter().enumerate().take(nl) {
                     light.push(Vertex::from_store(store, cap + k, d));
                 }
+                // VCM's merge factor follows the sample's pass radius (a power): once a sample.
+                let techniques = settings.techniques(wave, k, pixels);
                 // Each connection's weight in constant time from these (not through a cache,
                 // whose picks are other subpaths).
                 if cache.is_none() {
@@ -173,7 +175,7 @@ pub fn weigh_wave(
                         (&camera, light_side),
                         (s, t),
                         (strategy_count, connection_count),
-                        settings.techniques(wave, k, pixels),
+                        techniques,
                         cache
                             .is_none()
                             .then_some((&camera_tails[..], &light_tails[..])),
