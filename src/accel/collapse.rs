@@ -4,7 +4,7 @@
 //! section 3.1), then the nodes, with exact boxes, and their leaves packed into shared
 //! four-lane packets. Both passes run in parallel over subtrees.
 
-use super::bvh8::{BuildNode, Bvh8, LEAF, LEAF_MAX, MAX_PACKETS};
+use super::bvh8::{Bvh8, LEAF, LEAF_MAX, MAX_PACKETS, Node};
 use super::triangle::{LANES, TrianglePacket};
 use glam::Vec3;
 use obvhs::bvh2::{Bvh2, node::Bvh2Node};
@@ -141,7 +141,7 @@ pub(crate) fn collapse(bvh: &Bvh2, verts: &[[Vec3; 3]]) -> Collapsed {
 /// transparent huge pages: traversal reads nodes and packets all over hundreds of megabytes, and
 /// with 4 KiB pages nearly every read below the top of the tree misses the TLB. Only a hint:
 /// where the kernel refuses, nothing changes.
-pub(super) fn advise_huge_pages<T>(v: &Vec<T>) {
+fn advise_huge_pages<T>(v: &Vec<T>) {
     #[cfg(target_os = "linux")]
     {
         const HUGE: usize = 2 << 20;
@@ -305,7 +305,7 @@ fn leaf_cost(count: u32) -> f32 {
 /// index 0, its references its own).
 #[derive(Default)]
 struct Part {
-    nodes: Vec<BuildNode>,
+    nodes: Vec<Node>,
     packets: Vec<TrianglePacket>,
     lanes: Vec<u32>,
 }
@@ -374,7 +374,7 @@ impl Builder<'_> {
         mut top: Option<&mut Top>,
     ) -> (u32, Vec3, Vec3) {
         let me = out.nodes.len();
-        out.nodes.push(BuildNode::EMPTY);
+        out.nodes.push(Node::EMPTY);
         if let Some(top) = top.as_deref_mut() {
             top.parents.push(None);
         }

@@ -189,12 +189,12 @@ fn closest_hit_matches_brute_force_on_random_soups() {
     assert!(hits > 500, "too few hits ({hits}) for a meaningful test");
 }
 
-/// The tree's boxes are quantized (eight-bit offsets on a power-of-two grid per node, rounded
-/// outwards): against brute force where that rounding is hardest. A tiny scene (1e-20 across),
-/// scenes far from the origin for their size, triangles of sizes over six orders of magnitude
-/// in one soup, flat axis-aligned triangles (boxes of zero extent along an axis), and rays
-/// along the axes (zero direction components: infinite reciprocals in the box test), from
-/// inside the scene and from the planes of the flat triangles.
+/// Against brute force where the box test's rounding is hardest (written for the quantized
+/// node boxes tried on branch exp-quantized-nodes, kept for any box format): a tiny scene
+/// (1e-20 across), scenes far from the origin for their size, triangles of sizes over six
+/// orders of magnitude in one soup, flat axis-aligned triangles (boxes of zero extent along an
+/// axis), and rays along the axes (zero direction components: infinite reciprocals in the box
+/// test), from inside the scene and from the planes of the flat triangles.
 #[test]
 fn closest_hit_matches_brute_force_at_extreme_scales_and_along_the_axes() {
     let mut rng = Rng::new(13);
