@@ -53,10 +53,10 @@ pub struct Accel {
 }
 
 /// The triangles in leaf order, as four-lane packets (unused lanes are zero triangles, never
-/// tested), and the id in `TriangleColumns` of each lane's triangle (`u32::MAX` if unused).
+/// tested), each with the id in `TriangleColumns` of its lanes' triangles (`u32::MAX` if
+/// unused).
 pub(crate) struct LeafTriangles {
     packets: Vec<triangle::TrianglePacket>,
-    ids: Vec<u32>,
     /// The number of triangles (used lanes).
     len: usize,
 }
@@ -200,7 +200,6 @@ impl Accel {
                 tree: None,
                 tris: LeafTriangles {
                     packets: Vec::new(),
-                    ids: Vec::new(),
                     len: 0,
                 },
                 avx2: false,
@@ -232,16 +231,20 @@ impl Accel {
             None,
         );
         let mut collapsed = collapse::collapse(&bvh2, &kept_verts);
-        // The lanes' indices into `kept` become triangle ids, in place.
+        // The lanes' indices into `kept` become the packets' triangle ids.
         collapsed
-            .lanes
+            .packets
             .par_iter_mut()
-            .for_each(|k| *k = kept.get(*k as usize).copied().unwrap_or(u32::MAX));
+            .zip(collapsed.lanes.par_chunks(LANES))
+            .for_each(|(packet, lanes)| {
+                for (id, &k) in packet.ids.iter_mut().zip(lanes) {
+                    *id = kept.get(k as usize).copied().unwrap_or(u32::MAX);
+                }
+            });
         Accel {
             tree: Some(collapsed.tree),
             tris: LeafTriangles {
                 packets: collapsed.packets,
-                ids: collapsed.lanes,
                 len: kept.len(),
             },
             avx2: crate::cpu::has_avx2_fma(),
@@ -252,8 +255,7 @@ impl Accel {
     pub fn memory_bytes(&self) -> (usize, usize) {
         let nodes = self.tree.as_ref().map_or(0, |t| t.memory_bytes());
         let t = &self.tris;
-        let triangles = t.packets.capacity() * std::mem::size_of::<triangle::TrianglePacket>()
-            + t.ids.capacity() * std::mem::size_of::<u32>();
+        let triangles = t.packets.capacity() * std::mem::size_of::<triangle::TrianglePacket>();
         (nodes, triangles)
     }
 
@@ -285,7 +287,7 @@ impl Accel {
             .traverse::<ANY, AVX2>(&self.tris, &ray, t_max)?;
         Some(Hit {
             t: hit.t,
-            triangle: self.tris.ids[hit.slot as usize],
+            triangle: self.tris.packets[hit.slot as usize / LANES].ids[hit.slot as usize % LANES],
             b1: hit.b1,
             b2: hit.b2,
         })
@@ -346,7 +348,7 @@ impl Accel {
         let packet = *hint as usize;
         if let Some(triangles) = self.tris.packets.get(packet) {
             let used = (0..LANES)
-                .filter(|&lane| self.tris.ids[packet * LANES + lane] != u32::MAX)
+                .filter(|&lane| triangles.ids[lane] != u32::MAX)
                 .fold(0u32, |m, lane| m | (1 << lane));
             let mut t = t_max;
             if ray.intersect4::<true>(triangles, used, &mut t).is_some() {

@@ -122,6 +122,29 @@ fn brute_force(tris: &[[Vec3; 3]], o: Vec3, d: Vec3, t_max: f32) -> Option<Hit> 
     best
 }
 
+/// Checks one ray's closest and any hit against brute force; returns whether it hits.
+fn check_ray(accel: &Accel, tris: &[[Vec3; 3]], o: Vec3, d: Vec3, t_max: f32) -> bool {
+    let expected = brute_force(tris, o, d, t_max);
+    let got = accel.closest_hit(o, d, t_max);
+    match (expected, got) {
+        (None, None) => {}
+        (Some(e), Some(g)) => {
+            assert_eq!(e.t, g.t, "t differs for o={o} d={d}");
+            if e.triangle != g.triangle {
+                // Only a tie at exactly the same t may pick another triangle.
+                let other = intersect_triangle(o, d, &tris[g.triangle as usize], t_max);
+                assert_eq!(other.map(|h| h.0), Some(e.t), "o={o} d={d}");
+            } else {
+                assert_eq!((e.b1, e.b2), (g.b1, g.b2));
+            }
+            assert!(g.t > 0.0 && g.t < t_max);
+        }
+        _ => panic!("brute force {expected:?}, accel {got:?}, o={o} d={d} t_max={t_max}"),
+    }
+    assert_eq!(accel.any_hit(o, d, t_max), got.is_some(), "any_hit");
+    got.is_some()
+}
+
 /// Returns the number of hits seen.
 fn check_against_brute_force(
     tris: &[[Vec3; 3]],
@@ -129,42 +152,19 @@ fn check_against_brute_force(
     rays: usize,
     origin_box: (Vec3, Vec3),
 ) -> usize {
-    let cols = columns(tris);
-    let mut total_hits = 0;
-    {
-        let accel = Accel::build(&cols);
-        let mut hits = 0;
-        for _ in 0..rays {
-            let o = rng.vec_in(origin_box.0, origin_box.1);
-            let d = rng.dir() * rng.range(0.01, 100.0);
-            let t_max = if rng.f() < 0.5 {
-                f32::INFINITY
-            } else {
-                rng.range(0.0, 2.0)
-            };
-            let expected = brute_force(tris, o, d, t_max);
-            let got = accel.closest_hit(o, d, t_max);
-            match (expected, got) {
-                (None, None) => {}
-                (Some(e), Some(g)) => {
-                    hits += 1;
-                    assert_eq!(e.t, g.t, "t differs for o={o} d={d}");
-                    if e.triangle != g.triangle {
-                        // Only a tie at exactly the same t may pick another triangle.
-                        let other = intersect_triangle(o, d, &tris[g.triangle as usize], t_max);
-                        assert_eq!(other.map(|h| h.0), Some(e.t), "o={o} d={d}");
-                    } else {
-                        assert_eq!((e.b1, e.b2), (g.b1, g.b2));
-                    }
-                    assert!(g.t > 0.0 && g.t < t_max);
-                }
-                _ => panic!("brute force {expected:?}, accel {got:?}, o={o} d={d} t_max={t_max}"),
-            }
-            assert_eq!(accel.any_hit(o, d, t_max), got.is_some(), "any_hit");
-        }
-        total_hits += hits;
+    let accel = Accel::build(&columns(tris));
+    let mut hits = 0;
+    for _ in 0..rays {
+        let o = rng.vec_in(origin_box.0, origin_box.1);
+        let d = rng.dir() * rng.range(0.01, 100.0);
+        let t_max = if rng.f() < 0.5 {
+            f32::INFINITY
+        } else {
+            rng.range(0.0, 2.0)
+        };
+        hits += usize::from(check_ray(&accel, tris, o, d, t_max));
     }
-    total_hits
+    hits
 }
 
 #[test]
@@ -187,6 +187,69 @@ fn closest_hit_matches_brute_force_on_random_soups() {
         (lo * 12.0 + offset, hi * 12.0 + offset),
     );
     assert!(hits > 500, "too few hits ({hits}) for a meaningful test");
+}
+
+/// Against brute force where the box test's rounding is hardest (written for the quantized
+/// node boxes tried on branch exp-quantized-nodes, kept for any box format): a tiny scene
+/// (1e-20 across), scenes far from the origin for their size, triangles of sizes over six
+/// orders of magnitude in one soup, flat axis-aligned triangles (boxes of zero extent along an
+/// axis), and rays along the axes (zero direction components: infinite reciprocals in the box
+/// test), from inside the scene and from the planes of the flat triangles.
+#[test]
+fn closest_hit_matches_brute_force_at_extreme_scales_and_along_the_axes() {
+    let mut rng = Rng::new(13);
+    let mut hits = 0;
+    for (scale, offset) in [(1e-20, 0.0), (1.0, 0.0), (1.0, 3e5), (1e7, 1e11)] {
+        let centre = Vec3::new(offset, -0.5 * offset, 0.25 * offset);
+        let (lo, hi) = (centre - Vec3::splat(scale), centre + Vec3::splat(scale));
+        let mut tris: Vec<[Vec3; 3]> = (0..1500)
+            .map(|_| {
+                let c = rng.vec_in(lo, hi);
+                let s = scale * 10f32.powf(rng.range(-5.0, 0.5));
+                [c + s * rng.dir(), c + s * rng.dir(), c + s * rng.dir()]
+            })
+            .collect();
+        // Flat axis-aligned triangles, some sharing a plane with an axis ray below.
+        let flat: Vec<[Vec3; 3]> = (0..300)
+            .map(|k| {
+                let axis = k % 3;
+                let mut c = rng.vec_in(lo, hi);
+                c[axis] = centre[axis] + scale * ((k / 3) % 5) as f32 * 0.25;
+                let s = scale * rng.range(0.01, 0.3);
+                let mut corner = || {
+                    let mut v = c + s * rng.dir();
+                    v[axis] = c[axis];
+                    v
+                };
+                [corner(), corner(), corner()]
+            })
+            .collect();
+        tris.extend(flat);
+        tris.retain(|t| (t[1] - t[0]).cross(t[2] - t[0]) != Vec3::ZERO);
+        let accel = Accel::build(&columns(&tris));
+        for k in 0..6000 {
+            let mut o = rng.vec_in(lo, hi);
+            let d = if k % 2 == 0 {
+                // Along an axis, sometimes from a flat triangle's plane.
+                let axis = k / 2 % 3;
+                if k % 8 == 0 {
+                    o[(axis + 1) % 3] = centre[(axis + 1) % 3] + scale * (k / 8 % 5) as f32 * 0.25;
+                }
+                let mut d = Vec3::ZERO;
+                d[axis] = if k % 4 == 0 { 1.0 } else { -1.0 };
+                d
+            } else {
+                rng.dir()
+            };
+            let t_max = if k % 3 == 0 {
+                f32::INFINITY
+            } else {
+                3.0 * scale * rng.f()
+            };
+            hits += usize::from(check_ray(&accel, &tris, o, d, t_max));
+        }
+    }
+    assert!(hits > 4000, "too few hits ({hits}) for a meaningful test");
 }
 
 /// One outsized triangle (a floor 2e10 wide) under a small scene: the tree is built from boxes
