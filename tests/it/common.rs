@@ -80,6 +80,19 @@ pub fn block_means(image: &Image, block: usize) -> Vec<[f64; 3]> {
     out
 }
 
+/// `block_luminance_stats` of eight PT renders (seeds 300..308) of a scene in tests/scenes:
+/// the reference the block tests of other integrators compare with.
+pub fn pt_block_reference(scene: &str, spp: u64) -> Vec<(f64, f64)> {
+    let pt: Vec<Image> = (0..8)
+        .map(|seed| {
+            render_pt(load_test_scene(scene), spp, 300 + seed, u32::MAX)
+                .film
+                .image()
+        })
+        .collect();
+    block_luminance_stats(&pt)
+}
+
 /// Per 16x16 block, the luminance mean over renders (one per seed) and its standard error.
 pub fn block_luminance_stats(images: &[Image]) -> Vec<(f64, f64)> {
     block_luminance_stats_of(images, 16)

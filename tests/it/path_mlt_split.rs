@@ -4,7 +4,7 @@
 //! every 16x16 block agrees with PT's within the spread of their seeds. MLT's pixels are
 //! correlated within a seed, so seeds are compared, not pixels.
 
-use crate::common::{assert_blocks_agree, block_luminance_stats, load_test_scene, render_pt};
+use crate::common::{assert_blocks_agree, load_test_scene, pt_block_reference};
 use stagelight::film::Image;
 use stagelight::integrators::driver::{PassState, run_passes};
 use stagelight::integrators::path_mlt::{PathMltSettings, PathMltState};
@@ -38,14 +38,7 @@ fn path_mlt_direct_split_agrees_with_pt_per_block_through_glass() {
     // per pixel: median 0.295, mean 0.308, PT 0.317, one seed 0.425), so the mean of 4 is
     // usually low: 4 seeds failed here by 6 standard errors, 12 do not.
     const SEEDS: u64 = 12;
-    let pt: Vec<Image> = (0..8)
-        .map(|seed| {
-            render_pt(load_test_scene(SCENE), 128, 300 + seed, u32::MAX)
-                .film
-                .image()
-        })
-        .collect();
-    let reference = block_luminance_stats(&pt);
+    let reference = pt_block_reference(SCENE, 128);
     for direct_spp in [16, 0] {
         let images: Vec<Image> = (0..SEEDS).map(|seed| mlt(seed, direct_spp, 32)).collect();
         let what = format!("direct spp {direct_spp}");

@@ -480,16 +480,9 @@ fn merges_alone_agree_with_bdpt_strategies_alone_per_half() {
 /// light, and the default radius' blur stays below the seeds' spread.
 #[test]
 fn vcm_and_bpm_agree_with_pt_per_block_on_glass_spheres() {
-    use crate::common::{assert_blocks_agree, block_luminance_stats, load_test_scene, render_pt};
+    use crate::common::{assert_blocks_agree, load_test_scene, pt_block_reference};
     const SCENE: &str = "glass_spheres.ron";
-    let pt: Vec<_> = (0..8)
-        .map(|seed| {
-            render_pt(load_test_scene(SCENE), 512, 300 + seed, u32::MAX)
-                .film
-                .image()
-        })
-        .collect();
-    let reference = block_luminance_stats(&pt);
+    let reference = pt_block_reference(SCENE, 512);
     let scene = load_test_scene(SCENE);
     let data = SceneData::new(scene.clone());
     let render = stagelight::integrators::RenderSettings::default();
