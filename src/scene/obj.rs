@@ -1,7 +1,13 @@
-//! Wavefront OBJ meshes: vertices (`v`), vertex normals (`vn`) and polygonal faces (`f`, with
-//! `v`, `v/vt`, `v//vn` or `v/vt/vn` references, negative ones relative to the end), every
-//! group merged into one mesh; other statements (texture coordinates, groups, materials,
-//! lines, points) are ignored. Errors name the mesh file and its line.
+//! Wavefront OBJ meshes: vertices (`v`), vertex normals (`vn`), texture coordinates (`vt`)
+//! and polygonal faces (`f`, with `v`, `v/vt`, `v//vn` or `v/vt/vn` references, negative ones
+//! relative to the end), every group merged into one mesh; other statements (groups,
+//! materials, lines, points) are ignored. Errors name the mesh file and its line.
+//!
+//! Texture coordinates become `Mesh::uvs` as written in the file (v is not flipped; Mitsuba's
+//! reader flips it by default, see `Mesh::flip_tex_coords`); a corner without a `vt`
+//! reference gets (0, 0), as in Mitsuba. They are only kept, not rendered, so a file whose
+//! texture coordinates are unusable (a `vt` that is not numbers or not finite, a face that
+//! refers to a `vt` the file lacks) still loads as before: its uvs are dropped with a warning.
 //!
 //! Polygons of up to `FAN_LIMIT` vertices are triangulated as a fan from their first vertex
 //! (as tobj and most tools do); larger ones by halving (the triangles (0, 1, 2), (2, 3, 4),
@@ -11,15 +17,19 @@
 //! ones inside.
 
 use super::shapes::{Mesh, MeshFile};
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 use std::path::Path;
 
 /// Polygons with more vertices than this are triangulated by halving instead of as a fan.
 pub const FAN_LIMIT: usize = 32;
 
-/// A face's corner: its position index and normal index (0-based).
-type Corner = (usize, Option<usize>);
+/// A face's corner: its position, texture coordinate and normal indices (0-based).
+type Corner = (usize, Option<usize>, Option<usize>);
+
+/// A face's corner as parsed: the texture index is `Err` with the reason when the reference
+/// cannot be used.
+type ParsedCorner = (usize, Option<Result<usize, String>>, Option<usize>);
 
 /// Reads an OBJ file; errors and warnings name it (and the line).
 pub fn load_obj(path: &Path) -> Result<MeshFile, String> {
@@ -37,6 +47,9 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
     let at = |line: usize, what: String| format!("mesh file {name} line {line}: {what}");
     let mut positions: Vec<DVec3> = Vec::new();
     let mut file_normals: Vec<Option<DVec3>> = Vec::new();
+    let mut texcoords: Vec<DVec2> = Vec::new();
+    // The first reason the texture coordinates cannot be used, and its line.
+    let mut uv_problem: Option<(usize, String)> = None;
     let mut bad_normals = 0usize;
     let mut first_bad_normal = 0usize;
     // Faces as (line, [(position, normal)]) with indices resolved to 0-based, checked against
@@ -94,17 +107,50 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
                     file_normals.push(n);
                 }
             }
+            b"vt" => {
+                // u, then v (0 when missing, as the OBJ format has it), then an ignored w.
+                let mut uv = [0.0f64; 2];
+                let mut problem = None;
+                for (k, c) in uv.iter_mut().enumerate() {
+                    match tokens.next() {
+                        Some(token) => match number(token) {
+                            Some(x) if x.is_finite() => *c = x,
+                            _ => {
+                                problem = Some(format!(
+                                    "texture coordinate \"{}\" is not a finite number",
+                                    echo_token(token)
+                                ))
+                            }
+                        },
+                        None if k == 0 => problem = Some("`vt` needs a number".into()),
+                        None => {}
+                    }
+                }
+                if let Some(problem) = problem
+                    && uv_problem.is_none()
+                {
+                    uv_problem = Some((line, problem));
+                }
+                texcoords.push(DVec2::from_array(uv));
+            }
             b"f" => {
                 let mut corners = Vec::new();
                 for token in tokens {
-                    corners.push(corner(token, positions.len(), file_normals.len()).map_err(
-                        |what| {
-                            at(
-                                line,
-                                format!("face vertex \"{}\": {what}", echo_token(token)),
-                            )
-                        },
-                    )?);
+                    let (p, t, n) =
+                        corner(token, positions.len(), texcoords.len(), file_normals.len())
+                            .map_err(|what| {
+                                at(
+                                    line,
+                                    format!("face vertex \"{}\": {what}", echo_token(token)),
+                                )
+                            })?;
+                    let t = t.map(|t| {
+                        t.unwrap_or_else(|problem| {
+                            uv_problem.get_or_insert((line, problem));
+                            usize::MAX
+                        })
+                    });
+                    corners.push((p, t, n));
                 }
                 if corners.len() < 3 {
                     return Err(at(
@@ -124,15 +170,40 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
         return Err(format!("mesh file {name} has no faces"));
     }
 
-    // One vertex per distinct (position, normal) pair, as tobj's `single_index` makes them.
+    // Texture references are checked against the whole file, as positions are (a face may use
+    // a `vt` defined after it); the first unusable one drops the uvs.
+    if uv_problem.is_none()
+        && let Some((line, t)) = faces.iter().find_map(|(line, corners)| {
+            corners
+                .iter()
+                .find_map(|&(_, t, _)| t.filter(|&t| t >= texcoords.len()).map(|t| (*line, t)))
+        })
+    {
+        uv_problem = Some((
+            line,
+            format!(
+                "a face refers to texture coordinate {} but the file has {}",
+                t + 1,
+                texcoords.len()
+            ),
+        ));
+    }
+    let with_uvs = uv_problem.is_none()
+        && faces
+            .iter()
+            .any(|(_, corners)| corners.iter().any(|&(_, t, _)| t.is_some()));
+
+    // One vertex per distinct (position, texture, normal) triple, as tobj's `single_index`
+    // makes them (the texture index only counts when the uvs are kept).
     let mut mesh = Mesh::default();
     let mut normals: Vec<DVec3> = Vec::new();
+    let mut uvs: Vec<DVec2> = Vec::new();
     let mut any_normals = false;
-    let mut vertex_of: HashMap<(usize, Option<usize>), u32> = HashMap::new();
+    let mut vertex_of: HashMap<Corner, u32> = HashMap::new();
     let mut polygon: Vec<u32> = Vec::new();
     for (line, corners) in &faces {
         polygon.clear();
-        for &(p, n) in corners {
+        for &(p, t, n) in corners {
             if p >= positions.len() {
                 return Err(at(
                     *line,
@@ -158,18 +229,23 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
             if mesh.positions.len() >= u32::MAX as usize {
                 return Err(format!("mesh file {name} has too many vertices"));
             }
+            let t = t.filter(|_| with_uvs);
             let next = mesh.positions.len() as u32;
-            let v = *vertex_of.entry((p, n)).or_insert_with(|| {
+            let v = *vertex_of.entry((p, t, n)).or_insert_with(|| {
                 mesh.positions.push(positions[p]);
                 let normal = n.and_then(|n| file_normals[n]);
                 any_normals |= normal.is_some();
                 normals.push(normal.unwrap_or(DVec3::ZERO));
+                if with_uvs {
+                    uvs.push(t.map_or(DVec2::ZERO, |t| texcoords[t]));
+                }
                 next
             });
             polygon.push(v);
         }
         triangulate(&polygon, &mut mesh.triangles);
     }
+    mesh.uvs = with_uvs.then_some(uvs);
     mesh.normals = any_normals.then_some(normals);
     let mut warnings = Vec::new();
     if bad_normals > 0 {
@@ -178,6 +254,11 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
              infinite, NaN or zero: the faces that use {} are shaded flat",
             if bad_normals == 1 { " is" } else { "s are" },
             if bad_normals == 1 { "it" } else { "them" },
+        ));
+    }
+    if let Some((line, problem)) = uv_problem {
+        warnings.push(format!(
+            "mesh file {name} line {line}: {problem}: the mesh's texture coordinates are dropped"
         ));
     }
     Ok(MeshFile { mesh, warnings })
@@ -229,17 +310,31 @@ fn echo_token(token: &[u8]) -> String {
 
 /// A face's vertex reference `v`, `v/vt`, `v//vn` or `v/vt/vn`: the 0-based position and
 /// normal indices (negative references count back from the vertices defined so far).
-fn corner(token: &[u8], positions: usize, normals: usize) -> Result<Corner, String> {
+fn corner(
+    token: &[u8],
+    positions: usize,
+    texcoords: usize,
+    normals: usize,
+) -> Result<ParsedCorner, String> {
     let mut parts = token.split(|&b| b == b'/');
     let p = parts.next().unwrap_or_default();
-    let _texture = parts.next();
+    let t = parts.next().filter(|t| !t.is_empty());
     let n = parts.next().filter(|n| !n.is_empty());
     if parts.next().is_some() {
         return Err("more than three indices".into());
     }
     let p = resolve(p, positions)?;
+    // A bad texture reference only costs the mesh its uvs (see the module comment).
+    let t = t.map(|t| {
+        resolve(t, texcoords).map_err(|what| {
+            format!(
+                "face vertex \"{}\": texture coordinate {what}",
+                echo_token(token)
+            )
+        })
+    });
     let n = n.map(|n| resolve(n, normals)).transpose()?;
-    Ok((p, n))
+    Ok((p, t, n))
 }
 
 /// A 1-based index, or a negative one counting back from `count`, as a 0-based index.
@@ -305,5 +400,83 @@ mod tests {
         assert_eq!(m.warnings.len(), 1);
         assert!(m.warnings[0].contains("line 4"), "{:?}", m.warnings);
         assert_eq!(m.mesh.normals, None);
+    }
+
+    const TRIANGLE: &str = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+
+    fn uvs(m: &MeshFile) -> Vec<[f64; 2]> {
+        m.mesh
+            .uvs
+            .as_ref()
+            .unwrap()
+            .iter()
+            .map(|uv| uv.to_array())
+            .collect()
+    }
+
+    #[test]
+    fn texture_coordinates_are_read_unflipped() {
+        let text = format!("{TRIANGLE}vt 0.25 0.75\nvt 1 0 0.5\nvt 0.5\nf 1/1 2/2 3/3\n");
+        let m = parse_obj("m.obj", text.as_bytes()).unwrap();
+        assert!(m.warnings.is_empty(), "{:?}", m.warnings);
+        assert_eq!(uvs(&m), vec![[0.25, 0.75], [1.0, 0.0], [0.5, 0.0]]);
+        // Relative references, and Mitsuba's flip.
+        let text = format!("{TRIANGLE}vt 0.25 0.75\nvt 1 0\nvt 0.5 1\nf 1/-3 2/-2 3/-1/\n");
+        let mut m = parse_obj("m.obj", text.as_bytes()).unwrap();
+        assert_eq!(uvs(&m), vec![[0.25, 0.75], [1.0, 0.0], [0.5, 1.0]]);
+        m.mesh.flip_tex_coords();
+        assert_eq!(uvs(&m), vec![[0.25, 0.25], [1.0, 1.0], [0.5, 0.0]]);
+        // No `vt` references: no uvs.
+        let m = parse_obj("m.obj", format!("{TRIANGLE}vt 1 1\nf 1 2 3\n").as_bytes()).unwrap();
+        assert_eq!(m.mesh.uvs, None);
+    }
+
+    #[test]
+    fn texture_coordinates_split_vertices() {
+        // Vertex 1 with two different uvs becomes two vertices; a corner without one gets
+        // (0, 0), as in Mitsuba.
+        let text = format!("{TRIANGLE}v 1 1 0\nvt 0 0\nvt 1 1\nf 1/1 2/1 3/1\nf 1/2 4 2/1\n");
+        let m = parse_obj("m.obj", text.as_bytes()).unwrap();
+        assert_eq!(m.mesh.positions.len(), 5);
+        assert_eq!(m.mesh.triangles, vec![[0, 1, 2], [3, 4, 1]]);
+        assert_eq!(m.mesh.positions[3], m.mesh.positions[0]);
+        assert_eq!(
+            uvs(&m),
+            vec![[0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [1.0, 1.0], [0.0, 0.0]]
+        );
+    }
+
+    #[test]
+    fn unusable_texture_coordinates_are_dropped_with_a_warning() {
+        let cases = [
+            (
+                "vt 0 0\nf 1/1 2/5 3/1\n",
+                "line 5: a face refers to texture coordinate 5 but the file has 1",
+            ),
+            (
+                "vt 0 0\nf 1/1 2/-3 3/1\n",
+                "line 5: face vertex \"2/-3\": texture coordinate relative index -3",
+            ),
+            ("vt 0 0\nf 1/x 2/1 3/1\n", "texture coordinate not an index"),
+            (
+                "vt a 0\nf 1/1 2/1 3/1\n",
+                "line 4: texture coordinate \"a\" is not a finite number",
+            ),
+            ("vt 0 nan\nf 1/1 2/1 3/1\n", "\"nan\" is not a finite"),
+            ("vt\nf 1/1 2/1 3/1\n", "line 4: `vt` needs a number"),
+            ("f 1/1 2/1 3/1\n", "texture coordinate 1 but the file has 0"),
+        ];
+        for (tail, phrase) in cases {
+            let text = format!("{TRIANGLE}{tail}");
+            let m = parse_obj("m.obj", text.as_bytes()).unwrap_or_else(|e| panic!("{tail}: {e}"));
+            assert_eq!(m.mesh.uvs, None, "{tail}");
+            assert_eq!(m.mesh.triangles, vec![[0, 1, 2]], "{tail}");
+            assert_eq!(m.warnings.len(), 1, "{tail}");
+            let w = &m.warnings[0];
+            assert!(
+                w.contains(phrase) && w.ends_with("texture coordinates are dropped"),
+                "{w}"
+            );
+        }
     }
 }

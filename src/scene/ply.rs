@@ -1,8 +1,10 @@
 //! Stanford PLY meshes, read with `ply-rs-bw` (ASCII, binary little-endian and binary
 //! big-endian): the `vertex` element's `x`, `y`, `z` (any scalar type) and, when all three are
-//! there, its `nx`, `ny`, `nz` as vertex normals; the `face` element's `vertex_indices` (or
-//! `vertex_index`) list of any integer type. Other elements and properties (colours, texture
-//! coordinates, edges, materials) are read past and ignored. Polygons are triangulated as OBJ
+//! there, its `nx`, `ny`, `nz` as vertex normals, and texture coordinates as Mitsuba's PLY
+//! reader finds them (`texture_u`/`texture_v`, else `s`/`t`, else `u`/`v`, stored unflipped as
+//! Mitsuba does by default; uvs that are not finite are dropped with a warning); the `face`
+//! element's `vertex_indices` (or `vertex_index`) list of any integer type. Other elements and
+//! properties (colours, edges, materials) are read past and ignored. Polygons are triangulated as OBJ
 //! polygons are (`obj::triangulate`: fans up to 32 vertices, halving beyond); a face of fewer
 //! than 3 vertices, an index outside the file or a negative one is an error, as is a vertex
 //! that is not finite. Normals that are not finite or zero are a warning, and the faces that
@@ -12,7 +14,7 @@
 //! being read; the crate's multi-line messages are flattened to one short line.
 
 use super::shapes::{Mesh, MeshFile};
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use ply_rs_bw::parser::{Parser, Reader};
 use ply_rs_bw::ply::{ElementDef, Header, Property, PropertyAccess, PropertyAccessResult};
 use std::io::{BufRead, Write};
@@ -25,26 +27,52 @@ pub fn load_ply(path: &Path) -> Result<MeshFile, String> {
     parse_ply(&name, std::io::BufReader::with_capacity(1 << 16, file))
 }
 
-/// A vertex as read: position and normal in double precision.
-#[derive(Default)]
-struct Vertex {
-    p: [f64; 3],
-    n: [f64; 3],
+/// Which pair of vertex properties holds the texture coordinates (a const parameter of
+/// `Vertex`, since the crate builds each record without context).
+const NO_UV: u8 = 0;
+const UV_U_V: u8 = 1;
+const UV_S_T: u8 = 2;
+const UV_TEXTURE_U_V: u8 = 3;
+
+/// The texture coordinate properties of a vertex element, as Mitsuba looks for them:
+/// `texture_u`/`texture_v`, else `s`/`t`, else `u`/`v`.
+fn uv_names(def: &ElementDef) -> u8 {
+    let has = |name: &str| def.properties.contains_key(name);
+    if has("texture_u") && has("texture_v") {
+        UV_TEXTURE_U_V
+    } else if has("s") && has("t") {
+        UV_S_T
+    } else if has("u") && has("v") {
+        UV_U_V
+    } else {
+        NO_UV
+    }
 }
 
-impl PropertyAccess for Vertex {
+/// A vertex as read: position, normal and texture coordinates in double precision; `UV`
+/// names the properties the texture coordinates come from.
+#[derive(Default)]
+struct Vertex<const UV: u8> {
+    p: [f64; 3],
+    n: [f64; 3],
+    uv: [f64; 2],
+}
+
+impl<const UV: u8> PropertyAccess for Vertex<UV> {
     fn new() -> Self {
         Vertex::default()
     }
 
     fn set_property(&mut self, name: &str, property: Property) -> PropertyAccessResult {
-        let slot = match name {
-            "x" => &mut self.p[0],
-            "y" => &mut self.p[1],
-            "z" => &mut self.p[2],
-            "nx" => &mut self.n[0],
-            "ny" => &mut self.n[1],
-            "nz" => &mut self.n[2],
+        let slot = match (name, UV) {
+            ("x", _) => &mut self.p[0],
+            ("y", _) => &mut self.p[1],
+            ("z", _) => &mut self.p[2],
+            ("nx", _) => &mut self.n[0],
+            ("ny", _) => &mut self.n[1],
+            ("nz", _) => &mut self.n[2],
+            ("u", UV_U_V) | ("s", UV_S_T) | ("texture_u", UV_TEXTURE_U_V) => &mut self.uv[0],
+            ("v", UV_U_V) | ("t", UV_S_T) | ("texture_v", UV_TEXTURE_U_V) => &mut self.uv[1],
             _ => return PropertyAccessResult::Ignored,
         };
         match scalar(&property) {
@@ -165,7 +193,25 @@ pub fn parse_ply<R: BufRead>(name: &str, source: R) -> Result<MeshFile, String> 
         ));
     }
 
-    let mut vertices: Vec<Vertex> = Vec::new();
+    let uv = uv_names(vertex_def);
+    match uv {
+        UV_U_V => read_mesh::<UV_U_V, R>(name, reader, &header, with_normals),
+        UV_S_T => read_mesh::<UV_S_T, R>(name, reader, &header, with_normals),
+        UV_TEXTURE_U_V => read_mesh::<UV_TEXTURE_U_V, R>(name, reader, &header, with_normals),
+        _ => read_mesh::<NO_UV, R>(name, reader, &header, with_normals),
+    }
+}
+
+/// The elements after the header, and the mesh they make; `UV` names the texture coordinate
+/// properties (`NO_UV`: none).
+fn read_mesh<const UV: u8, R: BufRead>(
+    name: &str,
+    mut reader: Reader<R>,
+    header: &Header,
+    with_normals: bool,
+) -> Result<MeshFile, String> {
+    let fail = |what: String| format!("mesh file {name}: {what}");
+    let mut vertices: Vec<Vertex<UV>> = Vec::new();
     let mut faces: Vec<Face> = Vec::new();
     for (element, def) in &header.elements {
         let read = |e: ply_rs_bw::parser::ParseError| {
@@ -176,10 +222,10 @@ pub fn parse_ply<R: BufRead>(name: &str, source: R) -> Result<MeshFile, String> 
             ))
         };
         match element.as_str() {
-            "vertex" => vertices = read_element(&mut reader, def, &header).map_err(read)?,
-            "face" => faces = read_element(&mut reader, def, &header).map_err(read)?,
+            "vertex" => vertices = read_element(&mut reader, def, header).map_err(read)?,
+            "face" => faces = read_element(&mut reader, def, header).map_err(read)?,
             _ => {
-                read_element::<Skipped, R>(&mut reader, def, &header).map_err(read)?;
+                read_element::<Skipped, R>(&mut reader, def, header).map_err(read)?;
             }
         }
     }
@@ -219,6 +265,16 @@ pub fn parse_ply<R: BufRead>(name: &str, source: R) -> Result<MeshFile, String> 
                  that use {} are shaded flat",
                 if bad == 1 { " is" } else { "s are" },
                 if bad == 1 { "it" } else { "them" },
+            ));
+        }
+    }
+    if UV != NO_UV {
+        if vertices.iter().all(|v| v.uv.iter().all(|c| c.is_finite())) {
+            mesh.uvs = Some(vertices.iter().map(|v| DVec2::from_array(v.uv)).collect());
+        } else {
+            warnings.push(format!(
+                "mesh file {name}: texture coordinates that are not finite: the mesh's \
+                 texture coordinates are dropped"
             ));
         }
     }
@@ -467,5 +523,55 @@ mod tests {
             let e = parse(&whole[..cut]).expect_err(&format!("cut at {cut}"));
             assert!(!e.contains('\n') && e.contains("m.ply"), "{e:?}");
         }
+    }
+
+    #[test]
+    fn texture_coordinates_as_mitsuba_finds_them() {
+        let with = |properties: &str, extra: &str| {
+            SQUARE_ASCII
+                .replace(
+                    "property float z\n",
+                    &format!("property float z\n{properties}"),
+                )
+                .replace("0 0 0\n1 0 0\n1 1 0\n0 1 0\n", extra)
+        };
+        let values = "0 0 0 0.1 0.2\n1 0 0 0.3 0.4\n1 1 0 0.5 0.6\n0 1 0 0.7 0.8\n";
+        let want = [[0.1, 0.2], [0.3, 0.4], [0.5, 0.6], [0.7, 0.8]];
+        for pair in [("u", "v"), ("s", "t"), ("texture_u", "texture_v")] {
+            let text = with(
+                &format!("property float {}\nproperty double {}\n", pair.0, pair.1),
+                values,
+            );
+            let m = parse(text.as_bytes()).unwrap();
+            let uvs: Vec<[f64; 2]> = m.mesh.uvs.unwrap().iter().map(|uv| uv.to_array()).collect();
+            let uvs: Vec<[f64; 2]> = uvs.iter().map(|uv| uv.map(|c| (c as f32) as f64)).collect();
+            let want: Vec<[f64; 2]> = want
+                .iter()
+                .map(|uv| uv.map(|c| (c as f32) as f64))
+                .collect();
+            assert_eq!(uvs, want, "{pair:?}");
+        }
+        // s/t wins over u/v, texture_u/texture_v over both (Mitsuba renames them to u/v).
+        let text = with(
+            "property float u\nproperty float v\nproperty float s\nproperty float t\n",
+            "0 0 0 9 9 0.5 0.25\n1 0 0 9 9 0 0\n1 1 0 9 9 0 0\n0 1 0 9 9 0 0\n",
+        );
+        let m = parse(text.as_bytes()).unwrap();
+        assert_eq!(m.mesh.uvs.unwrap()[0], DVec2::new(0.5, 0.25));
+        // Half a pair is not texture coordinates.
+        let text = with("property float u\n", "0 0 0 1\n1 0 0 1\n1 1 0 1\n0 1 0 1\n");
+        assert_eq!(parse(text.as_bytes()).unwrap().mesh.uvs, None);
+        // Not finite: dropped with a warning.
+        let text = with(
+            "property float u\nproperty float v\n",
+            "0 0 0 0 0\n1 0 0 1e39 0\n1 1 0 0 0\n0 1 0 0 0\n",
+        );
+        let m = parse(text.as_bytes()).unwrap();
+        assert_eq!(m.mesh.uvs, None);
+        assert!(
+            m.warnings[0].contains("texture coordinates are dropped"),
+            "{:?}",
+            m.warnings
+        );
     }
 }

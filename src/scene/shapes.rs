@@ -3,7 +3,7 @@
 //!
 //! Windings follow SCENES.md: counter-clockwise seen from the side the normal points to.
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 use std::collections::HashMap;
 use std::f64::consts::TAU;
 use std::path::Path;
@@ -16,9 +16,23 @@ pub struct Mesh {
     /// Per-vertex shading normals (same indexing as `positions`), or `None` for flat shading.
     /// A zero normal marks a vertex without one: its triangles are shaded flat.
     pub normals: Option<Vec<DVec3>>,
+    /// Per-vertex texture coordinates (same indexing as `positions`), or `None` when the
+    /// source has none. Kept for the Mitsuba reader's textures; the renderer does not read
+    /// them yet. They are the values as the source holds them: an OBJ file's `vt` are NOT
+    /// flipped here, while Mitsuba's `obj` plugin flips v by default (`flip_tex_coords`), so
+    /// a caller that wants Mitsuba's uvs calls `flip_tex_coords` on an OBJ mesh.
+    pub uvs: Option<Vec<DVec2>>,
 }
 
 impl Mesh {
+    /// Replaces every texture coordinate (u, v) by (u, 1 - v): Mitsuba's `flip_tex_coords`,
+    /// on by default for its OBJ reader (OBJ's v axis points up an image, Mitsuba's down).
+    pub fn flip_tex_coords(&mut self) {
+        for uv in self.uvs.iter_mut().flatten() {
+            uv.y = 1.0 - uv.y;
+        }
+    }
+
     /// Appends the quad (a, b, c, d) as the triangles (a, b, c) and (a, c, d).
     fn push_quad(&mut self, corners: [DVec3; 4]) {
         let o = self.positions.len() as u32;
@@ -39,6 +53,7 @@ pub fn triangle(a: DVec3, b: DVec3, c: DVec3) -> Mesh {
         positions: vec![a, b, c],
         triangles: vec![[0, 1, 2]],
         normals: None,
+        uvs: None,
     }
 }
 
@@ -125,6 +140,7 @@ pub fn icosphere(level: u32, smooth: bool) -> Mesh {
         positions,
         triangles,
         normals,
+        uvs: None,
     }
 }
 
@@ -158,6 +174,7 @@ pub fn torus(major_radius: f64, minor_radius: f64, nu: u32, nv: u32) -> Mesh {
         positions,
         triangles,
         normals: None,
+        uvs: None,
     }
 }
 
