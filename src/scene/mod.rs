@@ -4,6 +4,7 @@
 mod camera;
 pub use camera::Frustum;
 pub mod format;
+pub mod mitsuba;
 pub mod obj;
 pub mod parse;
 pub mod ply;

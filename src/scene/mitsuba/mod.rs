@@ -1,0 +1,3 @@
+//! Reading Mitsuba 3 scenes: the pieces its XML reader calls.
+
+pub mod spectrum;
