@@ -1,3 +1,4 @@
 //! Reading Mitsuba 3 scenes: the pieces its XML reader calls.
 
+pub mod serialized;
 pub mod spectrum;
