@@ -24,8 +24,17 @@ use std::path::Path;
 /// Polygons with more vertices than this are triangulated by halving instead of as a fan.
 pub const FAN_LIMIT: usize = 32;
 
-/// A face's corner: its position, texture coordinate and normal indices (0-based).
-type Corner = (usize, Option<usize>, Option<usize>);
+/// A face's corner: its position, texture coordinate and normal indices (0-based), `NONE`
+/// where it has none (plain indices keep a big file's corners at 24 bytes).
+type Corner = (usize, usize, usize);
+
+/// The index of a missing texture coordinate or normal in a `Corner`.
+const NONE: usize = usize::MAX;
+
+/// A `Corner` index as an option.
+fn some(index: usize) -> Option<usize> {
+    (index != NONE).then_some(index)
+}
 
 /// A face's corner as parsed: the texture index is `Err` with the reason when the reference
 /// cannot be used.
@@ -144,13 +153,13 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
                                     format!("face vertex \"{}\": {what}", echo_token(token)),
                                 )
                             })?;
-                    let t = t.map(|t| {
+                    let t = t.map_or(NONE, |t| {
                         t.unwrap_or_else(|problem| {
                             uv_problem.get_or_insert((line, problem));
-                            usize::MAX
+                            NONE
                         })
                     });
-                    corners.push((p, t, n));
+                    corners.push((p, t, n.unwrap_or(NONE)));
                 }
                 if corners.len() < 3 {
                     return Err(at(
@@ -174,9 +183,11 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
     // a `vt` defined after it); the first unusable one drops the uvs.
     if uv_problem.is_none()
         && let Some((line, t)) = faces.iter().find_map(|(line, corners)| {
-            corners
-                .iter()
-                .find_map(|&(_, t, _)| t.filter(|&t| t >= texcoords.len()).map(|t| (*line, t)))
+            corners.iter().find_map(|&(_, t, _)| {
+                some(t)
+                    .filter(|&t| t >= texcoords.len())
+                    .map(|t| (*line, t))
+            })
         })
     {
         uv_problem = Some((
@@ -191,7 +202,7 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
     let with_uvs = uv_problem.is_none()
         && faces
             .iter()
-            .any(|(_, corners)| corners.iter().any(|&(_, t, _)| t.is_some()));
+            .any(|(_, corners)| corners.iter().any(|&(_, t, _)| t != NONE));
 
     // One vertex per distinct (position, texture, normal) triple, as tobj's `single_index`
     // makes them (the texture index only counts when the uvs are kept).
@@ -204,6 +215,8 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
     for (line, corners) in &faces {
         polygon.clear();
         for &(p, t, n) in corners {
+            // The texture index only tells vertices apart when the uvs are kept.
+            let t = if with_uvs { t } else { NONE };
             if p >= positions.len() {
                 return Err(at(
                     *line,
@@ -214,7 +227,7 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
                     ),
                 ));
             }
-            if let Some(n) = n
+            if let Some(n) = some(n)
                 && n >= file_normals.len()
             {
                 return Err(at(
@@ -229,15 +242,14 @@ pub fn parse_obj(name: &str, bytes: &[u8]) -> Result<MeshFile, String> {
             if mesh.positions.len() >= u32::MAX as usize {
                 return Err(format!("mesh file {name} has too many vertices"));
             }
-            let t = t.filter(|_| with_uvs);
             let next = mesh.positions.len() as u32;
             let v = *vertex_of.entry((p, t, n)).or_insert_with(|| {
                 mesh.positions.push(positions[p]);
-                let normal = n.and_then(|n| file_normals[n]);
+                let normal = some(n).and_then(|n| file_normals[n]);
                 any_normals |= normal.is_some();
                 normals.push(normal.unwrap_or(DVec3::ZERO));
                 if with_uvs {
-                    uvs.push(t.map_or(DVec2::ZERO, |t| texcoords[t]));
+                    uvs.push(some(t).map_or(DVec2::ZERO, |t| texcoords[t]));
                 }
                 next
             });

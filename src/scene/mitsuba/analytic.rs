@@ -9,14 +9,15 @@
 //! (which a radius correction cannot cancel in every direction at once) stay small on both
 //! sides. With the counts below, measured by the tests:
 //!
-//! | shape    | triangles | area error | silhouette error (front-facing projected area) |
-//! |----------|-----------|------------|------------------------------------------------|
-//! | disk     | 96        | < 1e-15    | < 1e-15 (a flat polygon projects as its area)  |
-//! | cylinder | 192       | < 1e-15    | -3.6e-4 to +1.8e-4 (over directions)           |
-//! | sphere   | 9024      | < 1e-15    | -3.0e-4 to +1.8e-4 (over directions)           |
+//! | shape    | triangles | area error      | silhouette error (front-facing projected area) |
+//! |----------|-----------|-----------------|------------------------------------------------|
+//! | disk     | 96        | 0 (to rounding) | 0 (a flat polygon projects as its area)        |
+//! | cylinder | 192       | 0 (to rounding) | -3.6e-4 to +1.8e-4 over 507 directions         |
+//! | sphere   | 9024      | 0 (to rounding) | -3.1e-4 to +1.8e-4 over 507 directions         |
 //!
-//! Without the correction the same meshes are 1.8e-4 (cylinder) and 5.7e-4 (sphere) short in
-//! area, and their silhouettes up to 1.2e-3 (sphere, along the poles) short.
+//! Without the correction the same meshes are 1.8e-4 (cylinder) and 8.9e-4 (sphere) short in
+//! area, and their silhouettes up to 5.3e-4 (cylinder) and 1.2e-3 (sphere, seen along the
+//! poles) short.
 //!
 //! Seams and poles repeat vertices for the uvs, with positions computed from the same angle so
 //! that neighbouring triangles share their edges exactly (no cracks for rays to slip through).
@@ -111,7 +112,7 @@ pub fn cube() -> Mesh {
 /// latitude-longitude mesh about the z axis, `SPHERE_BANDS` x `SPHERE_SEGMENTS` (9024
 /// triangles), with the analytic normals and Mitsuba's uv = (phi / 2 pi, theta / pi), theta
 /// from +z, phi from +x towards +y. The vertices sit on a sphere a little larger than
-/// `radius` (by 3.0e-4) so that the mesh's area is exactly 4 pi radius^2.
+/// `radius` (by 4.5e-4) so that the mesh's area is exactly 4 pi radius^2.
 pub fn sphere(center: DVec3, radius: f64) -> Result<Mesh, String> {
     if !center.is_finite() {
         return Err(format!("the sphere's center {center} is not finite"));

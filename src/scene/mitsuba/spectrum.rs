@@ -416,6 +416,13 @@ pub fn reflectance_rgb(samples: &[(f64, f64)]) -> Vec3 {
     to_vec3(spectrum_to_srgb(samples, true).map(|c| c.clamp(0.0, 1.0)))
 }
 
+/// An unbounded non-emitter spectrum (a conductor's inline `eta` and `k`, a rough
+/// dielectric's, a medium's coefficients: what Mitsuba reads with `get_unbounded_texture`) as
+/// its RGB variants use it: weighted by D65 like a reflectance, but clipped below at 0 only.
+pub fn unbounded_rgb(samples: &[(f64, f64)]) -> Vec3 {
+    to_vec3(spectrum_to_srgb(samples, true).map(|c| c.max(0.0)))
+}
+
 /// An emitter's spectrum (radiance, irradiance, intensity) as Mitsuba's RGB variants use it:
 /// not weighted by D65 (a constant spectrum of 1 gives the slightly purple (1.20, 0.95, 0.91)
 /// of an equal-energy white in sRGB), clipped below at 0 only. Mitsuba converts the spectral
@@ -1076,6 +1083,17 @@ mod tests {
         assert_eq!(bright, Vec3::ONE);
         let red = reflectance_rgb(&pairs("620:0.9, 700:0.1"));
         assert_close(red, [0.31119052, 0.0, 0.0], 1e-6, "red");
+    }
+
+    #[test]
+    fn spectrum_unbounded_matches_mitsuba() {
+        // A conductor's inline eta (and k): D65-weighted, not clipped at 1.
+        let eta = unbounded_rgb(&pairs("400:0.2, 500:1.5, 600:2.5, 700:3"));
+        assert_close(eta, [2.7967281, 1.9487159, 0.75212073], 1e-6, "eta");
+        let flat = unbounded_rgb(&pairs("400:0.78, 700:0.78"));
+        assert_close(flat, [0.7763668, 0.77981, 0.7760291], 1e-6, "flat");
+        let narrow = unbounded_rgb(&pairs("550:1, 560:1"));
+        assert_close(narrow, [0.01247926, 0.1371984, 0.0], 1e-6, "narrow");
     }
 
     #[test]
