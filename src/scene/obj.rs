@@ -491,4 +491,51 @@ mod tests {
             );
         }
     }
+
+    /// Each triangle's corners as the renderer reads them: position and normal.
+    fn corners(m: &MeshFile) -> Vec<[(DVec3, Option<DVec3>); 3]> {
+        let normal = |i: u32| m.mesh.normals.as_ref().map(|n| n[i as usize]);
+        m.mesh
+            .triangles
+            .iter()
+            .map(|t| t.map(|i| (m.mesh.positions[i as usize], normal(i))))
+            .collect()
+    }
+
+    #[test]
+    fn texture_coordinates_leave_the_rendered_geometry_alone() {
+        // The corpus files with `vt`, against the same files with the texture references
+        // taken out: the triangles' positions and normals are the same.
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz/corpus/obj");
+        for file in ["polygons.obj", "tetrahedron.obj"] {
+            let text = std::fs::read_to_string(dir.join(file)).unwrap();
+            let stripped: String = text
+                .lines()
+                .map(|line| match line.strip_prefix("f ") {
+                    Some(face) => {
+                        let corners: Vec<String> = face
+                            .split_whitespace()
+                            .map(|c| {
+                                let parts: Vec<&str> = c.split('/').collect();
+                                match parts.as_slice() {
+                                    [p, _, n] => format!("{p}//{n}"),
+                                    [p, ..] => p.to_string(),
+                                    [] => String::new(),
+                                }
+                            })
+                            .collect();
+                        format!("f {}\n", corners.join(" "))
+                    }
+                    None => format!("{line}\n"),
+                })
+                .collect();
+            let with = parse_obj(file, text.as_bytes()).unwrap();
+            let without = parse_obj(file, stripped.as_bytes()).unwrap();
+            assert!(
+                with.mesh.uvs.is_some() && without.mesh.uvs.is_none(),
+                "{file}"
+            );
+            assert_eq!(corners(&with), corners(&without), "{file}");
+        }
+    }
 }

@@ -518,6 +518,27 @@ mod tests {
         });
         eprintln!("cylinder: area error {area_error:.1e}, silhouette errors {lo:.2e} to {hi:.2e}");
         assert!(lo > -1e-3 && hi < 1e-3, "{lo} {hi}");
+        // The outline of the solid cylinder (the tube with one end's rim polygon):
+        // 2 r L sin(angle) + pi r^2 |cos(angle)|.
+        let segments = CIRCLE_SEGMENTS as usize;
+        let rim_area: f64 = (0..segments)
+            .map(|j| {
+                (m.positions[j] - p0)
+                    .cross(m.positions[j + 1] - p0)
+                    .length()
+                    / 2.0
+            })
+            .sum();
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for d in directions() {
+            let cos = d.dot(axis).abs();
+            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+            let mesh = front_projected(&m, d) + rim_area * cos;
+            let error = mesh / (2.0 * radius * length * sin + PI * radius * radius * cos) - 1.0;
+            (lo, hi) = (lo.min(error), hi.max(error));
+        }
+        eprintln!("cylinder: solid outline errors {lo:.2e} to {hi:.2e}");
+        assert!(lo > -1e-3 && hi < 1e-3, "{lo} {hi}");
         let normals = m.normals.as_ref().unwrap();
         for (p, n) in m.positions.iter().zip(normals) {
             let radial = (*p - p0) - (*p - p0).dot(axis) * axis;
