@@ -32,6 +32,10 @@ pub use values::{MAX_CHECKPOINT_SECONDS, one_line};
 pub struct Cli {
     #[command(subcommand)]
     pub command: Command,
+    /// Sets a Mitsuba scene's parameter `$NAME` (overrides its `<default>`; repeatable), as
+    /// Mitsuba's `-D spp=64`. `--spp` beats `-D spp`, which beats the file's sample_count.
+    #[arg(short = 'D', global = true, value_name = "NAME=VALUE", value_parser = parse_define)]
+    pub define: Vec<(String, String)>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -110,6 +114,14 @@ pub enum Command {
     /// origin xyz, t_min, direction xyz, t_max) and DIR/rays.json (their rows by bounce).
     /// `stagelight bench --rays DIR` traces them.
     Rays(RaysArgs),
+    /// Writes a RON scene as a Mitsuba 3 scene file (SCENE.xml, its meshes as double-precision
+    /// PLY files in meshes/ beside it), which Mitsuba renders and stagelight reads back as the
+    /// same triangles.
+    Export {
+        scene: PathBuf,
+        #[arg(short, long, value_name = "SCENE.xml")]
+        output: PathBuf,
+    },
     /// Prints an integrator's graph for a scene: its systems in run order, with the columns
     /// each reads and writes.
     Graph {
@@ -125,7 +137,7 @@ pub enum Command {
 /// `stagelight rays`.
 #[derive(clap::Args, Debug)]
 pub struct RaysArgs {
-    /// Scene file (RON).
+    /// Scene file: RON, or Mitsuba 3 XML (.xml).
     pub scene: PathBuf,
     /// The folder to write (created if missing).
     #[arg(long, value_name = "DIR")]
@@ -221,7 +233,7 @@ pub enum KernelName {
 
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
-    /// Scene file (RON).
+    /// Scene file: RON, or Mitsuba 3 XML (.xml).
     pub scene: PathBuf,
     #[arg(long, default_value = "pt", value_parser = IntegratorParser)]
     pub integrator: IntegratorKind,
@@ -351,7 +363,7 @@ pub const DEFAULT_REFERENCE_SPP: u64 = 4096;
 
 #[derive(clap::Args, Debug)]
 pub struct ReferenceArgs {
-    /// Scene file (RON).
+    /// Scene file: RON, or Mitsuba 3 XML (.xml).
     pub scene: PathBuf,
     /// An integrator that resumes from a checkpoint: pt, bdpt, or the photon mappers (pm,
     /// ppm, sppm: --spp counts passes).
@@ -547,11 +559,34 @@ pub fn main() -> i32 {
     }
 }
 
+/// What a Mitsuba scene file gives as defaults for `--spp` and `--max-depth` (nothing for a
+/// RON scene, or a file that cannot be read: loading it reports that).
+fn file_settings(scene: &std::path::Path) -> Result<crate::scene::mitsuba::FileSettings> {
+    if !crate::scene::is_mitsuba(scene) || !scene.is_file() {
+        return Ok(Default::default());
+    }
+    Ok(crate::scene::mitsuba::build::file_settings(
+        scene,
+        crate::commands::scene_defines(),
+    )?)
+}
+
 /// Turns the parsed command line into a command's options and runs it.
 fn run(cli: Cli) -> Result<i32> {
+    crate::commands::set_scene_defines(cli.define);
     match cli.command {
-        Command::Render(args) => crate::commands::render::render(&args.options()),
-        Command::Reference(args) => crate::commands::reference::reference(&args.options()),
+        Command::Render(mut args) => {
+            let file = file_settings(&args.scene)?;
+            if args.time.is_none() {
+                args.spp = args.spp.or(file.spp);
+            }
+            args.max_depth = args.max_depth.or(file.max_depth);
+            crate::commands::render::render(&args.options())
+        }
+        Command::Reference(mut args) => {
+            args.max_depth = args.max_depth.or(file_settings(&args.scene)?.max_depth);
+            crate::commands::reference::reference(&args.options())
+        }
         Command::Merge(args) => crate::commands::merge::merge(&args.parts, &args.output),
         Command::Slurm(args) => crate::commands::slurm::write(&args.options()?),
         Command::Compare(args) if args.plan.is_some() => crate::compare::shards::run_plan(
@@ -564,7 +599,16 @@ fn run(cli: Cli) -> Result<i32> {
         Command::Compare(args) if args.preset == Some(Preset::Thesis) => {
             crate::compare::thesis::run(&args.thesis_options())
         }
-        Command::Compare(args) => crate::compare::run::compare(&args.options()?),
+        Command::Compare(mut args) => {
+            if let Some(scene) = &args.scene {
+                args.max_depth = args.max_depth.or(file_settings(scene)?.max_depth);
+            }
+            crate::compare::run::compare(&args.options()?)
+        }
+        Command::Export { scene, output } => {
+            crate::commands::export(&scene, &output)?;
+            Ok(0)
+        }
         Command::Graph {
             scene,
             integrator,
@@ -627,6 +671,10 @@ fn run(cli: Cli) -> Result<i32> {
             kernel,
             sweep,
         } => {
+            let max_depth = match &scene {
+                Some(scene) => file_settings(scene)?.max_depth,
+                None => None,
+            };
             crate::commands::bench::bench(&BenchOptions {
                 scene,
                 big,
@@ -636,7 +684,10 @@ fn run(cli: Cli) -> Result<i32> {
                 spp,
                 runs,
                 threads: threads.map(|t| t as usize),
-                settings: kernel.apply(RenderSettings::default()),
+                settings: kernel.apply(RenderSettings {
+                    max_depth: max_depth.unwrap_or(u32::MAX),
+                    ..RenderSettings::default()
+                }),
                 sweep,
             })?;
             Ok(0)

@@ -180,13 +180,17 @@ pub(super) fn parse_checkpoint_seconds(s: &str) -> std::result::Result<f64, Stri
 /// Longest word of a message repeated whole: a longer one (a 300-digit number) is cut.
 pub(super) const MAX_WORD: usize = 64;
 
-/// A word of the user's as a message repeats it: at most `MAX_WORD` characters.
+/// A word of the user's as a message repeats it: its first and last 30 characters, the
+/// middle cut when it is longer than `MAX_WORD` (a long path keeps its file name, line and
+/// column, which end it).
 pub(super) fn clip_word(s: &str) -> String {
-    if s.chars().count() <= MAX_WORD {
+    let count = s.chars().count();
+    if count <= MAX_WORD {
         return s.to_string();
     }
-    let head: String = s.chars().take(40).collect();
-    format!("{head}...({} characters)", s.chars().count())
+    let head: String = s.chars().take(30).collect();
+    let tail: String = s.chars().skip(count - 30).collect();
+    format!("{head}...({count} characters)...{tail}")
 }
 
 /// An error message as printed: one line (line breaks become spaces), every overlong word
@@ -198,4 +202,18 @@ pub fn one_line(message: &str) -> String {
         .map(clip_word)
         .collect();
     crate::scene::clip(&words.join(" "), 2000)
+}
+
+/// `-D NAME=VALUE`: a Mitsuba scene parameter (its `$NAME`), overriding the file's default.
+pub(super) fn parse_define(s: &str) -> std::result::Result<(String, String), String> {
+    let (name, value) = s
+        .split_once('=')
+        .ok_or_else(|| format!("'{}' is not NAME=VALUE", clip_word(s)))?;
+    if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_') {
+        return Err(format!(
+            "'{}': a parameter name is letters, digits and underscores",
+            clip_word(name)
+        ));
+    }
+    Ok((name.to_string(), value.to_string()))
 }

@@ -498,7 +498,11 @@ fn bench_scene(
     path: &Path,
 ) -> Result<Vec<BenchResult>> {
     let t = Instant::now();
-    let scene = crate::scene::load(path)?;
+    let scene = crate::scene::load_with_defines(
+        path,
+        crate::commands::scene_defines(),
+        &crate::scene::Limits::of_this_machine(),
+    )?;
     let load_s = t.elapsed().as_secs_f64();
     for w in &scene.warnings {
         eprintln!("warning: {w}");

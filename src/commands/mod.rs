@@ -59,9 +59,48 @@ pub fn thread_pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {
     builder.build().context("cannot start the worker threads")
 }
 
-/// Loads and prepares a scene, printing its warnings.
+/// The command line's `-D NAME=VALUE` scene parameters, set once when it is parsed.
+static SCENE_DEFINES: std::sync::OnceLock<Vec<(String, String)>> = std::sync::OnceLock::new();
+
+/// Records the command line's scene parameters (the first call wins).
+pub fn set_scene_defines(defines: Vec<(String, String)>) {
+    let _ = SCENE_DEFINES.set(defines);
+}
+
+/// The command line's scene parameters (none before `set_scene_defines`).
+pub fn scene_defines() -> &'static [(String, String)] {
+    SCENE_DEFINES.get().map_or(&[], |d| d.as_slice())
+}
+
+/// `stagelight export`: a RON scene written as a Mitsuba scene file.
+pub fn export(scene: &Path, output: &Path) -> Result<()> {
+    if crate::scene::is_mitsuba(scene) {
+        anyhow::bail!("{}: is already a Mitsuba scene file", scene.display());
+    }
+    if !crate::scene::is_mitsuba(output) {
+        anyhow::bail!(
+            "{}: the output is a Mitsuba scene file, SCENE.xml",
+            output.display()
+        );
+    }
+    let bytes = std::fs::read(scene)
+        .with_context(|| format!("{}: cannot read the scene file", scene.display()))?;
+    let text = crate::scene::text_of(scene, &bytes)?;
+    let parsed = crate::scene::parse(scene, text)?;
+    let world = crate::scene::world::build(&parsed)?;
+    crate::scene::mitsuba::export::export(&parsed, &world, output).map_err(anyhow::Error::msg)?;
+    println!("wrote {}", output.display());
+    Ok(())
+}
+
+/// Loads and prepares a scene (RON or Mitsuba XML, with the command line's `-D` parameters),
+/// printing its warnings.
 pub fn load_scene(path: &Path) -> Result<Arc<SceneData>> {
-    let scene = crate::scene::load(path)?;
+    let scene = crate::scene::load_with_defines(
+        path,
+        scene_defines(),
+        &crate::scene::Limits::of_this_machine(),
+    )?;
     for w in &scene.warnings {
         eprintln!("warning: {w}");
     }

@@ -237,6 +237,35 @@ pub fn load(path: &Path) -> Result<PreparedScene, SceneError> {
 
 /// `load` within `limits`.
 pub fn load_with(path: &Path, limits: &Limits) -> Result<PreparedScene, SceneError> {
+    load_with_defines(path, &[], limits)
+}
+
+/// Whether `path` names a Mitsuba scene file (by its extension, `.xml`); others are RON.
+pub fn is_mitsuba(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("xml"))
+}
+
+/// Reads a RON or Mitsuba XML scene and prepares it; `defines` set a Mitsuba file's `$name`
+/// parameters (a RON scene has none: giving one is an error).
+pub fn load_with_defines(
+    path: &Path,
+    defines: &mitsuba::Defines,
+    limits: &Limits,
+) -> Result<PreparedScene, SceneError> {
+    if is_mitsuba(path) {
+        let (world, _) = mitsuba::build::load(path, defines, limits)?;
+        return prepare(&world);
+    }
+    if let Some((name, _)) = defines.first() {
+        return Err(file_error(
+            path,
+            format!(
+                "-D {}: parameters are for Mitsuba scene files (.xml); this is a RON scene",
+                echo(name)
+            ),
+        ));
+    }
     if std::fs::metadata(path).is_ok_and(|m| m.is_dir()) {
         return Err(file_error(path, "is a folder, not a scene file".into()));
     }
@@ -281,6 +310,20 @@ pub fn load_from_str_with(
     let parsed = parse(source, text)?;
     let world = world::build_with(&parsed, limits)?;
     prepare(&world)
+}
+
+/// A Mitsuba scene's text prepared as if read from `source` (includes and meshes resolve
+/// against its folder), with the file's settings.
+pub fn load_mitsuba_from_str(
+    source: &Path,
+    text: &str,
+    defines: &mitsuba::Defines,
+    limits: &Limits,
+) -> Result<(PreparedScene, mitsuba::FileSettings), SceneError> {
+    let doc =
+        mitsuba::document::read_str(source, text, defines).map_err(mitsuba::build::scene_error)?;
+    let (world, settings) = mitsuba::build::build(&doc, limits)?;
+    Ok((prepare(&world)?, settings))
 }
 
 /// A prepared scene with its acceleration structure: everything systems read while rendering.

@@ -1,8 +1,8 @@
 //! "prepare": reads the scene world once into the flat columns the renderer uses.
 
 use super::world::{
-    Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape, SourceSpot,
-    Transform,
+    DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape,
+    SourceSpot, Transform,
 };
 use super::{Camera, Emitters, FLAT, NO_EMITTER, PreparedScene, SceneError, TriangleColumns};
 use crate::bsdf::Material;
@@ -18,10 +18,12 @@ const MIN_RELATIVE_AREA: f64 = 1e-6;
 
 pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     let world = &scene.world;
-    let error = |spot: Option<&SourceSpot>, message: String| SceneError {
-        file: scene.source.clone(),
-        line: spot.map(|s| s.line),
-        column: spot.map(|s| s.column),
+    let error = |spot: Option<(&SourceSpot, Option<&DeclaredIn>)>, message: String| SceneError {
+        file: spot
+            .and_then(|(_, file)| file)
+            .map_or_else(|| scene.source.clone(), |f| f.0.clone()),
+        line: spot.map(|s| s.0.line),
+        column: spot.map(|s| s.0.column),
         message,
     };
 
@@ -42,6 +44,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         &MaterialRef,
         Option<&Emission>,
         Option<&FlipNormals>,
+        Option<&DeclaredIn>,
     )>();
     let mut objects: Vec<_> = object_query.iter().collect();
     // Triangle ids follow the file, whatever order hecs stores archetypes in.
@@ -70,10 +73,11 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
 
     let mut triangles = TriangleColumns::default();
     let mut emitters = Emitters::default();
-    for (info, spot, shape, transform, material, emission, flip) in objects {
+    for (info, spot, shape, transform, material, emission, flip, declared_in) in objects {
+        let spot = (spot, declared_in);
         let describe = || match &info.name {
-            Some(name) => format!("object \"{}\" (line {})", super::echo(name), spot.line),
-            None => format!("object #{} (line {})", info.order + 1, spot.line),
+            Some(name) => format!("object \"{}\" (line {})", super::echo(name), spot.0.line),
+            None => format!("object #{} (line {})", info.order + 1, spot.0.line),
         };
         let material = *material_index
             .get(&material.0)

@@ -56,6 +56,11 @@ pub struct MaterialRef(pub Entity);
 #[derive(Clone, Copy, Debug)]
 pub struct Emission(pub Vec3);
 
+/// The file an entity was declared in, where it is not the scene file itself (a Mitsuba
+/// scene's `include`s): errors name it with the entity's `SourceSpot`.
+#[derive(Clone, Debug)]
+pub struct DeclaredIn(pub PathBuf);
+
 /// Marks an object whose triangles are reversed (and vertex normals negated).
 #[derive(Clone, Copy, Debug)]
 pub struct FlipNormals;

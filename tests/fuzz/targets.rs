@@ -113,6 +113,48 @@ pub fn scene(data: &[u8]) -> String {
     format!("ok {kind} lights:{}", lights.min(3))
 }
 
+/// A Mitsuba scene file: read, interpreted, prepared, its tree built and one pass of a tiny
+/// image rendered with PT.
+pub fn mitsuba(data: &[u8]) -> String {
+    let path = Path::new("/nonexistent-stagelight-fuzz/fuzz.xml");
+    let limits = Limits {
+        memory: Some(FUZZ_MEMORY),
+    };
+    let text = match scene::text_of(path, data) {
+        Ok(text) => text,
+        Err(e) => return check_message(&e.to_string(), "fuzz.xml"),
+    };
+    let mut prepared = match scene::load_mitsuba_from_str(path, text, &[], &limits) {
+        Ok((s, _)) => s,
+        Err(e) => return check_message(&e.to_string(), "fuzz.xml"),
+    };
+    check_prepared(&prepared);
+    prepared.camera.width = prepared.camera.width.min(8);
+    prepared.camera.height = prepared.camera.height.min(8);
+    let stop = AtomicBool::new(false);
+    let control = Control {
+        stop: &stop,
+        progress: &|_, _| {},
+    };
+    let settings = RenderSettings {
+        max_depth: 8,
+        ..RenderSettings::default()
+    };
+    let outcome = stagelight::integrators::render(
+        IntegratorKind::named("pt"),
+        Arc::new(SceneData::new(prepared)),
+        &settings,
+        Budget::SamplesPerPixel(1),
+        &control,
+    );
+    let image = outcome.film.image();
+    assert!(
+        image.pixels.iter().all(|p| p.is_finite()),
+        "the film holds a non-finite value"
+    );
+    "ok".to_string()
+}
+
 /// The invariants of a prepared scene.
 pub fn check_prepared(s: &PreparedScene) {
     let t = &s.triangles;

@@ -788,6 +788,16 @@ fn fuzz_scene() {
 }
 
 #[test]
+fn fuzz_mitsuba() {
+    let mut seeds = corpus("mitsuba");
+    let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    for name in ["cornell_box.xml", "torus_glass.xml"] {
+        seeds.push(std::fs::read(scenes.join(name)).unwrap());
+    }
+    fuzz("mitsuba", seeds, mutate_ron, targets::mitsuba);
+}
+
+#[test]
 fn fuzz_obj() {
     fuzz("obj", corpus("obj"), mutate_obj, targets::obj);
 }

@@ -21,6 +21,7 @@ mod hostile;
 mod kernels;
 mod layering;
 mod light_vertex_cache;
+mod mitsuba_scenes;
 mod mlt;
 mod path_mlt;
 mod path_mlt_split;

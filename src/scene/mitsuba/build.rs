@@ -1,0 +1,1451 @@
+//! Mitsuba 3 plugin objects interpreted as stagelight's scene world: the sensor as the camera,
+//! the film's size, the BSDFs as materials, the shapes as meshes with their area emitters, the
+//! sampler's sample count and the integrator's depth as the file's defaults for `--spp` and
+//! `--max-depth`.
+//!
+//! Every parameter of a plugin is read by name; what is left unread at the end is an error
+//! naming it (`Params::finish`), so nothing a file asks for is silently dropped. The parameters
+//! that change only noise or nothing (`IGNORED_*` below) are read and ignored on purpose.
+
+use super::document::{
+    Child, Class, Defines, Document, Object, Property, Spectrum, Spot, Value, XmlError,
+};
+use crate::bsdf::Material;
+use crate::scene::shapes::Mesh;
+use crate::scene::world::{
+    DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape,
+    SourceSpot, Transform,
+};
+use crate::scene::{Camera, Limits, SceneError};
+use glam::{DAffine3, DMat4, DVec3, Vec3};
+use hecs::{Entity, EntityBuilder, World};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// What the file says about rendering that the command line may override: the sampler's
+/// `sample_count` (the default `--spp`) and the integrator's `max_depth` (the default
+/// `--max-depth`, in stagelight's bounces).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct FileSettings {
+    pub spp: Option<u64>,
+    pub max_depth: Option<u32>,
+}
+
+/// Integrators read: `path` is stagelight's `pt` (any integrator may be picked on the command
+/// line; the file gives only the depth), `direct` is a path of at most two segments (emitters
+/// seen directly and direct light), `moment` is read through to the integrator it wraps.
+pub const INTEGRATORS: &str = "path, direct, moment";
+pub const SHAPES: &str =
+    "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
+pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor";
+pub const EMITTERS: &str = "area";
+pub const SENSORS: &str = "perspective";
+pub const FILMS: &str = "hdrfilm";
+pub const RFILTERS: &str = "box";
+
+/// Parameters that change only noise or nothing (see docs/scene-format.md): read and ignored.
+const IGNORED_INTEGRATOR: &[&str] = &[
+    "rr_depth",
+    "hide_emitters_false",
+    "emitter_samples",
+    "bsdf_samples",
+];
+const IGNORED_SENSOR: &[&str] = &["focus_distance", "shutter_open", "shutter_close"];
+const IGNORED_FILM: &[&str] = &[
+    "pixel_format",
+    "component_format",
+    "file_format",
+    "banner",
+    "high_quality_edges",
+    "sample_border",
+];
+const IGNORED_SAMPLER: &[&str] = &["seed", "jitter", "scramble"];
+const IGNORED_BSDF: &[&str] = &["sample_visible"];
+
+/// Mitsuba's film size when the file gives none.
+const DEFAULT_WIDTH: i64 = 768;
+const DEFAULT_HEIGHT: i64 = 576;
+
+/// Reads a Mitsuba scene file into a scene world, with its file settings.
+pub fn load(
+    path: &Path,
+    defines: &Defines,
+    limits: &Limits,
+) -> Result<(SceneWorld, FileSettings), SceneError> {
+    let doc = super::document::read(path, defines).map_err(scene_error)?;
+    build(&doc, limits)
+}
+
+/// The file settings alone (no mesh is read): the command line needs them before it renders.
+pub fn file_settings(path: &Path, defines: &Defines) -> Result<FileSettings, SceneError> {
+    let doc = super::document::read(path, defines).map_err(scene_error)?;
+    let mut builder = Builder::new(&doc);
+    builder.settings_only = true;
+    builder.run().map_err(scene_error)?;
+    Ok(builder.settings)
+}
+
+/// Builds the world of a read document.
+pub fn build(doc: &Document, limits: &Limits) -> Result<(SceneWorld, FileSettings), SceneError> {
+    let mut builder = Builder::new(doc);
+    builder.limits = Some(*limits);
+    builder.run().map_err(scene_error)?;
+    check_clip_planes(&builder.world).map_err(scene_error)?;
+    let Builder {
+        world,
+        settings,
+        warnings,
+        ..
+    } = builder;
+    Ok((
+        SceneWorld {
+            world,
+            source: doc.source.clone(),
+            warnings,
+        },
+        settings,
+    ))
+}
+
+pub fn scene_error(e: XmlError) -> SceneError {
+    SceneError {
+        file: e.file,
+        line: e.line.map(|l| l as usize),
+        column: e.column.map(|c| c as usize),
+        message: e.message,
+    }
+}
+
+/// An object's parameters, each marked when read.
+struct Params<'a> {
+    object: &'a Object,
+    read: Vec<bool>,
+}
+
+/// How a spectrum becomes RGB: reflectances are D65-weighted and clipped to [0, 1], emitted
+/// radiance is unweighted and clipped at 0 (as Mitsuba's RGB variants do).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Role {
+    Reflectance,
+    Emission,
+}
+
+impl<'a> Params<'a> {
+    fn new(object: &'a Object) -> Params<'a> {
+        Params {
+            object,
+            read: vec![false; object.properties.len()],
+        }
+    }
+
+    fn plugin(&self) -> String {
+        format!(
+            "{} \"{}\"",
+            self.object.class.tag(),
+            super::super::echo(&self.object.kind)
+        )
+    }
+
+    fn take(&mut self, name: &str) -> Option<&'a Property> {
+        let i = self.object.properties.iter().position(|p| p.name == name)?;
+        self.read[i] = true;
+        Some(&self.object.properties[i])
+    }
+
+    fn wrong_type(&self, p: &Property, wanted: &str) -> XmlError {
+        XmlError::at(
+            &p.spot,
+            format!(
+                "{}: parameter \"{}\" is a {}, not a {wanted}",
+                self.plugin(),
+                super::super::echo(&p.name),
+                p.value.tag()
+            ),
+        )
+    }
+
+    fn float(&mut self, name: &str) -> Result<Option<(f64, Spot)>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        match p.value {
+            Value::Float(v) => Ok(Some((v, p.spot.clone()))),
+            Value::Integer(v) => Ok(Some((v as f64, p.spot.clone()))),
+            _ => Err(self.wrong_type(p, "float")),
+        }
+    }
+
+    fn integer(&mut self, name: &str) -> Result<Option<(i64, Spot)>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        match p.value {
+            Value::Integer(v) => Ok(Some((v, p.spot.clone()))),
+            _ => Err(self.wrong_type(p, "integer")),
+        }
+    }
+
+    fn boolean(&mut self, name: &str) -> Result<Option<bool>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        match p.value {
+            Value::Boolean(v) => Ok(Some(v)),
+            _ => Err(self.wrong_type(p, "boolean")),
+        }
+    }
+
+    fn string(&mut self, name: &str) -> Result<Option<(&'a str, Spot)>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        match &p.value {
+            Value::String(v) => Ok(Some((v.as_str(), p.spot.clone()))),
+            _ => Err(self.wrong_type(p, "string")),
+        }
+    }
+
+    fn point(&mut self, name: &str) -> Result<Option<DVec3>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        match p.value {
+            Value::Point(v) => Ok(Some(v)),
+            _ => Err(self.wrong_type(p, "point")),
+        }
+    }
+
+    fn transform(&mut self, name: &str) -> Result<Option<(DMat4, Spot)>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        match p.value {
+            Value::Transform(m) => Ok(Some((m, p.spot.clone()))),
+            _ => Err(self.wrong_type(p, "transform")),
+        }
+    }
+
+    /// An rgb, spectrum or float (a grey) as linear RGB.
+    fn color(&mut self, name: &str, role: Role) -> Result<Option<(Vec3, Spot)>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        let rgb = match &p.value {
+            Value::Rgb(v) => v.as_vec3(),
+            Value::Float(v) => Vec3::splat(*v as f32),
+            Value::Integer(v) => Vec3::splat(*v as f32),
+            Value::Spectrum(Spectrum::Constant(v)) => match role {
+                Role::Reflectance => Vec3::splat(*v as f32),
+                Role::Emission => super::spectrum::uniform_emission_rgb(*v),
+            },
+            Value::Spectrum(Spectrum::Pairs(pairs)) => match role {
+                Role::Reflectance => super::spectrum::reflectance_rgb(pairs),
+                Role::Emission => super::spectrum::emission_rgb(pairs),
+            },
+            _ => return Err(self.wrong_type(p, "color (rgb, spectrum or float)")),
+        };
+        Ok(Some((rgb, p.spot.clone())))
+    }
+
+    /// Marks these parameters read: they change only noise or nothing.
+    fn ignore(&mut self, names: &[&str]) {
+        for name in names {
+            self.take(name);
+        }
+    }
+
+    /// Fails on the first parameter nobody read.
+    fn finish(self) -> Result<(), XmlError> {
+        if let Some(i) = self.read.iter().position(|r| !r) {
+            let p = &self.object.properties[i];
+            return Err(XmlError::at(
+                &p.spot,
+                format!(
+                    "{}: parameter \"{}\" is not supported (stagelight does not model it)",
+                    self.plugin(),
+                    super::super::echo(&p.name)
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+struct Builder<'a> {
+    doc: &'a Document,
+    world: World,
+    settings: FileSettings,
+    warnings: Vec<String>,
+    limits: Option<Limits>,
+    /// Only the integrator and the sampler: no meshes are read.
+    settings_only: bool,
+    /// Material entities of BSDF objects already made (a BSDF referenced twice is one material).
+    materials: HashMap<usize, Entity>,
+    /// The default BSDF (Mitsuba's diffuse of reflectance 0.5), made when first needed.
+    default_material: Option<Entity>,
+    objects: u32,
+    triangles_so_far: u64,
+    film: Option<(u32, u32)>,
+}
+
+/// A shape's mesh with its placement, ready to spawn.
+struct Placed {
+    mesh: Mesh,
+    to_world: DAffine3,
+    flip_normals: bool,
+    material: usize,
+    emission: Option<Vec3>,
+    spot: Spot,
+}
+
+impl<'a> Builder<'a> {
+    fn new(doc: &'a Document) -> Builder<'a> {
+        Builder {
+            doc,
+            world: World::new(),
+            settings: FileSettings::default(),
+            warnings: Vec::new(),
+            limits: None,
+            settings_only: false,
+            materials: HashMap::new(),
+            default_material: None,
+            objects: 0,
+            triangles_so_far: 0,
+            film: None,
+        }
+    }
+
+    fn object(&self, id: usize) -> &'a Object {
+        &self.doc.objects[id]
+    }
+
+    fn run(&mut self) -> Result<(), XmlError> {
+        let scene = self.doc.scene();
+        Params::new(scene).finish()?;
+        let mut integrators = 0;
+        let mut sensors = 0;
+        for child in &scene.children {
+            let object = self.object(child.object);
+            match object.class {
+                Class::Integrator => {
+                    integrators += 1;
+                    if integrators > 1 {
+                        return Err(XmlError::at(
+                            &child.spot,
+                            "a second <integrator>: a scene has one",
+                        ));
+                    }
+                    self.integrator(child.object)?;
+                }
+                Class::Sensor => {
+                    sensors += 1;
+                    if sensors > 1 {
+                        return Err(XmlError::at(
+                            &child.spot,
+                            "a second <sensor>: stagelight renders one camera per scene",
+                        ));
+                    }
+                    self.sensor(child.object)?;
+                }
+                _ if self.settings_only => {}
+                Class::Shape => {
+                    let mut placed = Vec::new();
+                    self.shape(child.object, DAffine3::IDENTITY, &mut placed)?;
+                    for p in placed {
+                        self.spawn(p)?;
+                    }
+                }
+                // Declared for a later ref: made when a shape uses them.
+                Class::Bsdf | Class::Texture => {
+                    if object.id.is_none() {
+                        return Err(XmlError::at(
+                            &object.spot,
+                            format!(
+                                "a top-level <{}> without an id is never used",
+                                object.class.tag()
+                            ),
+                        ));
+                    }
+                    if object.class == Class::Texture {
+                        return Err(XmlError::at(
+                            &object.spot,
+                            format!(
+                                "texture \"{}\" is not supported (textures are not modelled yet)",
+                                super::super::echo(&object.kind)
+                            ),
+                        ));
+                    }
+                    // Checked now, so an unused BSDF's errors are not hidden.
+                    self.material(child.object)?;
+                }
+                Class::Emitter => {
+                    if object.kind == "area" {
+                        if object.id.is_none() {
+                            return Err(XmlError::at(
+                                &object.spot,
+                                "an area emitter outside a shape needs an id for a shape to ref",
+                            ));
+                        }
+                        self.area_emitter(child.object)?;
+                    } else {
+                        return Err(unsupported(object, EMITTERS));
+                    }
+                }
+                Class::Film | Class::Rfilter | Class::Sampler | Class::Scene => {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        format!("<{}> belongs inside a <sensor>", object.class.tag()),
+                    ));
+                }
+            }
+        }
+        if self.settings_only {
+            return Ok(());
+        }
+        if sensors == 0 {
+            return Err(XmlError::at(
+                &scene.spot,
+                "the scene has no <sensor>: stagelight needs a camera (a perspective sensor)",
+            ));
+        }
+        Ok(())
+    }
+
+    fn integrator(&mut self, id: usize) -> Result<(), XmlError> {
+        let object = self.object(id);
+        let mut params = Params::new(object);
+        match object.kind.as_str() {
+            "moment" => {
+                params.finish()?;
+                let inner: Vec<&Child> = object
+                    .children
+                    .iter()
+                    .filter(|c| self.object(c.object).class == Class::Integrator)
+                    .collect();
+                match inner[..] {
+                    [one] if inner.len() == object.children.len() => self.integrator(one.object),
+                    _ => Err(XmlError::at(
+                        &object.spot,
+                        "moment wraps exactly one integrator",
+                    )),
+                }
+            }
+            "path" | "direct" => {
+                let max_depth = if object.kind == "direct" {
+                    // Direct light only: emitters seen directly and one bounce to a light.
+                    params.ignore(&["shading_samples", "hide_emitters"]);
+                    Some(2)
+                } else {
+                    params.integer("max_depth")?.map(|(v, _)| v)
+                };
+                params.ignore(IGNORED_INTEGRATOR);
+                let hide = params.boolean("hide_emitters")?;
+                if hide == Some(true) {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        "integrator: hide_emitters true is not supported",
+                    ));
+                }
+                params.finish()?;
+                if let Some(children) = object.children.first() {
+                    return Err(XmlError::at(
+                        &children.spot,
+                        "this integrator takes no nested objects",
+                    ));
+                }
+                self.settings.max_depth = match max_depth {
+                    None | Some(-1) => None,
+                    Some(d) => Some(
+                        mitsuba_depth_to_bounces(d).map_err(|m| XmlError::at(&object.spot, m))?,
+                    ),
+                };
+                Ok(())
+            }
+            _ => Err(unsupported(object, INTEGRATORS)),
+        }
+    }
+
+    fn sensor(&mut self, id: usize) -> Result<(), XmlError> {
+        let object = self.object(id);
+        if object.kind != "perspective" {
+            return Err(unsupported(object, SENSORS));
+        }
+        let mut params = Params::new(object);
+        let mut film = None;
+        for child in &object.children {
+            let inner = self.object(child.object);
+            match inner.class {
+                Class::Film => film = Some(self.film(child.object)?),
+                Class::Sampler => self.sampler(child.object)?,
+                _ => {
+                    return Err(XmlError::at(
+                        &child.spot,
+                        format!(
+                            "a sensor holds a film and a sampler, not a <{}>",
+                            inner.class.tag()
+                        ),
+                    ));
+                }
+            }
+        }
+        let (width, height) = film.unwrap_or((DEFAULT_WIDTH as u32, DEFAULT_HEIGHT as u32));
+        self.film = Some((width, height));
+        let aspect = width as f64 / height as f64;
+        let fov = params.float("fov")?;
+        let focal = params.string("focal_length")?;
+        let axis = params.string("fov_axis")?;
+        let fov_y = match (fov, focal) {
+            (Some(_), Some((_, spot))) => {
+                return Err(XmlError::at(
+                    &spot,
+                    "perspective: give fov or focal_length, not both",
+                ));
+            }
+            (Some((fov, spot)), None) => {
+                if !(fov > 0.0 && fov < 180.0) {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!("fov {fov} must lie in (0, 180) degrees"),
+                    ));
+                }
+                let (axis, axis_spot) = axis.unwrap_or(("x", spot));
+                fov_y_degrees(fov, axis, aspect).map_err(|m| XmlError::at(&axis_spot, m))?
+            }
+            (None, focal) => {
+                if let Some((_, spot)) = axis {
+                    return Err(XmlError::at(
+                        &spot,
+                        "fov_axis applies to fov, not to focal_length",
+                    ));
+                }
+                let (text, spot) = focal.unwrap_or(("50mm", object.spot.clone()));
+                let mm = text
+                    .strip_suffix("mm")
+                    .unwrap_or(text)
+                    .trim()
+                    .parse::<f64>()
+                    .ok()
+                    .filter(|v| v.is_finite() && *v > 0.0)
+                    .ok_or_else(|| {
+                        XmlError::at(
+                            &spot,
+                            format!(
+                                "focal_length \"{}\" is not of the form <x>mm",
+                                super::super::echo(text)
+                            ),
+                        )
+                    })?;
+                // A 35 mm film's diagonal over twice the focal length.
+                let diagonal_fov = 2.0
+                    * ((36.0f64 * 36.0 + 24.0 * 24.0).sqrt() / (2.0 * mm))
+                        .atan()
+                        .to_degrees();
+                fov_y_degrees(diagonal_fov, "diagonal", aspect)
+                    .map_err(|m| XmlError::at(&spot, m))?
+            }
+        };
+        for name in ["principal_point_offset_x", "principal_point_offset_y"] {
+            if let Some((v, spot)) = params.float(name)?
+                && v != 0.0
+            {
+                return Err(XmlError::at(
+                    &spot,
+                    format!(
+                        "perspective: {name} {v} is not supported (only 0: the image centred on the view)"
+                    ),
+                ));
+            }
+        }
+        let near_clip = params.float("near_clip")?;
+        let far_clip = params.float("far_clip")?;
+        params.ignore(IGNORED_SENSOR);
+        let to_world = params.transform("to_world")?;
+        params.finish()?;
+        let (matrix, spot) = to_world.unwrap_or((DMat4::IDENTITY, object.spot.clone()));
+        let camera =
+            camera_of(&matrix, fov_y, width, height).map_err(|m| XmlError::at(&spot, m))?;
+        if !self.settings_only {
+            self.world.spawn((
+                camera,
+                source_spot(&object.spot),
+                DeclaredIn(object.spot.file.to_path_buf()),
+                ClipPlanes {
+                    near: near_clip,
+                    far: far_clip,
+                },
+            ));
+        }
+        Ok(())
+    }
+
+    fn film(&mut self, id: usize) -> Result<(u32, u32), XmlError> {
+        let object = self.object(id);
+        if object.kind != "hdrfilm" {
+            return Err(unsupported(object, FILMS));
+        }
+        let mut params = Params::new(object);
+        let size = |v: Option<(i64, Spot)>, default: i64| -> Result<u32, XmlError> {
+            match v {
+                None => Ok(default as u32),
+                Some((v, spot)) => {
+                    if v < 1 || v > crate::scene::format::MAX_IMAGE_SIZE as i64 {
+                        Err(XmlError::at(
+                            &spot,
+                            format!(
+                                "film size {v} must lie in 1..={}",
+                                crate::scene::format::MAX_IMAGE_SIZE
+                            ),
+                        ))
+                    } else {
+                        Ok(v as u32)
+                    }
+                }
+            }
+        };
+        let width = size(params.integer("width")?, DEFAULT_WIDTH)?;
+        let height = size(params.integer("height")?, DEFAULT_HEIGHT)?;
+        // A crop window that covers the whole film changes nothing.
+        let crop = [
+            ("crop_offset_x", 0),
+            ("crop_offset_y", 0),
+            ("crop_width", width as i64),
+            ("crop_height", height as i64),
+        ];
+        for (name, full) in crop {
+            if let Some((v, spot)) = params.integer(name)?
+                && v != full
+            {
+                return Err(XmlError::at(
+                    &spot,
+                    format!("hdrfilm: {name} {v} is not supported yet (only the whole film)"),
+                ));
+            }
+        }
+        params.ignore(IGNORED_FILM);
+        params.finish()?;
+        let mut filter = None;
+        for child in &object.children {
+            let inner = self.object(child.object);
+            if inner.class != Class::Rfilter {
+                return Err(XmlError::at(
+                    &child.spot,
+                    format!("a film holds an rfilter, not a <{}>", inner.class.tag()),
+                ));
+            }
+            filter = Some(inner);
+        }
+        match filter {
+            Some(f) if f.kind == "box" => {
+                let mut p = Params::new(f);
+                if let Some((radius, spot)) = p.float("radius")?
+                    && radius != 0.5
+                {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!(
+                            "rfilter box: radius {radius} is not supported (only 0.5: each sample in its own pixel)"
+                        ),
+                    ));
+                }
+                p.finish()?;
+            }
+            Some(f) => return Err(unsupported(f, RFILTERS)),
+            None => {
+                return Err(XmlError::at(
+                    &object.spot,
+                    "hdrfilm without an rfilter uses Mitsuba's default, the gaussian filter, which \
+                     stagelight does not model yet: add <rfilter type=\"box\"/> to the film",
+                ));
+            }
+        }
+        Ok((width, height))
+    }
+
+    fn sampler(&mut self, id: usize) -> Result<(), XmlError> {
+        let object = self.object(id);
+        // Every sampler type changes only noise: stagelight uses its own (--sampler).
+        let mut params = Params::new(object);
+        if let Some((count, spot)) = params.integer("sample_count")? {
+            if count < 1 {
+                return Err(XmlError::at(
+                    &spot,
+                    format!("sample_count {count} must be at least 1"),
+                ));
+            }
+            self.settings.spp = Some(count as u64);
+        }
+        params.ignore(IGNORED_SAMPLER);
+        params.finish()
+    }
+
+    /// The material entity of a BSDF object (made once per object).
+    fn material(&mut self, id: usize) -> Result<Entity, XmlError> {
+        if let Some(&e) = self.materials.get(&id) {
+            return Ok(e);
+        }
+        let object = self.object(id);
+        let material = self.material_of(object)?;
+        let name = match &object.id {
+            Some(id) => id.clone(),
+            None => format!("{} at line {}", object.kind, object.spot.line),
+        };
+        let info = MaterialInfo {
+            name,
+            order: self.materials.len() as u32 + 1,
+        };
+        let entity = self.world.spawn((info, material));
+        self.materials.insert(id, entity);
+        Ok(entity)
+    }
+
+    fn material_of(&self, object: &Object) -> Result<Material, XmlError> {
+        let mut params = Params::new(object);
+        params.ignore(IGNORED_BSDF);
+        let no_children = |object: &Object| -> Result<(), XmlError> {
+            match object.children.first() {
+                Some(c) => Err(XmlError::at(
+                    &c.spot,
+                    format!(
+                        "bsdf \"{}\": a nested <{}> is not supported here (textures are not modelled yet)",
+                        super::super::echo(&object.kind),
+                        self.object(c.object).class.tag()
+                    ),
+                )),
+                None => Ok(()),
+            }
+        };
+        let material = match object.kind.as_str() {
+            "twosided" => {
+                params.finish()?;
+                let inner: Vec<&Child> = object.children.iter().collect();
+                let [one] = inner[..] else {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        "twosided with two different BSDFs is not supported yet (give one BSDF)",
+                    ));
+                };
+                let inner = self.object(one.object);
+                if inner.class != Class::Bsdf || inner.kind != "diffuse" {
+                    return Err(XmlError::at(
+                        &one.spot,
+                        format!(
+                            "twosided of \"{}\" is not supported (supported: twosided of diffuse)",
+                            super::super::echo(&inner.kind)
+                        ),
+                    ));
+                }
+                return self.diffuse(inner, true);
+            }
+            "diffuse" => {
+                drop(params);
+                return self.diffuse(object, false);
+            }
+            "dielectric" => {
+                no_children(object)?;
+                let int_ior = ior(&mut params, "int_ior", 1.5046)?;
+                let ext_ior = ior(&mut params, "ext_ior", 1.000277)?;
+                for name in ["specular_reflectance", "specular_transmittance"] {
+                    if let Some((c, spot)) = params.color(name, Role::Reflectance)?
+                        && c != Vec3::ONE
+                    {
+                        return Err(XmlError::at(
+                            &spot,
+                            format!("dielectric: {name} other than 1 is not supported yet"),
+                        ));
+                    }
+                }
+                params.finish()?;
+                let ratio = (int_ior / ext_ior) as f32;
+                if !(ratio.is_finite() && ratio > 0.0) || ratio == 1.0 {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        format!(
+                            "dielectric: int_ior / ext_ior = {ratio} must be positive and not 1"
+                        ),
+                    ));
+                }
+                Material::Dielectric { ior: ratio }
+            }
+            "conductor" | "roughconductor" => {
+                no_children(object)?;
+                let rough = object.kind == "roughconductor";
+                let material_name = params.string("material")?;
+                let eta = params.take("eta");
+                let k = params.take("k");
+                if let Some(p) = eta.or(k) {
+                    return Err(XmlError::at(
+                        &p.spot,
+                        "conductor: eta and k are not supported yet (only material \"none\": a Fresnel factor of 1)",
+                    ));
+                }
+                match material_name {
+                    Some(("none", _)) => {}
+                    Some((name, spot)) => {
+                        return Err(XmlError::at(
+                            &spot,
+                            format!(
+                                "conductor material \"{}\" is not supported yet (only \"none\": a Fresnel factor of 1)",
+                                super::super::echo(name)
+                            ),
+                        ));
+                    }
+                    None => {
+                        return Err(XmlError::at(
+                            &object.spot,
+                            "conductor without material uses Mitsuba's default, Cu (copper), whose \
+                             Fresnel stagelight does not model yet: give material \"none\"",
+                        ));
+                    }
+                }
+                let reflectance = params
+                    .color("specular_reflectance", Role::Reflectance)?
+                    .map(|(c, _)| c)
+                    .unwrap_or(Vec3::ONE);
+                let alpha = if rough {
+                    match params.string("distribution")? {
+                        Some(("ggx", _)) => {}
+                        Some((other, spot)) => {
+                            return Err(XmlError::at(
+                                &spot,
+                                format!(
+                                    "roughconductor distribution \"{}\" is not supported yet (only ggx)",
+                                    super::super::echo(other)
+                                ),
+                            ));
+                        }
+                        None => {
+                            return Err(XmlError::at(
+                                &object.spot,
+                                "roughconductor without distribution uses Mitsuba's default, \
+                                 beckmann, which stagelight does not model yet: give \
+                                 <string name=\"distribution\" value=\"ggx\"/>",
+                            ));
+                        }
+                    }
+                    if let Some(p) = params.take("alpha_u").or(params.take("alpha_v")) {
+                        return Err(XmlError::at(
+                            &p.spot,
+                            "roughconductor: anisotropic alpha is not supported yet",
+                        ));
+                    }
+                    let (alpha, spot) =
+                        params.float("alpha")?.unwrap_or((0.1, object.spot.clone()));
+                    if !(alpha > 0.0 && alpha <= 1e4) {
+                        return Err(XmlError::at(
+                            &spot,
+                            format!("alpha {alpha} must lie in (0, 1e4]"),
+                        ));
+                    }
+                    alpha as f32
+                } else {
+                    // A smooth mirror, as the narrowest GGX lobe the conductor evaluates
+                    // accurately (see bsdf::conductor::ALPHA_MIN).
+                    crate::bsdf::conductor::ALPHA_MIN
+                };
+                params.finish()?;
+                Material::Conductor { alpha, reflectance }
+            }
+            _ => return Err(unsupported(object, BSDFS)),
+        };
+        Ok(material)
+    }
+
+    fn diffuse(&self, object: &Object, two_sided: bool) -> Result<Material, XmlError> {
+        let mut params = Params::new(object);
+        if let Some(c) = object.children.first() {
+            return Err(XmlError::at(
+                &c.spot,
+                "diffuse: a nested texture is not supported yet (textures are not modelled yet)",
+            ));
+        }
+        let reflectance = params
+            .color("reflectance", Role::Reflectance)?
+            .map(|(c, _)| c)
+            .unwrap_or(Vec3::splat(0.5));
+        params.finish()?;
+        if !two_sided {
+            return Err(XmlError::at(
+                &object.spot,
+                "a one-sided diffuse is not supported yet: wrap it in <bsdf type=\"twosided\">",
+            ));
+        }
+        Ok(Material::Diffuse { reflectance })
+    }
+
+    fn area_emitter(&self, id: usize) -> Result<Vec3, XmlError> {
+        let object = self.object(id);
+        let mut params = Params::new(object);
+        if let Some(c) = object.children.first() {
+            return Err(XmlError::at(
+                &c.spot,
+                "area: a textured radiance is not supported yet",
+            ));
+        }
+        let (radiance, spot) = params
+            .color("radiance", Role::Emission)?
+            .ok_or_else(|| XmlError::at(&object.spot, "area emitter needs a radiance"))?;
+        params.finish()?;
+        if !radiance.is_finite() || radiance.min_element() < 0.0 {
+            return Err(XmlError::at(
+                &spot,
+                format!(
+                    "radiance {:?} must be finite and not negative",
+                    radiance.to_array()
+                ),
+            ));
+        }
+        Ok(radiance)
+    }
+
+    /// Meshes a shape (a shapegroup's members through an instance) into `out`.
+    fn shape(&mut self, id: usize, outer: DAffine3, out: &mut Vec<Placed>) -> Result<(), XmlError> {
+        let object = self.object(id);
+        let mut params = Params::new(object);
+        let to_world = match params.transform("to_world")? {
+            None => DAffine3::IDENTITY,
+            Some((m, spot)) => super::document::affine(&m).ok_or_else(|| {
+                XmlError::at(
+                    &spot,
+                    "a shape's to_world must be affine (last row 0 0 0 1)",
+                )
+            })?,
+        };
+        let to_world = outer * to_world;
+        match object.kind.as_str() {
+            "shapegroup" => {
+                if object.id.is_none() {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        "a shapegroup needs an id for instances to ref",
+                    ));
+                }
+                // Declared only: instances place its members.
+                params.finish()?;
+                return Ok(());
+            }
+            "instance" => {
+                params.finish()?;
+                let groups: Vec<&Child> = object.children.iter().collect();
+                let [group] = groups[..] else {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        "an instance refs exactly one shapegroup",
+                    ));
+                };
+                let inner = self.object(group.object);
+                if inner.class != Class::Shape || inner.kind != "shapegroup" {
+                    return Err(XmlError::at(&group.spot, "an instance refs a shapegroup"));
+                }
+                let mut members = Vec::new();
+                for child in &inner.children {
+                    let member = self.object(child.object);
+                    if member.class != Class::Shape
+                        || matches!(member.kind.as_str(), "shapegroup" | "instance")
+                    {
+                        return Err(XmlError::at(
+                            &child.spot,
+                            "a shapegroup holds shapes (not groups or instances)",
+                        ));
+                    }
+                    self.shape(child.object, to_world, &mut members)?;
+                }
+                out.extend(members);
+                return Ok(());
+            }
+            _ => {}
+        }
+        let flip_normals = params.boolean("flip_normals")?.unwrap_or(false);
+        let mesh = match object.kind.as_str() {
+            "obj" | "ply" | "serialized" => self.mesh_file(object, &mut params)?,
+            "rectangle" => super::analytic::rectangle(),
+            "disk" => super::analytic::disk(),
+            "cube" => super::analytic::cube(),
+            "sphere" | "cylinder" => {
+                check_similarity(&to_world)
+                    .map_err(|m| XmlError::at(&object.spot, format!("{}: {m}", object.kind)))?;
+                let radius = params.float("radius")?.map_or(1.0, |(r, _)| r);
+                let point = |params: &mut Params, name: &str, default: DVec3| {
+                    params.point(name).map(|p| p.unwrap_or(default))
+                };
+                if object.kind == "sphere" {
+                    let center = point(&mut params, "center", DVec3::ZERO)?;
+                    super::analytic::sphere(center, radius)
+                } else {
+                    let p0 = point(&mut params, "p0", DVec3::ZERO)?;
+                    let p1 = point(&mut params, "p1", DVec3::Z)?;
+                    super::analytic::cylinder(p0, p1, radius)
+                }
+                .map_err(|m| XmlError::at(&object.spot, m))?
+            }
+            _ => return Err(unsupported(object, SHAPES)),
+        };
+        self.check_memory(Some(mesh.triangles.len() as u64), &object.spot)?;
+        let mut material = None;
+        let mut emission = None;
+        for child in &object.children {
+            let inner = self.object(child.object);
+            match inner.class {
+                Class::Bsdf => {
+                    if material.replace(child.object).is_some() {
+                        return Err(XmlError::at(&child.spot, "a shape has one bsdf"));
+                    }
+                }
+                Class::Emitter => {
+                    if inner.kind != "area" {
+                        return Err(XmlError::at(
+                            &child.spot,
+                            format!(
+                                "a shape's emitter is an area emitter, not \"{}\"",
+                                super::super::echo(&inner.kind)
+                            ),
+                        ));
+                    }
+                    if emission.replace(self.area_emitter(child.object)?).is_some() {
+                        return Err(XmlError::at(&child.spot, "a shape has one emitter"));
+                    }
+                }
+                other => {
+                    return Err(XmlError::at(
+                        &child.spot,
+                        format!(
+                            "a shape holds a bsdf and an emitter, not a <{}>",
+                            other.tag()
+                        ),
+                    ));
+                }
+            }
+        }
+        params.finish()?;
+        let material = match material {
+            Some(m) => m,
+            None => usize::MAX,
+        };
+        out.push(Placed {
+            mesh,
+            to_world,
+            flip_normals,
+            material,
+            emission,
+            spot: object.spot.clone(),
+        });
+        Ok(())
+    }
+
+    /// A mesh read from a file (obj, ply, serialized), with its vertex normals as Mitsuba
+    /// makes them: the file's, none with `face_normals`, angle-weighted ones where the file has
+    /// none.
+    fn mesh_file(&mut self, object: &Object, params: &mut Params) -> Result<Mesh, XmlError> {
+        let (name, spot) = params.string("filename")?.ok_or_else(|| {
+            XmlError::at(
+                &object.spot,
+                format!("shape {} needs a filename", object.kind),
+            )
+        })?;
+        let face_normals = params.boolean("face_normals")?.unwrap_or(false);
+        let path = self.doc.resolve(name);
+        let file = match object.kind.as_str() {
+            "obj" => crate::scene::obj::load_obj(&path),
+            "ply" => crate::scene::ply::load_ply(&path),
+            _ => {
+                let index = match params.integer("shape_index")? {
+                    None => 0,
+                    Some((i, s)) => u32::try_from(i).map_err(|_| {
+                        XmlError::at(&s, format!("shape_index {i} must be 0 or more"))
+                    })?,
+                };
+                super::serialized::load_serialized(&path, index)
+            }
+        }
+        .map_err(|m| XmlError::at(&spot, m))?;
+        self.warnings.extend(file.warnings);
+        let mut mesh = file.mesh;
+        // Mitsuba flips an OBJ's v by default (OBJ's v points up an image, Mitsuba's down).
+        if object.kind == "obj" && params.boolean("flip_tex_coords")?.unwrap_or(true) {
+            mesh.flip_tex_coords();
+        }
+        if face_normals {
+            mesh.normals = None;
+        } else if mesh.normals.is_none() {
+            mesh.normals = Some(smooth_vertex_normals(&mesh));
+        }
+        Ok(mesh)
+    }
+
+    fn check_memory(&mut self, triangles: Option<u64>, spot: &Spot) -> Result<(), XmlError> {
+        let Some(count) = triangles else {
+            return Ok(());
+        };
+        let total = self.triangles_so_far.saturating_add(count);
+        if let Some(limits) = &self.limits {
+            crate::sysinfo::check_memory(
+                &format!("the scene's {total} triangles"),
+                total.saturating_mul(crate::scene::BYTES_PER_TRIANGLE),
+                limits.memory,
+            )
+            .map_err(|m| XmlError::at(spot, m))?;
+        }
+        self.triangles_so_far = total;
+        Ok(())
+    }
+
+    fn spawn(&mut self, placed: Placed) -> Result<(), XmlError> {
+        let material = if placed.material == usize::MAX {
+            match self.default_material {
+                Some(e) => e,
+                None => {
+                    let e = self.world.spawn((
+                        MaterialInfo {
+                            name: "the default BSDF".into(),
+                            order: 0,
+                        },
+                        // Mitsuba's default: diffuse of reflectance 0.5. Two-sided until the
+                        // one-sided diffuse is modelled; see `diffuse`.
+                        Material::Diffuse {
+                            reflectance: Vec3::splat(0.5),
+                        },
+                    ));
+                    self.default_material = Some(e);
+                    e
+                }
+            }
+        } else {
+            self.material(placed.material)?
+        };
+        let mut entity = EntityBuilder::new();
+        entity.add_bundle((
+            ObjectInfo {
+                order: self.objects,
+                name: None,
+            },
+            source_spot(&placed.spot),
+            DeclaredIn(placed.spot.file.to_path_buf()),
+            Shape(placed.mesh),
+            Transform(placed.to_world),
+            MaterialRef(material),
+        ));
+        if let Some(radiance) = placed.emission {
+            entity.add(Emission(radiance));
+        }
+        if placed.flip_normals {
+            entity.add(FlipNormals);
+        }
+        self.world.spawn(entity.build());
+        self.objects += 1;
+        Ok(())
+    }
+}
+
+/// Fails unless `m` is a rotation (or mirror) with one scale and a translation: Mitsuba's sphere
+/// and cylinder keep their round cross-section under any to_world, a mesh would not.
+fn check_similarity(m: &DAffine3) -> Result<(), String> {
+    let c = [m.matrix3.x_axis, m.matrix3.y_axis, m.matrix3.z_axis];
+    let lengths = c.map(|v| v.length());
+    let scale = lengths[0];
+    let tolerance = 1e-6 * scale;
+    let uniform = lengths.iter().all(|l| (l - scale).abs() <= tolerance);
+    let orthogonal = (c[0].dot(c[1]).abs() + c[1].dot(c[2]).abs() + c[0].dot(c[2]).abs())
+        <= 1e-6 * scale * scale;
+    if uniform && orthogonal {
+        Ok(())
+    } else {
+        Err(
+            "a to_world with non-uniform scale or shear is not supported (Mitsuba keeps the \
+             shape round; a mesh would not be)"
+                .into(),
+        )
+    }
+}
+
+/// Near and far clipping distances a perspective sensor gives (checked against the scene once
+/// its triangles are placed: see `check_clip_planes`).
+#[derive(Clone, Debug)]
+pub struct ClipPlanes {
+    pub near: Option<(f64, Spot)>,
+    pub far: Option<(f64, Spot)>,
+}
+
+/// Fails where the sensor's near or far clipping plane would hide part of a triangle in view:
+/// stagelight's camera rays are not clipped, so such a file would render a different image.
+/// Each triangle is clipped (in camera space) to the part of the view frustum before the near
+/// plane, then to the part beyond the far plane; any area left is an error.
+fn check_clip_planes(world: &World) -> Result<(), XmlError> {
+    let mut cameras = world.query::<(&Camera, &ClipPlanes)>();
+    let Some((camera, clip)) = cameras.iter().next() else {
+        return Ok(());
+    };
+    if clip.near.is_none() && clip.far.is_none() {
+        return Ok(());
+    }
+    let tan_y = (0.5 * (camera.fov_y_degrees as f64).to_radians()).tan();
+    let tan_x = tan_y * camera.width as f64 / camera.height as f64;
+    let (o, r, u, f) = (
+        camera.position.as_dvec3(),
+        camera.right.as_dvec3(),
+        camera.up.as_dvec3(),
+        camera.forward.as_dvec3(),
+    );
+    let mut objects = world.query::<(&Shape, &Transform)>();
+    for (shape, transform) in objects.iter() {
+        let local: Vec<DVec3> = shape
+            .0
+            .positions
+            .iter()
+            .map(|&p| {
+                let d = transform.0.transform_point3(p) - o;
+                DVec3::new(d.dot(r), d.dot(u), d.dot(f))
+            })
+            .collect();
+        for tri in &shape.0.triangles {
+            let corners = tri.map(|i| local[i as usize]);
+            // Frustum sides: x <= z tan_x, -x <= z tan_x, y <= z tan_y, -y <= z tan_y, z >= 0,
+            // each as a plane a.p <= b.
+            let sides = [
+                (DVec3::new(1.0, 0.0, -tan_x), 0.0),
+                (DVec3::new(-1.0, 0.0, -tan_x), 0.0),
+                (DVec3::new(0.0, 1.0, -tan_y), 0.0),
+                (DVec3::new(0.0, -1.0, -tan_y), 0.0),
+                (DVec3::new(0.0, 0.0, -1.0), 0.0),
+            ];
+            if let Some((near, spot)) = &clip.near {
+                let mut planes = sides.to_vec();
+                planes.push((DVec3::Z, *near));
+                if clipped_area(&corners, &planes) > 0.0 {
+                    return Err(XmlError::at(
+                        spot,
+                        format!(
+                            "near_clip {near} hides part of the scene in view: camera rays are not                              clipped in stagelight (lower near_clip below the nearest visible surface)"
+                        ),
+                    ));
+                }
+            }
+            if let Some((far, spot)) = &clip.far {
+                let mut planes = sides.to_vec();
+                planes.push((-DVec3::Z, -*far));
+                if clipped_area(&corners, &planes) > 0.0 {
+                    return Err(XmlError::at(
+                        spot,
+                        format!(
+                            "far_clip {far} hides part of the scene in view: camera rays are not                              clipped in stagelight (raise far_clip beyond the farthest surface)"
+                        ),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The area of a triangle's part inside every half-space a.p <= b (Sutherland-Hodgman).
+fn clipped_area(triangle: &[DVec3; 3], planes: &[(DVec3, f64)]) -> f64 {
+    let mut polygon: Vec<DVec3> = triangle.to_vec();
+    for &(a, b) in planes {
+        let mut next = Vec::with_capacity(polygon.len() + 1);
+        for i in 0..polygon.len() {
+            let (p, q) = (polygon[i], polygon[(i + 1) % polygon.len()]);
+            let (dp, dq) = (a.dot(p) - b, a.dot(q) - b);
+            if dp <= 0.0 {
+                next.push(p);
+            }
+            if (dp < 0.0 && dq > 0.0) || (dp > 0.0 && dq < 0.0) {
+                next.push(p + (q - p) * (dp / (dp - dq)));
+            }
+        }
+        polygon = next;
+        if polygon.len() < 3 {
+            return 0.0;
+        }
+    }
+    let mut doubled = DVec3::ZERO;
+    for i in 1..polygon.len() - 1 {
+        doubled += (polygon[i] - polygon[0]).cross(polygon[i + 1] - polygon[0]);
+    }
+    0.5 * doubled.length()
+}
+
+fn unsupported(object: &Object, supported: &str) -> XmlError {
+    XmlError::at(
+        &object.spot,
+        format!(
+            "{} type \"{}\" is not supported (supported: {supported})",
+            object.class.tag(),
+            super::super::echo(&object.kind)
+        ),
+    )
+}
+
+fn source_spot(spot: &Spot) -> SourceSpot {
+    SourceSpot {
+        line: spot.line as usize,
+        column: spot.column as usize,
+    }
+}
+
+/// An index of refraction: a number or one of Mitsuba's named materials.
+fn ior(params: &mut Params, name: &str, default: f64) -> Result<f64, XmlError> {
+    let Some(p) = params.take(name) else {
+        return Ok(default);
+    };
+    let value = match &p.value {
+        Value::Float(v) => *v,
+        Value::Integer(v) => *v as f64,
+        Value::String(s) => super::spectrum::named_ior(s).ok_or_else(|| {
+            XmlError::at(
+                &p.spot,
+                format!(
+                    "{name} \"{}\" is not a known material (known: {})",
+                    super::super::echo(s),
+                    super::spectrum::IOR_NAMES.join(", ")
+                ),
+            )
+        })?,
+        _ => return Err(params.wrong_type(p, "float or material name")),
+    };
+    if !(value.is_finite() && value >= 1.0) {
+        return Err(XmlError::at(
+            &p.spot,
+            format!("{name} {value} must be a finite number of at least 1"),
+        ));
+    }
+    Ok(value)
+}
+
+/// Mitsuba's max_depth counts a path's segments (1: emitters seen directly, 2: direct light);
+/// stagelight's `--max-depth` counts bounces, so it is one less.
+pub fn mitsuba_depth_to_bounces(depth: i64) -> Result<u32, String> {
+    match depth {
+        d if d >= 1 && d <= u32::MAX as i64 => Ok((d - 1) as u32),
+        0 => Err("max_depth 0 renders a black image: not supported (use -1 for unlimited, 1 for emitters seen directly)".into()),
+        d => Err(format!("max_depth {d} must be -1 (unlimited) or at least 1")),
+    }
+}
+
+/// The vertical field of view of Mitsuba's `fov` along `axis` on a film of this aspect (width
+/// over height). Along y it is `fov` itself, unrounded.
+pub fn fov_y_degrees(fov: f64, axis: &str, aspect: f64) -> Result<f64, String> {
+    let full = |tan_half: f64| 2.0 * tan_half.atan().to_degrees();
+    let tan = (0.5 * fov.to_radians()).tan();
+    let axis = match axis {
+        "smaller" if aspect > 1.0 => "y",
+        "smaller" => "x",
+        "larger" if aspect > 1.0 => "x",
+        "larger" => "y",
+        other => other,
+    };
+    Ok(match axis {
+        "x" => full(tan / aspect),
+        "y" => fov,
+        // The diagonal is sqrt(1 + aspect^2) heights long.
+        "diagonal" => full(tan / (1.0 + aspect * aspect).sqrt()),
+        other => {
+            return Err(format!(
+                "fov_axis \"{}\" is not one of x, y, diagonal, smaller, larger",
+                super::super::echo(other)
+            ));
+        }
+    })
+}
+
+/// The camera of a sensor's to_world: Mitsuba's camera looks along its +z with +y up; the
+/// image's right is its -x.
+fn camera_of(m: &DMat4, fov_y: f64, width: u32, height: u32) -> Result<Camera, String> {
+    let affine = super::document::affine(m).ok_or("a sensor's to_world must be affine")?;
+    let position = affine.transform_point3(DVec3::ZERO);
+    let forward = affine
+        .transform_vector3(DVec3::Z)
+        .try_normalize()
+        .ok_or("the sensor's to_world flattens its view direction")?;
+    let up = affine.transform_vector3(DVec3::Y);
+    let right = -affine.transform_vector3(DVec3::X);
+    // The frame must stay orthogonal: a sensor's to_world is a rotation, translation and
+    // possibly a mirror; shear would skew the image.
+    let (up, right) = (
+        up.try_normalize()
+            .ok_or("the sensor's to_world flattens its up direction")?,
+        right
+            .try_normalize()
+            .ok_or("the sensor's to_world flattens its side direction")?,
+    );
+    if forward.dot(up).abs() > 1e-6 || forward.dot(right).abs() > 1e-6 || up.dot(right).abs() > 1e-6
+    {
+        return Err("the sensor's to_world is not orthogonal (shear or non-uniform scale)".into());
+    }
+    if position.abs().max_element() >= crate::scene::MAX_COORDINATE {
+        return Err("the sensor's position is too far out".into());
+    }
+    if !(fov_y > 0.0 && fov_y < 180.0) {
+        return Err(format!(
+            "the vertical field of view {fov_y} degrees is out of (0, 180)"
+        ));
+    }
+    Ok(Camera {
+        position: position.as_vec3(),
+        forward: forward.as_vec3(),
+        right: right.as_vec3(),
+        up: up.as_vec3(),
+        fov_y_degrees: fov_y as f32,
+        width,
+        height,
+    })
+}
+
+/// Per-vertex normals of a mesh without them, as Mitsuba makes them: each face's unit normal
+/// added to its corners weighted by the corner's angle (Thürmer and Wüthrich 1998).
+pub fn smooth_vertex_normals(mesh: &Mesh) -> Vec<DVec3> {
+    let mut normals = vec![DVec3::ZERO; mesh.positions.len()];
+    for tri in &mesh.triangles {
+        let p = tri.map(|i| mesh.positions[i as usize]);
+        let Some(n) = (p[1] - p[0]).cross(p[2] - p[0]).try_normalize() else {
+            continue;
+        };
+        for k in 0..3 {
+            let a = (p[(k + 1) % 3] - p[k]).try_normalize();
+            let b = (p[(k + 2) % 3] - p[k]).try_normalize();
+            if let (Some(a), Some(b)) = (a, b) {
+                normals[tri[k] as usize] += n * a.dot(b).clamp(-1.0, 1.0).acos();
+            }
+        }
+    }
+    // A vertex no face reaches keeps a zero normal: its triangles are shaded flat.
+    normals
+        .iter()
+        .map(|n| n.try_normalize().unwrap_or(DVec3::ZERO))
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn max_depth_counts_segments() {
+        assert_eq!(mitsuba_depth_to_bounces(1), Ok(0));
+        assert_eq!(mitsuba_depth_to_bounces(2), Ok(1));
+        assert_eq!(mitsuba_depth_to_bounces(8), Ok(7));
+        assert!(mitsuba_depth_to_bounces(0).is_err());
+        assert!(mitsuba_depth_to_bounces(-2).is_err());
+    }
+
+    #[test]
+    fn fov_axes() {
+        // Square film: every axis but the diagonal is the same.
+        for axis in ["x", "y", "smaller", "larger"] {
+            assert!((fov_y_degrees(40.0, axis, 1.0).unwrap() - 40.0).abs() < 1e-12);
+        }
+        // 2:1 film, fov 90 along x: tan(y/2) = tan(45) / 2; "larger" is x there.
+        let y = 2.0 * 0.5f64.atan().to_degrees();
+        for axis in ["x", "larger"] {
+            assert!((fov_y_degrees(90.0, axis, 2.0).unwrap() - y).abs() < 1e-12);
+        }
+        assert_eq!(fov_y_degrees(90.0, "smaller", 2.0).unwrap(), 90.0);
+        // Diagonal of a square: tan(y/2) = tan(d/2) / sqrt(2).
+        let y = fov_y_degrees(90.0, "diagonal", 1.0).unwrap();
+        assert!((y - 2.0 * (1.0 / 2.0f64.sqrt()).atan().to_degrees()).abs() < 1e-12);
+        // Mitsuba's default lens, 50 mm on 35 mm film: 46.8 degrees across the diagonal.
+        let diagonal = 2.0
+            * ((36.0f64 * 36.0 + 24.0 * 24.0).sqrt() / 100.0)
+                .atan()
+                .to_degrees();
+        assert!((diagonal - 46.8).abs() < 0.01, "{diagonal}");
+        assert!(fov_y_degrees(40.0, "z", 1.0).is_err());
+    }
+}

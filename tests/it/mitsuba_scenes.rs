@@ -1,0 +1,351 @@
+//! Mitsuba 3 scene files: the study's scenes in XML are their RON scenes bit for bit, the file's
+//! settings reach the command line in the right order, and every broken file is an error
+//! naming its file, line and column (exit 1 from the binary).
+
+use crate::common::{stagelight, stderr, temp_dir};
+use stagelight::scene::mitsuba::build::file_settings;
+use stagelight::scene::{self, Limits, PreparedScene};
+use std::path::{Path, PathBuf};
+
+fn scenes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
+}
+
+/// Every column the renderer reads, compared exactly (floats by their bits).
+fn assert_same_scene(a: &PreparedScene, b: &PreparedScene, name: &str) {
+    assert_eq!(a.camera, b.camera, "{name}: camera");
+    assert_eq!(a.materials, b.materials, "{name}: materials");
+    let (t, u) = (&a.triangles, &b.triangles);
+    assert_eq!(t.len(), u.len(), "{name}: triangle count");
+    let bits = |v: &[glam::Vec3]| -> Vec<[u32; 3]> {
+        v.iter().map(|p| p.to_array().map(f32::to_bits)).collect()
+    };
+    assert_eq!(bits(&t.p0), bits(&u.p0), "{name}: p0");
+    assert_eq!(bits(&t.p1), bits(&u.p1), "{name}: p1");
+    assert_eq!(bits(&t.p2), bits(&u.p2), "{name}: p2");
+    assert_eq!(bits(&t.normal), bits(&u.normal), "{name}: normals");
+    assert_eq!(t.material, u.material, "{name}: material ids");
+    assert_eq!(t.emitter, u.emitter, "{name}: emitter ids");
+    assert_eq!(t.smooth, u.smooth, "{name}: smooth flags");
+    let vn = |v: &[[glam::Vec3; 3]]| -> Vec<[[u32; 3]; 3]> {
+        v.iter()
+            .map(|n| n.map(|p| p.to_array().map(f32::to_bits)))
+            .collect()
+    };
+    assert_eq!(
+        vn(&t.vertex_normals),
+        vn(&u.vertex_normals),
+        "{name}: vertex normals"
+    );
+    assert_eq!(a.emitters.radiance, b.emitters.radiance, "{name}: radiance");
+    assert_eq!(a.emitters.area, b.emitters.area, "{name}: light areas");
+    assert_eq!(a.emitters.cdf, b.emitters.cdf, "{name}: light distribution");
+}
+
+#[test]
+fn study_scenes_in_xml_are_their_ron_scenes_bit_for_bit() {
+    for name in ["cornell_box", "door_ajar", "furnace", "torus_glass"] {
+        let ron = scene::load(&scenes_dir().join(format!("{name}.ron"))).unwrap();
+        let xml = scene::load(&scenes_dir().join(format!("{name}.xml"))).unwrap();
+        assert_same_scene(&ron, &xml, name);
+    }
+}
+
+#[test]
+fn export_writes_what_reads_back_as_the_same_scene() {
+    let dir = temp_dir("mitsuba-export");
+    let out = dir.join("torus_glass.xml");
+    let o = stagelight(&[
+        "export",
+        scenes_dir().join("torus_glass.ron").to_str().unwrap(),
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let ron = scene::load(&scenes_dir().join("torus_glass.ron")).unwrap();
+    let xml = scene::load(&out).unwrap();
+    assert_same_scene(&ron, &xml, "exported torus_glass");
+}
+
+const SETTINGS: &str = r#"<scene version="3.0.0">
+    <default name="spp" value="16"/>
+    <default name="depth" value="8"/>
+    <integrator type="moment"><integrator type="path">
+        <integer name="max_depth" value="$depth"/>
+    </integrator></integrator>
+    <sensor type="perspective">
+        <sampler type="independent"><integer name="sample_count" value="$spp"/></sampler>
+    </sensor>
+</scene>"#;
+
+#[test]
+fn sample_count_and_max_depth_are_the_defaults_and_minus_d_overrides_them() {
+    let dir = temp_dir("mitsuba-settings");
+    let path = dir.join("settings.xml");
+    std::fs::write(&path, SETTINGS).unwrap();
+    let s = file_settings(&path, &[]).unwrap();
+    // Mitsuba's max_depth counts segments: 8 segments are 7 bounces.
+    assert_eq!((s.spp, s.max_depth), (Some(16), Some(7)));
+    let s = file_settings(
+        &path,
+        &[("spp".into(), "64".into()), ("depth".into(), "-1".into())],
+    )
+    .unwrap();
+    assert_eq!((s.spp, s.max_depth), (Some(64), None));
+    let s = file_settings(&path, &[("depth".into(), "2".into())]).unwrap();
+    assert_eq!(s.max_depth, Some(1), "direct light only");
+}
+
+#[test]
+fn minus_d_is_an_error_on_a_ron_scene() {
+    let e = scene::load_with_defines(
+        &scenes_dir().join("furnace.ron"),
+        &[("spp".into(), "4".into())],
+        &Limits::of_this_machine(),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("Mitsuba scene files"), "{e}");
+}
+
+/// A scene around `body`: a sensor with a box-filtered film on lines 2-4, `body` from line 5.
+fn scene_with(body: &str) -> String {
+    format!(
+        "<scene version=\"3.0.0\">\n\
+         <sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\n\
+         <film type=\"hdrfilm\"><rfilter type=\"box\"/></film>\n\
+         </sensor>\n{body}\n</scene>\n"
+    )
+}
+
+/// Broken files: (name, files to write (name, text), the file loaded, the error's line and
+/// column, a phrase of the message). The error names the file loaded, but for the cyclic
+/// include, which is found where b.xml includes a.xml again.
+#[allow(clippy::type_complexity)]
+fn broken() -> Vec<(
+    &'static str,
+    Vec<(&'static str, String)>,
+    &'static str,
+    u32,
+    u32,
+    &'static str,
+)> {
+    vec![
+        (
+            "unknown plugin",
+            vec![("a.xml", scene_with("<bsdf type=\"principled\" id=\"p\"/>"))],
+            "a.xml",
+            5,
+            1,
+            "bsdf type \"principled\" is not supported (supported: diffuse",
+        ),
+        (
+            "missing mesh",
+            vec![(
+                "a.xml",
+                scene_with("<shape type=\"obj\">\n  <string name=\"filename\" value=\"nowhere.obj\"/>\n</shape>"),
+            )],
+            "a.xml",
+            6,
+            3,
+            "nowhere.obj",
+        ),
+        (
+            "bad spectrum",
+            vec![("a.xml", scene_with("<spectrum name=\"x\" value=\"500:1, 400:2\"/>"))],
+            "a.xml",
+            5,
+            1,
+            "wavelengths of a spectrum must increase",
+        ),
+        (
+            "cyclic include",
+            vec![
+                ("a.xml", scene_with("<include filename=\"b.xml\"/>")),
+                (
+                    "b.xml",
+                    "<scene version=\"3.0.0\">\n  <include filename=\"a.xml\"/>\n</scene>".into(),
+                ),
+            ],
+            "a.xml",
+            2,
+            3,
+            "cyclic",
+        ),
+        (
+            "undefined parameter",
+            vec![("a.xml", scene_with("<shape type=\"$kind\"/>"))],
+            "a.xml",
+            5,
+            1,
+            "$kind is not defined",
+        ),
+        (
+            "bad transform",
+            vec![(
+                "a.xml",
+                scene_with("<shape type=\"obj\"><transform name=\"to_world\">\n<matrix value=\"1 2 3\"/></transform></shape>"),
+            )],
+            "a.xml",
+            6,
+            1,
+            "matrix has 3 numbers",
+        ),
+        (
+            "not well-formed",
+            vec![("a.xml", scene_with("<shape type=\"obj\">"))],
+            "a.xml",
+            6,
+            1,
+            "not well-formed XML: expected 'shape' tag, not 'scene'",
+        ),
+        (
+            "unmodelled parameter",
+            vec![(
+                "a.xml",
+                scene_with("<bsdf type=\"twosided\" id=\"d\"><bsdf type=\"diffuse\">\n  <float name=\"sheen\" value=\"1\"/>\n</bsdf></bsdf>"),
+            )],
+            "a.xml",
+            6,
+            3,
+            "parameter \"sheen\" is not supported",
+        ),
+        (
+            "ref to nothing",
+            vec![("a.xml", scene_with("<shape type=\"obj\"><ref id=\"ghost\"/></shape>"))],
+            "a.xml",
+            5,
+            19,
+            "ref to id \"ghost\"",
+        ),
+        (
+            "old version",
+            vec![("a.xml", "<scene version=\"0.6.0\">\n</scene>\n".into())],
+            "a.xml",
+            1,
+            1,
+            "version \"0.6.0\" is not supported",
+        ),
+        (
+            "participating media",
+            vec![("a.xml", scene_with("<medium type=\"homogeneous\" id=\"m\"/>"))],
+            "a.xml",
+            5,
+            1,
+            "participating media",
+        ),
+        (
+            "gaussian filter by default",
+            vec![(
+                "a.xml",
+                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <film type=\"hdrfilm\"/>\n</sensor>\n</scene>\n".into(),
+            )],
+            "a.xml",
+            3,
+            3,
+            "gaussian",
+        ),
+        (
+            "duplicate id",
+            vec![(
+                "a.xml",
+                scene_with("<bsdf type=\"diffuse\" id=\"x\"/>\n<bsdf type=\"diffuse\" id=\"x\"/>"),
+            )],
+            "a.xml",
+            6,
+            1,
+            "id \"x\" is already used at 5:1",
+        ),
+        (
+            "wrong property type",
+            vec![(
+                "a.xml",
+                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <string name=\"fov\" value=\"wide\"/>\n</sensor>\n</scene>\n".into(),
+            )],
+            "a.xml",
+            3,
+            3,
+            "is a string, not a float",
+        ),
+    ]
+}
+
+#[test]
+fn broken_files_name_the_file_line_column_and_problem() {
+    let dir = temp_dir("mitsuba-broken");
+    for (k, (name, files, load, line, column, phrase)) in broken().into_iter().enumerate() {
+        let case = dir.join(format!("case{k}"));
+        std::fs::create_dir_all(&case).unwrap();
+        for (file, text) in &files {
+            std::fs::write(case.join(file), text).unwrap();
+        }
+        let e = scene::load(&case.join(load))
+            .err()
+            .unwrap_or_else(|| panic!("{name}: loaded"));
+        let shown = e.to_string();
+        let where_ = files
+            .iter()
+            .map(|(f, _)| *f)
+            .find(|f| shown.starts_with(&case.join(f).display().to_string()))
+            .unwrap_or_else(|| panic!("{name}: no file named first in {shown}"));
+        let expected_file = match name {
+            "cyclic include" => "b.xml",
+            _ => load,
+        };
+        assert_eq!(where_, expected_file, "{name}: {shown}");
+        assert_eq!(
+            (e.line, e.column),
+            (Some(line as usize), Some(column as usize)),
+            "{name}: {shown}"
+        );
+        assert!(shown.contains(phrase), "{name}: {shown}");
+    }
+}
+
+#[test]
+fn the_binary_exits_1_with_the_message_on_one_line() {
+    let dir = temp_dir("mitsuba-broken-cli");
+    let path = dir.join("bad.xml");
+    std::fs::write(&path, scene_with("<emitter type=\"spot\"/>")).unwrap();
+    let o = stagelight(&[
+        "render",
+        path.to_str().unwrap(),
+        "--spp",
+        "1",
+        "-o",
+        dir.join("x.exr").to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    let err = stderr(&o);
+    assert!(
+        err.contains("bad.xml:5:1: emitter type \"spot\" is not supported"),
+        "{err}"
+    );
+    assert!(!dir.join("x.exr").exists());
+}
+
+#[test]
+fn near_clip_that_would_hide_a_surface_is_refused() {
+    let dir = temp_dir("mitsuba-clip");
+    // A quad two units in front of the camera; near_clip 3 would hide it in Mitsuba.
+    let quad = "v -1 -1 2\nv 1 -1 2\nv 1 1 2\nv -1 1 2\nf 1 2 3 4\n";
+    std::fs::write(dir.join("quad.obj"), quad).unwrap();
+    let text = |near: f64| {
+        format!(
+            "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <float name=\"near_clip\" value=\"{near}\"/>\n  \
+             <film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/><integer name=\"height\" value=\"8\"/><rfilter type=\"box\"/></film>\n\
+             </sensor>\n<shape type=\"obj\"><string name=\"filename\" value=\"quad.obj\"/>\
+             <emitter type=\"area\"><rgb name=\"radiance\" value=\"1\"/></emitter></shape>\n</scene>\n"
+        )
+    };
+    let path = dir.join("clip.xml");
+    std::fs::write(&path, text(3.0)).unwrap();
+    let e = scene::load(&path).unwrap_err();
+    assert_eq!(e.line, Some(3), "{e}");
+    assert!(
+        e.to_string()
+            .contains("near_clip 3 hides part of the scene"),
+        "{e}"
+    );
+    std::fs::write(&path, text(1.0)).unwrap();
+    scene::load(&path).unwrap();
+}
