@@ -244,20 +244,8 @@ fn read_mesh<const UV: u8, R: BufRead>(
     }
     let mut warnings = Vec::new();
     if with_normals {
-        let mut bad = 0usize;
-        let normals = vertices
-            .iter()
-            .map(|v| {
-                let n = DVec3::from_array(v.n);
-                n.is_finite()
-                    .then(|| n.try_normalize())
-                    .flatten()
-                    .unwrap_or_else(|| {
-                        bad += 1;
-                        DVec3::ZERO
-                    })
-            })
-            .collect();
+        let (normals, bad) =
+            super::shapes::usable_normals(vertices.iter().map(|v| DVec3::from_array(v.n)));
         mesh.normals = Some(normals);
         if bad > 0 {
             warnings.push(format!(

@@ -42,6 +42,24 @@ impl Mesh {
     }
 }
 
+/// File normals made unit, each unusable one (infinite, NaN or zero) replaced by zero (its
+/// faces are then shaded flat); with the count of unusable ones, for the reader's warning.
+pub fn usable_normals(normals: impl Iterator<Item = DVec3>) -> (Vec<DVec3>, usize) {
+    let mut bad = 0usize;
+    let normals = normals
+        .map(|n| {
+            n.is_finite()
+                .then(|| n.try_normalize())
+                .flatten()
+                .unwrap_or_else(|| {
+                    bad += 1;
+                    DVec3::ZERO
+                })
+        })
+        .collect();
+    (normals, bad)
+}
+
 pub fn quad(a: DVec3, b: DVec3, c: DVec3, d: DVec3) -> Mesh {
     let mut mesh = Mesh::default();
     mesh.push_quad([a, b, c, d]);

@@ -297,23 +297,13 @@ fn read_mesh(stream: &[u8], version: u16) -> Result<(Mesh, Vec<String>), String>
         ));
     }
     if has_normals {
-        let mut bad = 0usize;
-        let normals = (0..v)
-            .map(|_| {
-                let n = DVec3::new(
-                    cursor.float(double),
-                    cursor.float(double),
-                    cursor.float(double),
-                );
-                n.is_finite()
-                    .then(|| n.try_normalize())
-                    .flatten()
-                    .unwrap_or_else(|| {
-                        bad += 1;
-                        DVec3::ZERO
-                    })
-            })
-            .collect();
+        let (normals, bad) = crate::scene::shapes::usable_normals((0..v).map(|_| {
+            DVec3::new(
+                cursor.float(double),
+                cursor.float(double),
+                cursor.float(double),
+            )
+        }));
         mesh.normals = Some(normals);
         if bad > 0 {
             warnings.push(format!(
