@@ -160,7 +160,7 @@ pub fn write_big_scene(dir: &Path, size: &BigScene) -> Result<PathBuf> {
         camera.height.0
     );
     let mut xml = format!(
-        "<!-- Written by `stagelight bench --big`: the same geometry as {name}.ron, for Mitsuba 3 -->\n\
+        "<!-- Written by stagelight bench (its big scenes): the same geometry as {name}.ron, for Mitsuba 3 -->\n\
          <scene version=\"3.0.0\">\n\
          \x20   <default name=\"spp\" value=\"32\"/>\n\
          \x20   <integrator type=\"path\"><integer name=\"max_depth\" value=\"-1\"/></integrator>\n\

@@ -281,7 +281,7 @@ struct Builder<'a> {
     settings_only: bool,
     /// Material entities of BSDF objects already made (a BSDF referenced twice is one material).
     materials: HashMap<usize, Entity>,
-    /// The default BSDF (Mitsuba's diffuse of reflectance 0.5), made when first needed.
+    /// The default BSDF of emitting shapes (Mitsuba's: a black diffuse), made when first needed.
     default_material: Option<Entity>,
     objects: u32,
     triangles_so_far: u64,
@@ -1089,19 +1089,21 @@ impl<'a> Builder<'a> {
     }
 
     fn spawn(&mut self, placed: Placed) -> Result<(), XmlError> {
-        let material = if placed.material == usize::MAX {
+        let material = if placed.material != usize::MAX {
+            self.material(placed.material)?
+        } else if placed.emission.is_some() {
+            // Mitsuba's default BSDF of an emitting shape: a black diffuse (the light
+            // reflects nothing; black is black from both sides).
             match self.default_material {
                 Some(e) => e,
                 None => {
                     let e = self.world.spawn((
                         MaterialInfo {
-                            name: "the default BSDF".into(),
+                            name: "the default BSDF of emitters (black)".into(),
                             order: 0,
                         },
-                        // Mitsuba's default: diffuse of reflectance 0.5. Two-sided until the
-                        // one-sided diffuse is modelled; see `diffuse`.
                         Material::Diffuse {
-                            reflectance: Vec3::splat(0.5),
+                            reflectance: Vec3::ZERO,
                         },
                     ));
                     self.default_material = Some(e);
@@ -1109,7 +1111,11 @@ impl<'a> Builder<'a> {
                 }
             }
         } else {
-            self.material(placed.material)?
+            return Err(XmlError::at(
+                &placed.spot,
+                "a shape without a bsdf gets Mitsuba's default, a one-sided diffuse, which \
+                 stagelight does not model yet: give it a bsdf (e.g. a twosided diffuse)",
+            ));
         };
         let mut entity = EntityBuilder::new();
         entity.add_bundle((

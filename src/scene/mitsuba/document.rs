@@ -356,6 +356,8 @@ impl Reader {
             }
         }
         let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+        let text = lenient_comments(text);
+        let text = text.as_ref();
         let options = roxmltree::ParsingOptions {
             allow_dtd: false,
             nodes_limit: 10_000_000,
@@ -904,6 +906,30 @@ impl Reader {
     }
 }
 
+/// `text` with every dash inside a comment made a space. XML forbids "--" in a comment, but
+/// Mitsuba's parser (pugixml) reads such files, and scene files have them (a command line
+/// quoted in a comment); the text keeps its length, so positions in errors are unchanged.
+fn lenient_comments(text: &str) -> std::borrow::Cow<'_, str> {
+    if !text.contains("<!--") {
+        return std::borrow::Cow::Borrowed(text);
+    }
+    let mut bytes = text.as_bytes().to_vec();
+    let mut at = 0;
+    while let Some(start) = text[at..].find("<!--").map(|i| at + i + 4) {
+        let Some(end) = text[start..].find("-->").map(|i| start + i) else {
+            break;
+        };
+        for b in &mut bytes[start..end] {
+            if *b == b'-' {
+                *b = b' ';
+            }
+        }
+        at = end + 3;
+    }
+    // Only ASCII dashes became ASCII spaces: the bytes are still UTF-8.
+    std::borrow::Cow::Owned(String::from_utf8(bytes).unwrap_or_else(|_| text.to_string()))
+}
+
 /// Mitsuba's look-at frame: columns left = normalize(up x dir), up' = dir x left, dir, origin.
 /// Without `up`, one perpendicular to dir is chosen.
 fn look_at(origin: DVec3, target: DVec3, up: Option<DVec3>) -> Result<DMat4, String> {
@@ -995,6 +1021,15 @@ mod tests {
         let e = read(text, &[]).unwrap_err();
         assert!(e.message.contains("$kind is not defined"), "{}", e.message);
         assert_eq!(e.line, Some(3));
+    }
+
+    #[test]
+    fn comments_may_hold_double_dashes_as_in_mitsuba() {
+        let text = "<scene version=\"3.0.0\"><!-- made by `tool --flag` ---><integer name=\"a\" value=\"1\"/></scene>";
+        let doc = read(text, &[]).unwrap();
+        assert_eq!(doc.objects[0].properties[0].value, Value::Integer(1));
+        let e = read("<scene version=\"3.0.0\"><!-- x --><bad/></scene>", &[]).unwrap_err();
+        assert_eq!((e.line, e.column), (Some(1), Some(35)), "{}", e.message);
     }
 
     #[test]
