@@ -1029,7 +1029,7 @@ mod tests {
         let doc = read(text, &[]).unwrap();
         assert_eq!(doc.objects[0].properties[0].value, Value::Integer(1));
         let e = read("<scene version=\"3.0.0\"><!-- x --><bad/></scene>", &[]).unwrap_err();
-        assert_eq!((e.line, e.column), (Some(1), Some(35)), "{}", e.message);
+        assert_eq!((e.line, e.column), (Some(1), Some(34)), "{}", e.message);
     }
 
     #[test]
