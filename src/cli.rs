@@ -223,6 +223,10 @@ pub struct KernelArgs {
     /// others). vcm and bpm merge with the light subpaths of the same wave.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
     pub wavefront: Option<u64>,
+    /// Paths pt's wavefront shades at a time in vector lanes: 8 (AVX2's registers) or 16
+    /// (AVX-512's); default: the widest this CPU has. The image is the same.
+    #[arg(long, value_name = "8|16", value_parser = parse_lanes)]
+    pub lanes: Option<crate::lanes::LaneWidth>,
 }
 
 #[derive(Copy, Clone, Debug, PartialEq, Eq, ValueEnum)]

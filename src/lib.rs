@@ -16,6 +16,7 @@ pub mod cpu;
 pub mod film;
 pub mod geometry;
 pub mod integrators;
+pub mod lanes;
 pub mod math;
 pub mod metrics;
 pub mod mlt;

@@ -1,18 +1,25 @@
 //! Lambertian reflection on both sides of the surface.
+//!
+//! The lobe's maths is written once over [`Real`] (`eval_cos`, `pdf_cos`, `sample_of`): the
+//! megakernel and the other integrators run it for one path (`f32`, through `Material`), the
+//! wavefront's lane systems for `N` paths at a time (`F<N>`), bit for bit alike (see
+//! docs/architecture.md, "Writing a material once for one path and for lanes").
 use super::BsdfSample;
-use crate::sampling::cosine_hemisphere;
+use crate::lanes::{Real, V3};
+use crate::sampling::cosine_hemisphere_of;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
 /// True when both directions lie strictly on the same side of the surface (a zero cosine is on
 /// neither side: such directions carry no projected energy).
-#[inline]
-fn same_side(cos_o: f32, cos_i: f32) -> bool {
-    (cos_o > 0.0 && cos_i > 0.0) || (cos_o < 0.0 && cos_i < 0.0)
+#[inline(always)]
+fn same_side<T: Real>(cos_o: T, cos_i: T) -> T::Mask {
+    let zero = T::splat(0.0);
+    (cos_o.greater(zero) & cos_i.greater(zero)) | (cos_o.less(zero) & cos_i.less(zero))
 }
 
 pub fn eval(reflectance: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
-    eval_cos(reflectance, wo.z, wi.z)
+    eval_cos(reflectance.into(), wo.z, wi.z).into()
 }
 
 pub fn pdf(wo: Vec3, wi: Vec3) -> f32 {
@@ -20,43 +27,59 @@ pub fn pdf(wo: Vec3, wi: Vec3) -> f32 {
 }
 
 /// `eval` from the two cosines with the shading normal (all the lobe depends on).
-#[inline]
-pub fn eval_cos(reflectance: Vec3, cos_o: f32, cos_i: f32) -> Vec3 {
-    if same_side(cos_o, cos_i) {
-        reflectance * FRAC_1_PI
-    } else {
-        Vec3::ZERO
-    }
+#[inline(always)]
+pub fn eval_cos<T: Real>(reflectance: V3<T>, cos_o: T, cos_i: T) -> V3<T> {
+    V3::select(
+        same_side(cos_o, cos_i),
+        reflectance * T::splat(FRAC_1_PI),
+        V3::splat(Vec3::ZERO),
+    )
 }
 
 /// `pdf` from the two cosines with the shading normal.
-#[inline]
-pub fn pdf_cos(cos_o: f32, cos_i: f32) -> f32 {
-    if same_side(cos_o, cos_i) {
-        cos_i.abs() * FRAC_1_PI
-    } else {
-        0.0
-    }
+#[inline(always)]
+pub fn pdf_cos<T: Real>(cos_o: T, cos_i: T) -> T {
+    T::select(
+        same_side(cos_o, cos_i),
+        cos_i.abs() * FRAC_1_PI,
+        T::splat(0.0),
+    )
 }
 
 pub fn sample(reflectance: Vec3, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
-    if wo.z == 0.0 {
-        return None;
-    }
-    let mut wi = cosine_hemisphere(u);
-    // Mirror the lobe onto wo's side: the surface reflects on both sides.
-    if wo.z < 0.0 {
-        wi.z = -wi.z;
-    }
-    let pdf = pdf(wo, wi);
-    // The rim of the disk maps to the tangent plane, where the density vanishes.
-    if pdf <= 0.0 {
-        return None;
-    }
-    Some(BsdfSample {
-        wi,
-        value: reflectance * FRAC_1_PI,
-        pdf,
+    let s = sample_of(reflectance.into(), wo.into(), u.x, u.y);
+    s.valid.then(|| BsdfSample {
+        wi: s.wi.into(),
+        value: s.value.into(),
+        pdf: s.pdf,
         delta: false,
     })
+}
+
+/// A sample of the lobe for one path or lanes: `BsdfSample` where `valid` is set (elsewhere
+/// the sample carries nothing).
+#[derive(Clone, Copy, Debug)]
+pub struct DiffuseSample<T: Real> {
+    pub valid: T::Mask,
+    pub wi: V3<T>,
+    pub value: V3<T>,
+    pub pdf: T,
+}
+
+/// `sample` for one path or lanes: the one body of both.
+#[inline(always)]
+pub fn sample_of<T: Real>(reflectance: V3<T>, wo: V3<T>, ux: T, uy: T) -> DiffuseSample<T> {
+    let zero = T::splat(0.0);
+    let wi = cosine_hemisphere_of(ux, uy);
+    // Mirror the lobe onto wo's side: the surface reflects on both sides.
+    let wi = V3::new(wi.x, wi.y, T::select(wo.z.less(zero), -wi.z, wi.z));
+    let pdf = pdf_cos(wo.z, wi.z);
+    DiffuseSample {
+        // A grazing wo has no side; the rim of the disk maps to the tangent plane, where the
+        // density vanishes.
+        valid: !wo.z.equal(zero) & !pdf.less_eq(zero),
+        wi,
+        value: reflectance * T::splat(FRAC_1_PI),
+        pdf,
+    }
 }

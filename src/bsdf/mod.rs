@@ -117,7 +117,7 @@ impl Material {
     pub fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
         match *self {
             Material::Diffuse { reflectance } => {
-                diffuse::eval_cos(reflectance, wo.dot(ns), wi.dot(ns))
+                diffuse::eval_cos(reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
             }
             Material::Dielectric { .. } => Vec3::ZERO,
             _ => {

@@ -22,6 +22,7 @@ impl KernelArgs {
                 KernelName::Megakernel => Kernel::Megakernel,
             },
             wavefront: self.wavefront.map(|n| n as usize),
+            lanes: self.lanes,
             ..settings
         }
     }

@@ -41,6 +41,14 @@ pub(super) fn parse_sampler(s: &str) -> std::result::Result<SamplerKind, String>
     s.parse::<SamplerKind>().map_err(|e| e.to_string())
 }
 
+pub(super) fn parse_lanes(s: &str) -> std::result::Result<crate::lanes::LaneWidth, String> {
+    s.trim()
+        .parse()
+        .ok()
+        .and_then(crate::lanes::LaneWidth::of)
+        .ok_or_else(|| format!("expected 8 or 16, not {}", clip_word(s)))
+}
+
 pub(super) fn parse_shard(s: &str) -> std::result::Result<(u64, u64), String> {
     let bad = || {
         format!(

@@ -9,6 +9,7 @@ use super::{
 };
 use crate::integrators::pt::Kernel;
 use crate::integrators::{Budget, Control, IntegratorKind, RenderSettings, SceneData};
+use crate::lanes::LaneWidth;
 use crate::report::{BenchRuns, bench_table, sweep_table};
 use crate::sysinfo::cpu_seconds;
 use anyhow::{Context, Result, bail};
@@ -60,16 +61,22 @@ pub struct Machine {
     pub target_features: Vec<String>,
     /// Whether the traversal's AVX2 copy ran (chosen at run time).
     pub avx2_fma_at_run_time: bool,
+    /// Paths PT's wavefront shaded at a time in vector lanes (`--lanes`); None where no render
+    /// ran (`stagelight rays`) and in files saved before the width was a choice (8 then).
+    #[serde(default)]
+    pub lanes: Option<usize>,
 }
 
 impl Machine {
-    pub fn this(threads: usize) -> Machine {
+    /// This machine, with `threads` workers and PT's lanes `lanes` wide.
+    pub fn this(threads: usize, lanes: Option<LaneWidth>) -> Machine {
         Machine {
             stagelight: env!("CARGO_PKG_VERSION").to_string(),
             cpu: cpu_model(),
             threads,
             target_features: target_features(),
             avx2_fma_at_run_time: crate::cpu::has_avx2_fma(),
+            lanes: lanes.map(LaneWidth::count),
         }
     }
 
@@ -102,12 +109,15 @@ impl Machine {
             self.avx2_fma_at_run_time.to_string(),
             other.avx2_fma_at_run_time.to_string(),
         );
+        if let (Some(a), Some(b)) = (self.lanes, other.lanes) {
+            check("lanes", a.to_string(), b.to_string());
+        }
         out
     }
 
     /// One line for the report.
     pub fn describe(&self) -> String {
-        format!(
+        let mut line = format!(
             "machine: {}, {} threads; build target features: {}; AVX2+FMA code at run time: {}",
             self.cpu,
             self.threads,
@@ -117,7 +127,11 @@ impl Machine {
             } else {
                 "no"
             }
-        )
+        );
+        if let Some(n) = self.lanes {
+            let _ = write!(line, "; pt wavefront lanes: {n}");
+        }
+        line
     }
 }
 
@@ -407,7 +421,8 @@ pub fn bench(o: &BenchOptions) -> Result<()> {
             .collect::<Result<_>>()?,
         _ => bail!("bench takes a scene file or --big DIR"),
     };
-    let machine = Machine::this(pool.current_num_threads());
+    let lanes = o.settings.lanes.unwrap_or_else(LaneWidth::widest);
+    let machine = Machine::this(pool.current_num_threads(), Some(lanes));
     print_out(&format!("{}\n\n", machine.describe()));
     let mut file = BenchFile {
         machine,
@@ -644,7 +659,7 @@ mod tests {
             max,
         };
         BenchFile {
-            machine: Machine::this(2),
+            machine: Machine::this(2, Some(LaneWidth::Eight)),
             results: vec![BenchResult {
                 scene: "cornell_box.ron".into(),
                 integrator: "pt".into(),

@@ -223,6 +223,10 @@ pub fn check_kernel(kind: IntegratorKind, settings: &RenderSettings) -> Result<(
     if settings.wavefront.is_some() && !matches!(kind.as_str(), "pt" | "bdpt" | "vcm" | "bpm") {
         bail!("--wavefront: only pt, bdpt, vcm and bpm render in waves of samples, not {kind}");
     }
+    if settings.lanes.is_some() && (kind.as_str() != "pt" || settings.kernel == Kernel::Megakernel)
+    {
+        bail!("--lanes: only pt's wavefront shades paths in vector lanes");
+    }
     Ok(())
 }
 

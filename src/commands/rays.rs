@@ -455,7 +455,7 @@ pub fn bench_rays(options: &RayBenchOptions) -> Result<()> {
         }
     }
     crate::npy::write_hits(&options.dir.join(HITS_FILE), &hit_t, &hit_primitive)?;
-    let machine = super::bench::Machine::this(threads);
+    let machine = super::bench::Machine::this(threads, None);
     let (node_bytes, packet_bytes) = accel.memory_bytes();
     let mut text = format!(
         "{}: {} triangles ({} in the tree of {:.2} MB, built in {:.3} s); {} threads, median \

@@ -4,6 +4,7 @@
 
 use crate::bsdf::MaterialKind;
 use crate::components::{Hits, Paths, Rays};
+use crate::lanes::LaneWidth;
 use crate::sampling::SamplerKind;
 use std::ops::Range;
 
@@ -32,15 +33,18 @@ pub struct PtSettings {
     pub sampler: SamplerKind,
     /// Maximum number of scattering events; `u32::MAX` for unlimited.
     pub max_depth: u32,
+    /// Paths the lane systems take at a time (`--lanes`); the image is the same.
+    pub lanes: LaneWidth,
 }
 
 impl PtSettings {
-    /// Independent samples, `seed`, at most `max_depth` bounces.
+    /// Independent samples, `seed`, at most `max_depth` bounces, lanes as wide as the CPU's.
     pub fn new(seed: u64, max_depth: u32) -> PtSettings {
         PtSettings {
             seed,
             sampler: SamplerKind::Independent,
             max_depth,
+            lanes: LaneWidth::widest(),
         }
     }
 }

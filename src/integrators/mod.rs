@@ -406,6 +406,9 @@ pub struct RenderSettings {
     /// Samples in flight of the sample-based integrators (pt, bdpt; `--wavefront N`); None:
     /// the integrator's default. The image is the same.
     pub wavefront: Option<usize>,
+    /// Paths PT's wavefront shades at a time in vector lanes (`--lanes`); None: as many as the
+    /// CPU's vector registers hold. The image is the same.
+    pub lanes: Option<crate::lanes::LaneWidth>,
 }
 
 /// Options of the Metropolis integrators (pssmlt, mmlt); None: the integrator's default.
@@ -441,6 +444,7 @@ impl Default for RenderSettings {
             mlt: MltOptions::default(),
             kernel: pt::Kernel::Wavefront,
             wavefront: None,
+            lanes: None,
         }
     }
 }

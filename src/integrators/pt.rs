@@ -28,6 +28,7 @@ impl From<&RenderSettings> for PtSettings {
             seed: s.seed,
             sampler: s.sampler,
             max_depth: s.max_depth,
+            lanes: s.lanes.unwrap_or_else(crate::lanes::LaneWidth::widest),
         }
     }
 }
@@ -271,7 +272,7 @@ mod bindings {
             write radiance = paths.radiance;
         }
         connect::sample_lights::SampleLights {
-            read data, sampler, hits, rays, paths, surfaces, ranges;
+            read data, sampler, lanes = settings.lanes, hits, rays, paths, surfaces, ranges;
             write shadow, shadow_len;
         }
         gather::film::AccumulateFilm {
@@ -279,7 +280,7 @@ mod bindings {
             write film;
         }
         generate::camera_rays::GenerateCameraRays {
-            read wave, camera = data.scene.camera, pixels, sampler;
+            read wave, camera = data.scene.camera, pixels, sampler, lanes = settings.lanes;
             write rays, paths, sample_radiance, active;
         }
         shade::emitted_light::AddEmittedLight {
@@ -287,7 +288,7 @@ mod bindings {
             write paths;
         }
         shade::material::ShadeMaterial {
-            read data, sampler, hits, surfaces, ranges;
+            read data, sampler, lanes = settings.lanes, hits, surfaces, ranges;
             write rays, paths;
         }
         shade::russian_roulette::RussianRoulette {

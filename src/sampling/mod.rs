@@ -17,6 +17,7 @@ pub use sampler::{
     UnknownSampler,
 };
 
+use crate::lanes::{Real, V3};
 use glam::{Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -83,24 +84,44 @@ impl SampleKey {
 /// Cosine-weighted direction on the +z hemisphere (concentric mapping, Shirley and Chiu).
 #[inline]
 pub fn cosine_hemisphere(u: Vec2) -> Vec3 {
-    let d = concentric_disk(u);
-    let z = (1.0 - d.x * d.x - d.y * d.y).max(0.0).sqrt();
-    Vec3::new(d.x, d.y, z)
+    cosine_hemisphere_of(u.x, u.y).into()
+}
+
+/// `cosine_hemisphere` for one path (`f32`) or lanes (`F<N>`): the one body of both.
+#[inline(always)]
+pub fn cosine_hemisphere_of<T: Real>(ux: T, uy: T) -> V3<T> {
+    let (dx, dy) = concentric_disk_of(ux, uy);
+    let z = (T::splat(1.0) - dx * dx - dy * dy)
+        .max(T::splat(0.0))
+        .sqrt();
+    V3::new(dx, dy, z)
 }
 
 /// Uniform point on the unit disk with low distortion (Shirley and Chiu's concentric map).
 #[inline]
 pub fn concentric_disk(u: Vec2) -> Vec2 {
-    let o = 2.0 * u - Vec2::ONE;
-    if o.x == 0.0 && o.y == 0.0 {
-        return Vec2::ZERO;
-    }
-    let (r, theta) = if o.x.abs() > o.y.abs() {
-        (o.x, 0.25 * PI * (o.y / o.x))
-    } else {
-        (o.y, 0.5 * PI - 0.25 * PI * (o.x / o.y))
-    };
-    Vec2::new(r * theta.cos(), r * theta.sin())
+    let (x, y) = concentric_disk_of(u.x, u.y);
+    Vec2::new(x, y)
+}
+
+/// `concentric_disk` for one path or lanes.
+#[inline(always)]
+pub fn concentric_disk_of<T: Real>(ux: T, uy: T) -> (T, T) {
+    let (ox, oy) = (T::splat(2.0) * ux - 1.0, T::splat(2.0) * uy - 1.0);
+    let zero = T::splat(0.0);
+    let centre = ox.equal(zero) & oy.equal(zero);
+    let wide = ox.abs().greater(oy.abs());
+    let r = T::select(wide, ox, oy);
+    let theta = T::select(
+        wide,
+        T::splat(0.25 * PI) * (oy / ox),
+        T::splat(0.5 * PI) - T::splat(0.25 * PI) * (ox / oy),
+    );
+    // The centre's theta is 0 / 0: its lanes take 0 whatever the sine and cosine give.
+    (
+        T::select(centre, zero, r * theta.cos()),
+        T::select(centre, zero, r * theta.sin()),
+    )
 }
 
 /// Uniform barycentrics (b1, b2) on a triangle (the square-root parameterisation).

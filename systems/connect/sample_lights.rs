@@ -2,32 +2,32 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
+use crate::bsdf::diffuse;
 use crate::components::ShadowRays;
 use crate::components::path_tracing::DIM_LIGHT_PICK;
 use crate::components::path_tracing::DIM_LIGHT_POINT;
 use crate::components::path_tracing::MaterialRanges;
 use crate::components::path_tracing::bounce_dim;
 use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
+use crate::lanes::{F, LaneKernel, LaneWidth, M, Real, V3, lanes_of, run_lanes};
 use crate::math::gamma;
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, power_heuristic, sample_cdf};
 use crate::scene::SceneData;
 use crate::systems::shade::Surface;
 use crate::systems::shade::lanes::{
-    DiffuseLanes, F, LANES, M, V3, draw, draw2, lanes_of, offset_origin,
-    power_heuristic as power_heuristic_lanes, same_side,
+    DiffuseLanes, draw, draw2, offset_origin, power_heuristic as power_heuristic_lanes,
 };
 use glam::Vec3;
 use rayon::prelude::*;
-use std::f32::consts::FRAC_1_PI;
 use std::sync::Arc;
 
 pub struct SampleLights;
 
 crate::system! {
     SampleLights = "sample_lights";
-    read data: Arc<SceneData>, sampler: Sampler<'static>, hits: Hits, rays: Rays, paths: Paths,
-        surfaces: Surfaces, ranges: MaterialRanges;
+    read data: Arc<SceneData>, sampler: Sampler<'static>, lanes: LaneWidth, hits: Hits,
+        rays: Rays, paths: Paths, surfaces: Surfaces, ranges: MaterialRanges;
     write shadow: ShadowRays, shadow_len: usize;
     run {
         let data: &SceneData = data;
@@ -38,55 +38,45 @@ crate::system! {
             .chunks_mut(range)
             .into_par_iter()
             .map(|c| {
-                #[cfg(target_arch = "x86_64")]
-                if crate::cpu::has_avx512() {
-                    // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
-                    return unsafe { sample_chunk_avx512(data, sampler, hits, rays, paths, surfaces, c) };
-                }
-                if crate::cpu::has_avx2_fma() {
-                    // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                    return unsafe { sample_chunk_avx2(data, sampler, hits, rays, paths, surfaces, c) };
-                }
-                sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
+                let chunk = SampleChunk { data, sampler, hits, rays, paths, surfaces, c };
+                run_lanes(*lanes, chunk)
             })
             .sum();
         Flow::new(taken, cast)
     }
 }
 
-/// `sample_chunk` compiled for AVX2 and FMA (see `crate::cpu`): about 15% fewer instructions.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn sample_chunk_avx2(
-    data: &SceneData,
-    sampler: &Sampler,
-    hits: &Hits,
-    rays: &Rays,
-    paths: &Paths,
-    surfaces: &Surfaces,
-    c: ShadowRaysChunk,
-) -> usize {
-    sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
+/// Light sampling's work over one chunk, for `run_lanes`.
+struct SampleChunk<'a> {
+    data: &'a SceneData,
+    sampler: &'a Sampler<'a>,
+    hits: &'a Hits,
+    rays: &'a Rays,
+    paths: &'a Paths,
+    surfaces: &'a Surfaces,
+    c: ShadowRaysChunk<'a>,
 }
 
-/// `sample_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
-fn sample_chunk_avx512(
-    data: &SceneData,
-    sampler: &Sampler,
-    hits: &Hits,
-    rays: &Rays,
-    paths: &Paths,
-    surfaces: &Surfaces,
-    c: ShadowRaysChunk,
-) -> usize {
-    sample_chunk(data, sampler, hits, rays, paths, surfaces, c)
+impl LaneKernel for SampleChunk<'_> {
+    type Output = usize;
+    #[inline(always)]
+    fn run<const N: usize>(self) -> usize {
+        let SampleChunk {
+            data,
+            sampler,
+            hits,
+            rays,
+            paths,
+            surfaces,
+            c,
+        } = self;
+        sample_chunk::<N>(data, sampler, hits, rays, paths, surfaces, c)
+    }
 }
 
 /// Light sampling at the paths of one chunk; returns the number of shadow rays cast.
 #[inline(always)]
-fn sample_chunk(
+fn sample_chunk<const N: usize>(
     data: &SceneData,
     sampler: &Sampler,
     hits: &Hits,
@@ -121,29 +111,29 @@ fn sample_chunk(
             0
         }
     };
-    // Lambertian paths LANES at a time; the rest (other kinds, the chunk's tail) one by one.
+    // Lambertian paths N at a time; the rest (other kinds, the chunk's tail) one by one.
     let mut i = 0;
-    while i + LANES <= c.len() {
-        match DiffuseLanes::at(data, &surfaces, hits.triangle, rays.dir, i) {
+    while i + N <= c.len() {
+        match DiffuseLanes::<N>::at(data, &surfaces, hits.triangle, rays.dir, i) {
             Some(surf) => {
-                let keys: &[SampleKey; LANES] = paths.key[i..i + LANES].try_into().unwrap();
-                let depths: &[u32; LANES] = paths.depth[i..i + LANES].try_into().unwrap();
+                let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
+                let depths: &[u32; N] = paths.depth[i..i + N].try_into().unwrap();
                 let throughput = V3::load(&paths.throughput[i..]);
                 let light = light_sample_lanes(data, sampler, &surf, keys, depths, throughput);
-                let t_max = light.cast.select(F::splat(LIGHT_T_MAX), F::splat(0.0));
+                let t_max = F::select(light.cast, F::splat(LIGHT_T_MAX), F::splat(0.0));
                 light.origin.store(&mut c.origin[i..]);
                 light.dir.store(&mut c.dir[i..]);
                 light.contribution.store(&mut c.contribution[i..]);
-                c.t_max[i..i + LANES].copy_from_slice(&t_max.0);
+                c.t_max[i..i + N].copy_from_slice(&t_max.0);
                 cast += light.cast.0.iter().filter(|&&b| b).count();
             }
             None => {
-                for j in i..i + LANES {
+                for j in i..i + N {
                     cast += one(&mut c, j);
                 }
             }
         }
-        i += LANES;
+        i += N;
     }
     for j in i..c.len() {
         cast += one(&mut c, j);
@@ -154,26 +144,27 @@ fn sample_chunk(
 /// The length of every light sample's shadow ray (`spawn_ray_to`'s).
 const LIGHT_T_MAX: f32 = 1.0 - crate::geometry::SHADOW_EPSILON;
 
-/// `light_sample` of `LANES` paths on Lambertian surfaces: the shadow rays and their
+/// `light_sample` of `N` paths on Lambertian surfaces: the shadow rays and their
 /// contributions, which count only where `cast` is set.
-pub struct LightLanes {
-    pub cast: M,
-    pub origin: V3,
-    pub dir: V3,
-    pub contribution: V3,
+pub struct LightLanes<const N: usize> {
+    pub cast: M<N>,
+    pub origin: V3<F<N>>,
+    pub dir: V3<F<N>>,
+    pub contribution: V3<F<N>>,
 }
 
-/// `light_sample` in lanes, for paths on Lambertian surfaces: lane by lane the same
-/// operations, so the same bits.
+/// `light_sample` in lanes, for paths on Lambertian surfaces (the BSDF by
+/// `diffuse::eval_cos` and `pdf_cos`, the very maths of the single path): lane by lane the
+/// same operations, so the same bits.
 #[inline(always)]
-pub fn light_sample_lanes(
+pub fn light_sample_lanes<const N: usize>(
     data: &SceneData,
     sampler: &Sampler,
-    surf: &DiffuseLanes,
-    keys: &[SampleKey; LANES],
-    depths: &[u32; LANES],
-    throughput: V3,
-) -> LightLanes {
+    surf: &DiffuseLanes<N>,
+    keys: &[SampleKey; N],
+    depths: &[u32; N],
+    throughput: V3<F<N>>,
+) -> LightLanes<N> {
     let scene = &data.scene;
     let emitters = &scene.emitters;
     let u_pick = draw(
@@ -187,10 +178,10 @@ pub fn light_sample_lanes(
         &lanes_of(|l| bounce_dim(depths[l]) + DIM_LIGHT_POINT),
     );
     // sample_emitter: an emitter by the cdf, a point uniform on it.
-    let e: [usize; LANES] = lanes_of(|l| sample_cdf(&emitters.cdf, u_pick.0[l]));
+    let e: [usize; N] = lanes_of(|l| sample_cdf(&emitters.cdf, u_pick.0[l]));
     let su = ux.sqrt();
     let (b1, b2) = (1.0 - su, uy * su);
-    let tri: [usize; LANES] = lanes_of(|l| emitters.triangle[e[l]] as usize);
+    let tri: [usize; N] = lanes_of(|l| emitters.triangle[e[l]] as usize);
     let tris = &scene.triangles;
     let (p0, p1, p2) = (
         V3::from_fn(|l| tris.p0[tri[l]]),
@@ -211,20 +202,17 @@ pub fn light_sample_lanes(
     let wi = to_light / dist2.sqrt();
     let cos_light = -wi.dot(light_ng);
     let zero = F::splat(0.0);
-    let facing = !(cos_light.le(zero) | (wi.dot(surf.ng) * surf.wo.dot(surf.ng)).le(zero));
+    let facing =
+        !(cos_light.less_eq(zero) | (wi.dot(surf.ng) * surf.wo.dot(surf.ng)).less_eq(zero));
     // spawn_ray_to: both ends moved off their surfaces, towards each other.
     let origin = offset_origin(surf.p, surf.p_error, surf.ng, light_p - surf.p);
     let target = offset_origin(light_p, light_p_error, light_ng, origin - light_p);
     let light_pdf = pdf_area * dist2 / cos_light;
     // The Lambertian BSDF toward the light, and MIS against sampling it.
     let wi_local = surf.frame.to_local(wi);
-    let same = same_side(surf.wo_local.z, wi_local.z);
-    let f = same.select3(
-        surf.reflectance * F::splat(FRAC_1_PI),
-        V3::splat(Vec3::ZERO),
-    );
-    let black = f.x.eq(zero) & f.y.eq(zero) & f.z.eq(zero);
-    let bsdf_pdf = same.select(wi_local.z.abs() * FRAC_1_PI, zero);
+    let f = diffuse::eval_cos(surf.reflectance, surf.wo_local.z, wi_local.z);
+    let black = f.is_zero();
+    let bsdf_pdf = diffuse::pdf_cos(surf.wo_local.z, wi_local.z);
     let weight = power_heuristic_lanes(light_pdf, bsdf_pdf);
     LightLanes {
         cast: facing & !black,

@@ -5,11 +5,11 @@ use crate::components::Wave;
 use crate::components::path_tracing::DIM_PIXEL;
 use crate::components::{CHUNK, Paths, PathsChunk, Rays, RaysChunk};
 use crate::components::{Path, PathFlags};
+use crate::lanes::{F, LaneKernel, LaneWidth, Real, V3, lanes_of, run_lanes};
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, Stream};
 use crate::scene::Camera;
 use crate::scene::Frustum;
-use crate::systems::shade::lanes::{F, LANES, V3, lanes_of};
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -17,7 +17,7 @@ pub struct GenerateCameraRays;
 
 crate::system! {
     GenerateCameraRays = "generate_camera_rays";
-    read wave: Wave, camera: Camera, pixels: u64, sampler: Sampler<'static>;
+    read wave: Wave, camera: Camera, pixels: u64, sampler: Sampler<'static>, lanes: LaneWidth;
     write rays: Rays, paths: Paths, sample_radiance: Vec<Vec3>, active: usize;
     run {
         let n = wave.len;
@@ -30,37 +30,45 @@ crate::system! {
         let radiance = sample_radiance[..n].par_chunks_mut(CHUNK);
         rays.into_par_iter().zip(paths).zip(radiance).for_each(|((r, p), radiance)| {
             radiance.fill(Vec3::ZERO);
-            #[cfg(target_arch = "x86_64")]
-            if crate::cpu::has_avx512() {
-                // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
-                return unsafe { generate_chunk_avx512(sampler, &cam, pixels, first, r, p) };
-            }
-            generate_chunk(sampler, &cam, pixels, first, r, p)
+            let chunk = GenerateChunk { sampler, cam: &cam, pixels, first, r, p };
+            run_lanes(*lanes, chunk)
         });
         *active = n;
         Flow::new(n, n)
     }
 }
 
-/// `generate_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`): the keys' 64-bit
-/// hashes in vector lanes need its 64-bit multiplies.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
-fn generate_chunk_avx512(
-    sampler: &Sampler,
-    cam: &Frustum,
+/// Camera ray generation's work over one chunk, for `run_lanes` (the keys' 64-bit hashes in
+/// vector lanes want AVX-512's 64-bit multiplies).
+struct GenerateChunk<'a> {
+    sampler: &'a Sampler<'a>,
+    cam: &'a Frustum,
     pixels: u64,
     first: u64,
-    r: RaysChunk,
-    p: PathsChunk,
-) {
-    generate_chunk(sampler, cam, pixels, first, r, p)
+    r: RaysChunk<'a>,
+    p: PathsChunk<'a>,
+}
+
+impl LaneKernel for GenerateChunk<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn run<const N: usize>(self) {
+        let GenerateChunk {
+            sampler,
+            cam,
+            pixels,
+            first,
+            r,
+            p,
+        } = self;
+        generate_chunk::<N>(sampler, cam, pixels, first, r, p)
+    }
 }
 
 /// The camera rays and fresh paths of one chunk of the wave's slots (slot i is global sample
-/// `first + i`): under the independent sampler `LANES` at a time, the rest one by one.
+/// `first + i`): under the independent sampler `N` at a time, the rest one by one.
 #[inline(always)]
-fn generate_chunk(
+fn generate_chunk<const N: usize>(
     sampler: &Sampler,
     cam: &Frustum,
     pixels: u64,
@@ -79,15 +87,15 @@ fn generate_chunk(
     };
     let mut i = 0;
     if let Sampler::Independent { .. } = *sampler {
-        while i + LANES <= r.len() {
+        while i + N <= r.len() {
             let slot = r.start + i;
-            let (keys, dir) = camera_ray_lanes(sampler, cam, pixels, first + slot as u64);
+            let (keys, dir) = camera_ray_lanes::<N>(sampler, cam, pixels, first + slot as u64);
             for (l, &key) in keys.iter().enumerate() {
                 r.origin[i + l] = cam.position;
                 r.dir[i + l] = dir.lane(l);
                 p.set(i + l, path(slot + l, key));
             }
-            i += LANES;
+            i += N;
         }
     }
     for i in i..r.len() {
@@ -99,25 +107,25 @@ fn generate_chunk(
     }
 }
 
-/// `camera_ray` of the `LANES` global samples from `g` on, under the independent sampler:
+/// `camera_ray` of the `N` global samples from `g` on, under the independent sampler:
 /// the jitter's hashes and the directions in lanes, lane by lane the same operations
 /// (`Sampler::get2`, `Frustum::direction`), so the same bits (the megakernel's test compares).
 #[inline(always)]
-fn camera_ray_lanes(
+fn camera_ray_lanes<const N: usize>(
     sampler: &Sampler,
     cam: &Frustum,
     pixels: u64,
     g: u64,
-) -> ([SampleKey; LANES], V3) {
+) -> ([SampleKey; N], V3<F<N>>) {
     let w = cam.width as u64;
     // Pixels and sample indices stepped from the first lane's (no divisions per lane).
     let (mut pixel, mut sample) = (g % pixels, g / pixels);
     let (mut x, mut y) = (pixel % w, pixel / w);
-    let mut lane_pixel = [0u64; LANES];
-    let mut lane_sample = [0u64; LANES];
+    let mut lane_pixel = [0u64; N];
+    let mut lane_sample = [0u64; N];
     let mut raster_x = F::splat(0.0);
     let mut raster_y = F::splat(0.0);
-    for l in 0..LANES {
+    for l in 0..N {
         lane_pixel[l] = pixel;
         lane_sample[l] = sample;
         raster_x.0[l] = x as f32;
@@ -131,11 +139,11 @@ fn camera_ray_lanes(
             (pixel, sample, x, y) = (0, sample + 1, 0, 0);
         }
     }
-    let keys: [SampleKey; LANES] =
+    let keys: [SampleKey; N] =
         lanes_of(|l| sampler.key(Stream::Camera, lane_pixel[l], lane_sample[l]));
     let (jitter_x, jitter_y) = (
-        F(SampleKey::get_lanes(&keys, &[DIM_PIXEL; LANES])),
-        F(SampleKey::get_lanes(&keys, &[DIM_PIXEL + 1; LANES])),
+        F(SampleKey::get_lanes(&keys, &[DIM_PIXEL; N])),
+        F(SampleKey::get_lanes(&keys, &[DIM_PIXEL + 1; N])),
     );
     let (raster_x, raster_y) = (raster_x + jitter_x, raster_y + jitter_y);
     // Frustum::direction

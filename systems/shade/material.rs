@@ -9,6 +9,7 @@ use crate::components::Paths;
 use crate::components::Rays;
 use crate::components::Surfaces;
 use crate::components::path_tracing::MaterialRanges;
+use crate::lanes::LaneWidth;
 use crate::sampling::Sampler;
 use crate::scene::SceneData;
 use std::sync::Arc;
@@ -29,20 +30,20 @@ impl MaterialKind {
 crate::system! {
     ShadeMaterial;
     name(this) = this.0.shading_system();
-    read data: Arc<SceneData>, sampler: Sampler<'static>, hits: Hits, surfaces: Surfaces,
-        ranges: MaterialRanges;
+    read data: Arc<SceneData>, sampler: Sampler<'static>, lanes: LaneWidth, hits: Hits,
+        surfaces: Surfaces, ranges: MaterialRanges;
     write rays: Rays, paths: Paths;
     run(this) {
         let range = ranges.of(this.0);
         match this.0 {
             MaterialKind::Diffuse => scatter_paths::<{ MaterialKind::Diffuse as u8 }>(
-                data, sampler, hits, surfaces, rays, paths, range,
+                data, sampler, *lanes, hits, surfaces, rays, paths, range,
             ),
             MaterialKind::Dielectric => scatter_paths::<{ MaterialKind::Dielectric as u8 }>(
-                data, sampler, hits, surfaces, rays, paths, range,
+                data, sampler, *lanes, hits, surfaces, rays, paths, range,
             ),
             MaterialKind::Conductor => scatter_paths::<{ MaterialKind::Conductor as u8 }>(
-                data, sampler, hits, surfaces, rays, paths, range,
+                data, sampler, *lanes, hits, surfaces, rays, paths, range,
             ),
         }
     }

@@ -1,21 +1,21 @@
 //! The shading point of a hit, shared by the systems that shade, sample lights or add
 //! emission: position with its error bound, normals, the shading frame and wo.
 
-use super::lanes::{DiffuseLanes, F, LANES, M, V3, draw2, lanes_of, offset_origin, same_side};
-use crate::bsdf::{Material, MaterialKind, TransportMode, sample_direction};
+use super::lanes::{DiffuseLanes, draw2, offset_origin};
+use crate::bsdf::{Material, MaterialKind, TransportMode, diffuse, sample_direction};
 use crate::components::path_tracing::DIM_BSDF;
 use crate::components::path_tracing::bounce_dim;
 use crate::components::{
     Hits, PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView,
 };
 use crate::geometry::{SurfacePoint, offset_ray_origin};
+use crate::lanes::{F, LaneKernel, LaneWidth, M, Real, V3, lanes_of, run_lanes};
 use crate::math::Frame;
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler};
 use crate::scene::SceneData;
 use glam::Vec3;
 use rayon::prelude::*;
-use std::f32::consts::{FRAC_1_PI, PI};
 use std::ops::Range;
 
 pub struct Surface {
@@ -89,12 +89,14 @@ impl Surface {
 /// (a `MaterialKind as u8`) so that each loop holds only its kind's BSDF code (about 1% of a
 /// PT render's instructions): at each path of `range` (all on materials of that kind) the
 /// surface's BSDF draws wi; the path's throughput, next ray and MIS state follow, or the path
-/// ends when the sample carries nothing or leaks through the surface. Returns the flow (paths
-/// taken, paths that scatter on).
+/// ends when the sample carries nothing or leaks through the surface. Lambertian paths go
+/// `lanes` at a time. Returns the flow (paths taken, paths that scatter on).
+#[allow(clippy::too_many_arguments)]
 #[inline]
 pub fn scatter_paths<const KIND: u8>(
     data: &SceneData,
     sampler: &Sampler,
+    lanes: LaneWidth,
     hits: &Hits,
     surfaces: &Surfaces,
     rays: &mut Rays,
@@ -108,54 +110,49 @@ pub fn scatter_paths<const KIND: u8>(
         .into_par_iter()
         .zip(paths)
         .map(|(r, p)| {
-            #[cfg(target_arch = "x86_64")]
-            if crate::cpu::has_avx512() {
-                // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
-                return unsafe {
-                    scatter_chunk_avx512::<KIND>(data, sampler, hits, surfaces, r, p)
-                };
-            }
-            if crate::cpu::has_avx2_fma() {
-                // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                return unsafe { scatter_chunk_avx2::<KIND>(data, sampler, hits, surfaces, r, p) };
-            }
-            scatter_chunk::<KIND>(data, sampler, hits, surfaces, r, p)
+            let chunk = ScatterChunk::<KIND> {
+                data,
+                sampler,
+                hits,
+                surfaces,
+                r,
+                p,
+            };
+            run_lanes(lanes, chunk)
         })
         .sum();
     Flow::new(taken, scattered)
 }
 
-/// `scatter_chunk` compiled for AVX2 and FMA (see `crate::cpu`): about 15% fewer instructions.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn scatter_chunk_avx2<const KIND: u8>(
-    data: &SceneData,
-    sampler: &Sampler,
-    hits: &Hits,
-    surfaces: &Surfaces,
-    r: RaysChunk,
-    p: PathsChunk,
-) -> usize {
-    scatter_chunk::<KIND>(data, sampler, hits, surfaces, r, p)
+/// The scattering step's work over one chunk, for `run_lanes`.
+struct ScatterChunk<'a, const KIND: u8> {
+    data: &'a SceneData,
+    sampler: &'a Sampler<'a>,
+    hits: &'a Hits,
+    surfaces: &'a Surfaces,
+    r: RaysChunk<'a>,
+    p: PathsChunk<'a>,
 }
 
-/// `scatter_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
-fn scatter_chunk_avx512<const KIND: u8>(
-    data: &SceneData,
-    sampler: &Sampler,
-    hits: &Hits,
-    surfaces: &Surfaces,
-    r: RaysChunk,
-    p: PathsChunk,
-) -> usize {
-    scatter_chunk::<KIND>(data, sampler, hits, surfaces, r, p)
+impl<const KIND: u8> LaneKernel for ScatterChunk<'_, KIND> {
+    type Output = usize;
+    #[inline(always)]
+    fn run<const N: usize>(self) -> usize {
+        let ScatterChunk {
+            data,
+            sampler,
+            hits,
+            surfaces,
+            r,
+            p,
+        } = self;
+        scatter_chunk::<KIND, N>(data, sampler, hits, surfaces, r, p)
+    }
 }
 
 /// The scattering step at the paths of one chunk; returns the number that scatter on.
 #[inline(always)]
-fn scatter_chunk<const KIND: u8>(
+fn scatter_chunk<const KIND: u8, const N: usize>(
     data: &SceneData,
     sampler: &Sampler,
     hits: &Hits,
@@ -166,19 +163,19 @@ fn scatter_chunk<const KIND: u8>(
     let mut scattered = 0;
     let range = p.start..p.start + p.len();
     let (hits, surfaces) = (hits.view(range.clone()), surfaces.view(range));
-    // Lambertian paths LANES at a time (the rest one by one, below).
+    // Lambertian paths N at a time (the rest one by one, below).
     let mut first = 0;
     if KIND == MaterialKind::Diffuse as u8 {
-        while first + LANES <= p.len() {
+        while first + N <= p.len() {
             let i = first;
-            let Some(surf) = DiffuseLanes::at(data, &surfaces, hits.triangle, r.dir, i) else {
+            let Some(surf) = DiffuseLanes::<N>::at(data, &surfaces, hits.triangle, r.dir, i) else {
                 break;
             };
-            let keys: &[SampleKey; LANES] = p.key[i..i + LANES].try_into().unwrap();
-            let depths: &[u32; LANES] = p.depth[i..i + LANES].try_into().unwrap();
+            let keys: &[SampleKey; N] = p.key[i..i + N].try_into().unwrap();
+            let depths: &[u32; N] = p.depth[i..i + N].try_into().unwrap();
             let next = scatter_lanes(sampler, &surf, keys, depths);
             let throughput = V3::load(&p.throughput[i..]) * next.weight;
-            for l in 0..LANES {
+            for l in 0..N {
                 let j = i + l;
                 if next.scattered.0[l] {
                     p.throughput[j] = throughput.lane(l);
@@ -192,7 +189,7 @@ fn scatter_chunk<const KIND: u8>(
                     p.flags[j].set(PathFlags::DEAD, true);
                 }
             }
-            first += LANES;
+            first += N;
         }
     }
     for i in first..p.len() {
@@ -260,66 +257,43 @@ pub fn scatter(sampler: &Sampler, surf: &Surface, key: SampleKey, depth: u32) ->
     })
 }
 
-/// `scatter` of `LANES` paths on Lambertian surfaces: where `scattered` is set, the path's
+/// `scatter` of `N` paths on Lambertian surfaces: where `scattered` is set, the path's
 /// throughput factor, BSDF density and next ray.
-pub struct ScatterLanes {
-    pub scattered: M,
-    pub weight: V3,
-    pub pdf: F,
-    pub origin: V3,
-    pub dir: V3,
+pub struct ScatterLanes<const N: usize> {
+    pub scattered: M<N>,
+    pub weight: V3<F<N>>,
+    pub pdf: F<N>,
+    pub origin: V3<F<N>>,
+    pub dir: V3<F<N>>,
 }
 
-/// `scatter` in lanes for paths on Lambertian surfaces (`diffuse::sample` and
-/// `sample_direction`): lane by lane the same operations, so the same bits.
+/// `scatter` in lanes for paths on Lambertian surfaces (`diffuse::sample_of`, the very maths
+/// of the single path, then `sample_direction`'s test): lane by lane the same operations, so
+/// the same bits.
 #[inline(always)]
-pub fn scatter_lanes(
+pub fn scatter_lanes<const N: usize>(
     sampler: &Sampler,
-    surf: &DiffuseLanes,
-    keys: &[SampleKey; LANES],
-    depths: &[u32; LANES],
-) -> ScatterLanes {
+    surf: &DiffuseLanes<N>,
+    keys: &[SampleKey; N],
+    depths: &[u32; N],
+) -> ScatterLanes<N> {
     let (ux, uy) = draw2(
         sampler,
         keys,
         &lanes_of(|l| bounce_dim(depths[l]) + DIM_BSDF),
     );
     let zero = F::splat(0.0);
-    let wo_z = surf.wo_local.z;
-    // cosine_hemisphere: Shirley and Chiu's concentric map, then lifted to the hemisphere.
-    let (ox, oy) = (2.0 * ux - 1.0, 2.0 * uy - 1.0);
-    let centre = ox.eq(zero) & oy.eq(zero);
-    let wide = ox.abs().gt(oy.abs());
-    let r = wide.select(ox, oy);
-    let theta = wide.select((0.25 * PI) * (oy / ox), 0.5 * PI - (0.25 * PI) * (ox / oy));
-    let mut dx = F::splat(0.0);
-    let mut dy = F::splat(0.0);
-    for l in 0..LANES {
-        if !centre.0[l] {
-            dx.0[l] = r.0[l] * theta.0[l].cos();
-            dy.0[l] = r.0[l] * theta.0[l].sin();
-        }
-    }
-    let z = (1.0 - dx * dx - dy * dy).max(zero).sqrt();
-    // Mirror the lobe onto wo's side: the surface reflects on both sides.
-    let wi = V3 {
-        x: dx,
-        y: dy,
-        z: wo_z.lt(zero).select(-z, z),
-    };
-    let same = same_side(wo_z, wi.z);
-    let pdf = same.select(wi.z.abs() * FRAC_1_PI, zero);
-    let value = surf.reflectance * F::splat(FRAC_1_PI);
+    let bs = diffuse::sample_of(surf.reflectance, surf.wo_local, ux, uy);
     // sample_direction: reflection must leave on wo's side of the geometric surface.
-    let dir = surf.frame.to_world(wi).normalize();
-    let reflected = (wi.z * wo_z).gt(zero);
-    let leaves_right = (dir.dot(surf.ng) * surf.wo.dot(surf.ng)).gt(zero);
-    let kept = !wo_z.eq(zero) & !pdf.le(zero) & !(leaves_right ^ reflected);
-    let weight = value * wi.z.abs() / pdf;
+    let dir = surf.frame.to_world(bs.wi).normalize();
+    let reflected = (bs.wi.z * surf.wo_local.z).greater(zero);
+    let leaves_right = (dir.dot(surf.ng) * surf.wo.dot(surf.ng)).greater(zero);
+    let kept = bs.valid & !(leaves_right ^ reflected);
+    let weight = bs.value * bs.wi.z.abs() / bs.pdf;
     ScatterLanes {
-        scattered: kept & weight.max_element().gt(zero),
+        scattered: kept & weight.max_element().greater(zero),
         weight,
-        pdf,
+        pdf: bs.pdf,
         origin: offset_origin(surf.p, surf.p_error, surf.ng, dir),
         dir,
     }

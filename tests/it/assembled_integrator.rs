@@ -58,7 +58,7 @@ stagelight::system! {
 stagelight::bind! {
     BsdfOnlyState:
     generate::camera_rays::GenerateCameraRays {
-        read wave, camera = data.scene.camera, pixels, sampler;
+        read wave, camera = data.scene.camera, pixels, sampler, lanes = settings.lanes;
         write rays, paths, sample_radiance, active;
     }
     trace::closest::TraceClosest {
@@ -74,7 +74,7 @@ stagelight::bind! {
         write hits, paths, rays, sample_radiance, ranges, active, scratch, surfaces;
     }
     shade::material::ShadeMaterial {
-        read data, sampler, hits, surfaces, ranges;
+        read data, sampler, lanes = settings.lanes, hits, surfaces, ranges;
         write rays, paths;
     }
     CountEmissionWhole {

@@ -1,6 +1,7 @@
-//! The megakernel against the wavefront, and the wavefront's size: PT's two kernels call the
-//! same per-path steps in the same order and the film sums exactly, so they must give the
-//! same film bit for bit; and every wavefront size must give the same film too.
+//! The megakernel against the wavefront, and the wavefront's size and lane width: PT's two
+//! kernels call the same per-path steps in the same order (the wavefront's lanes are their
+//! lane-by-lane twins) and the film sums exactly, so they must give the same film bit for bit;
+//! and every wavefront size and lane width must give the same film too.
 
 use crate::common::{load_small, shrunk_scene, stagelight, stderr, stdout, temp_dir};
 use stagelight::film::Film;
@@ -8,6 +9,7 @@ use stagelight::integrators::pt::Kernel;
 use stagelight::integrators::{
     Budget, Control, IntegratorKind, RenderOutcome, RenderSettings, SceneData,
 };
+use stagelight::lanes::LaneWidth;
 use stagelight::sampling::SamplerKind;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
@@ -67,7 +69,6 @@ fn the_megakernel_renders_the_wavefront_image_bit_for_bit() {
                 wavefront,
                 ..RenderSettings::default()
             };
-            let wave = render(&data, "pt", settings, 8);
             let mega = render(
                 &data,
                 "pt",
@@ -77,13 +78,29 @@ fn the_megakernel_renders_the_wavefront_image_bit_for_bit() {
                 },
                 8,
             );
+            // Each lane width runs in the copy compiled for this CPU (AVX-512, AVX2 or the
+            // baseline): each must give the megakernel's film.
+            for lanes in [LaneWidth::Eight, LaneWidth::Sixteen] {
+                let wave = render(
+                    &data,
+                    "pt",
+                    RenderSettings {
+                        lanes: Some(lanes),
+                        ..settings
+                    },
+                    8,
+                );
+                let what = format!(
+                    "{name} {sampler:?} max depth {max_depth} wavefront {wavefront:?} {lanes:?} lanes"
+                );
+                assert_same_film(&wave.film, &mega.film, &what);
+                // The same paths: the same rays, counted by the trace systems in one and by
+                // the megakernel in the other.
+                assert!(mega.counted_rays.is_some() && wave.counted_rays.is_none());
+                assert_eq!(wave.closest_rays(), mega.closest_rays(), "{what}");
+                assert_eq!(wave.shadow_rays(), mega.shadow_rays(), "{what}");
+            }
             let what = format!("{name} {sampler:?} max depth {max_depth} wavefront {wavefront:?}");
-            assert_same_film(&wave.film, &mega.film, &what);
-            // The same paths: the same rays, counted by the trace systems in one and by the
-            // megakernel in the other.
-            assert!(mega.counted_rays.is_some() && wave.counted_rays.is_none());
-            assert_eq!(wave.closest_rays(), mega.closest_rays(), "{what}");
-            assert_eq!(wave.shadow_rays(), mega.shadow_rays(), "{what}");
             assert!(mega.closest_rays() > 0);
             assert_eq!(
                 mega.systems,
@@ -177,6 +194,19 @@ fn the_kernel_and_wavefront_options_run_and_refuse_what_does_not_apply() {
         std::fs::read(&b).unwrap(),
         "the EXRs differ"
     );
+    // Both lane widths, whatever the CPU: the same image again.
+    for lanes in ["8", "16"] {
+        let c = out(&format!("lanes{lanes}.exr"));
+        let o = stagelight(&[
+            "render", scene, "--spp", "4", "--quiet", "--lanes", lanes, "-o", &c,
+        ]);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        assert_eq!(
+            std::fs::read(&a).unwrap(),
+            std::fs::read(&c).unwrap(),
+            "--lanes {lanes}: the EXRs differ"
+        );
+    }
     // Bad input: one clear message, exit 1.
     for (args, expect) in [
         (
@@ -188,6 +218,15 @@ fn the_kernel_and_wavefront_options_run_and_refuse_what_does_not_apply() {
             "only pt, bdpt, vcm and bpm",
         ),
         (vec!["--wavefront", "0"], "--wavefront"),
+        (vec!["--lanes", "4"], "expected 8 or 16"),
+        (
+            vec!["--kernel", "megakernel", "--lanes", "8"],
+            "only pt's wavefront",
+        ),
+        (
+            vec!["--integrator", "bdpt", "--lanes", "16"],
+            "only pt's wavefront",
+        ),
         (vec!["--kernel", "simd"], "--kernel"),
     ] {
         let mut line = vec!["render", scene, "--spp", "1", "--quiet", "-o", &a];
@@ -233,6 +272,12 @@ fn bench_sweeps_the_wavefront_and_compares_with_a_baseline_per_kernel() {
     let table = stdout(&o);
     assert!(
         table.contains("machine: ") && table.contains("2 threads"),
+        "{table}"
+    );
+    // The lane width that ran: the widest this CPU has, as no --lanes was given.
+    let widest = LaneWidth::widest().count();
+    assert!(
+        table.contains(&format!("pt wavefront lanes: {widest}")),
         "{table}"
     );
     // Eleven wavefront sizes (a wave holds at most the render's 1024 samples) and the

@@ -1,0 +1,624 @@
+//! Numbers one path at a time or many paths in SIMD lanes, behind one trait, so that the maths
+//! of a material (or any per-path step) is written once and serves both the megakernel's single
+//! path and the wavefront's lanes (docs/architecture.md, "Writing a material once for one path
+//! and for lanes").
+//!
+//! [`Real`] is implemented by `f32` (masks are `bool`) and by [`F<N>`], `N` paths as a column of
+//! `N` numbers (masks are [`M<N>`]); [`V3`] is a 3-vector over either. Code generic over `Real`
+//! compiles, for `f32`, to the plain scalar code, and for `F<N>` to loops over `N` lanes that
+//! the compiler turns into vector instructions: `N = 8` fills AVX2's registers and `N = 16`
+//! AVX-512's ([`LaneWidth`] picks one at run time, [`run_lanes`] runs a kernel in the copy
+//! compiled for the CPU).
+//!
+//! Every lane operation is the lane-by-lane twin of the scalar one (glam's `Vec3` included):
+//! the same IEEE operations in the same order, never fused, so each lane's result is the scalar
+//! result bit for bit (`tests/it/kernels.rs` renders the megakernel and the wavefront at each
+//! width and compares the films).
+
+use glam::Vec3;
+use std::ops::{Add, BitAnd, BitOr, BitXor, Div, Mul, Neg, Not, Sub};
+
+/// Per-lane flags: `bool` for one path, [`M<N>`] for lanes.
+pub trait Mask:
+    Copy + BitAnd<Output = Self> + BitOr<Output = Self> + BitXor<Output = Self> + Not<Output = Self>
+{
+    fn splat(v: bool) -> Self;
+    /// Whether every lane is set.
+    fn all(self) -> bool;
+    /// Whether some lane is set.
+    fn any(self) -> bool;
+}
+
+/// A number per path: `f32` for one path, [`F<N>`] for `N` paths in lanes. The operations are
+/// those of `f32` (`max` is `f32::max`), lane by lane.
+pub trait Real:
+    Copy
+    + Add<Output = Self>
+    + Sub<Output = Self>
+    + Mul<Output = Self>
+    + Div<Output = Self>
+    + Neg<Output = Self>
+    + Add<f32, Output = Self>
+    + Sub<f32, Output = Self>
+    + Mul<f32, Output = Self>
+    + Div<f32, Output = Self>
+{
+    type Mask: Mask;
+    /// `v` in every lane.
+    fn splat(v: f32) -> Self;
+    fn sqrt(self) -> Self;
+    fn abs(self) -> Self;
+    /// `f32::max`: a NaN lane takes the other operand.
+    fn max(self, o: Self) -> Self;
+    /// `f32::min`: a NaN lane takes the other operand.
+    fn min(self, o: Self) -> Self;
+    /// The standard library's (libm's) cosine, lane by lane: no vector version rounds alike.
+    fn cos(self) -> Self;
+    /// The standard library's (libm's) sine, lane by lane.
+    fn sin(self) -> Self;
+    /// `1.0f32.copysign(self)`.
+    fn sign_one(self) -> Self;
+    fn less(self, o: Self) -> Self::Mask;
+    fn less_eq(self, o: Self) -> Self::Mask;
+    fn greater(self, o: Self) -> Self::Mask;
+    fn equal(self, o: Self) -> Self::Mask;
+    /// `if m { a } else { b }`, lane by lane.
+    fn select(m: Self::Mask, a: Self, b: Self) -> Self;
+}
+
+impl Mask for bool {
+    #[inline(always)]
+    fn splat(v: bool) -> bool {
+        v
+    }
+    #[inline(always)]
+    fn all(self) -> bool {
+        self
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        self
+    }
+}
+
+impl Real for f32 {
+    type Mask = bool;
+    #[inline(always)]
+    fn splat(v: f32) -> f32 {
+        v
+    }
+    #[inline(always)]
+    fn sqrt(self) -> f32 {
+        f32::sqrt(self)
+    }
+    #[inline(always)]
+    fn abs(self) -> f32 {
+        f32::abs(self)
+    }
+    #[inline(always)]
+    fn max(self, o: f32) -> f32 {
+        f32::max(self, o)
+    }
+    #[inline(always)]
+    fn min(self, o: f32) -> f32 {
+        f32::min(self, o)
+    }
+    #[inline(always)]
+    fn cos(self) -> f32 {
+        f32::cos(self)
+    }
+    #[inline(always)]
+    fn sin(self) -> f32 {
+        f32::sin(self)
+    }
+    #[inline(always)]
+    fn sign_one(self) -> f32 {
+        1.0f32.copysign(self)
+    }
+    #[inline(always)]
+    fn less(self, o: f32) -> bool {
+        self < o
+    }
+    #[inline(always)]
+    fn less_eq(self, o: f32) -> bool {
+        self <= o
+    }
+    #[inline(always)]
+    fn greater(self, o: f32) -> bool {
+        self > o
+    }
+    #[inline(always)]
+    fn equal(self, o: f32) -> bool {
+        self == o
+    }
+    #[inline(always)]
+    fn select(m: bool, a: f32, b: f32) -> f32 {
+        if m { a } else { b }
+    }
+}
+
+/// One f32 per lane, `N` lanes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct F<const N: usize>(pub [f32; N]);
+
+/// One flag per lane, `N` lanes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct M<const N: usize>(pub [bool; N]);
+
+impl<const N: usize> F<N> {
+    /// Lane `l` is `f(l)`.
+    #[inline(always)]
+    pub fn from_fn(mut f: impl FnMut(usize) -> f32) -> F<N> {
+        let mut out = [0.0; N];
+        for (l, v) in out.iter_mut().enumerate() {
+            *v = f(l);
+        }
+        F(out)
+    }
+    #[inline(always)]
+    fn map(self, f: impl Fn(f32) -> f32) -> F<N> {
+        let mut out = self.0;
+        for v in &mut out {
+            *v = f(*v);
+        }
+        F(out)
+    }
+    #[inline(always)]
+    fn zip(self, o: F<N>, f: impl Fn(f32, f32) -> f32) -> F<N> {
+        let mut out = self.0;
+        for (v, w) in out.iter_mut().zip(o.0) {
+            *v = f(*v, w);
+        }
+        F(out)
+    }
+    #[inline(always)]
+    fn test(self, o: F<N>, f: impl Fn(f32, f32) -> bool) -> M<N> {
+        let mut out = [false; N];
+        for ((m, a), b) in out.iter_mut().zip(self.0).zip(o.0) {
+            *m = f(a, b);
+        }
+        M(out)
+    }
+}
+
+impl<const N: usize> Real for F<N> {
+    type Mask = M<N>;
+    #[inline(always)]
+    fn splat(v: f32) -> F<N> {
+        F([v; N])
+    }
+    #[inline(always)]
+    fn sqrt(self) -> F<N> {
+        self.map(f32::sqrt)
+    }
+    #[inline(always)]
+    fn abs(self) -> F<N> {
+        self.map(f32::abs)
+    }
+    #[inline(always)]
+    fn max(self, o: F<N>) -> F<N> {
+        self.zip(o, f32::max)
+    }
+    #[inline(always)]
+    fn min(self, o: F<N>) -> F<N> {
+        self.zip(o, f32::min)
+    }
+    #[inline(always)]
+    fn cos(self) -> F<N> {
+        self.map(f32::cos)
+    }
+    #[inline(always)]
+    fn sin(self) -> F<N> {
+        self.map(f32::sin)
+    }
+    #[inline(always)]
+    fn sign_one(self) -> F<N> {
+        self.map(|v| 1.0f32.copysign(v))
+    }
+    #[inline(always)]
+    fn less(self, o: F<N>) -> M<N> {
+        self.test(o, |a, b| a < b)
+    }
+    #[inline(always)]
+    fn less_eq(self, o: F<N>) -> M<N> {
+        self.test(o, |a, b| a <= b)
+    }
+    #[inline(always)]
+    fn greater(self, o: F<N>) -> M<N> {
+        self.test(o, |a, b| a > b)
+    }
+    #[inline(always)]
+    fn equal(self, o: F<N>) -> M<N> {
+        self.test(o, |a, b| a == b)
+    }
+    #[inline(always)]
+    fn select(m: M<N>, a: F<N>, b: F<N>) -> F<N> {
+        let mut out = b.0;
+        for ((v, m), a) in out.iter_mut().zip(m.0).zip(a.0) {
+            if m {
+                *v = a;
+            }
+        }
+        F(out)
+    }
+}
+
+impl<const N: usize> Mask for M<N> {
+    #[inline(always)]
+    fn splat(v: bool) -> M<N> {
+        M([v; N])
+    }
+    #[inline(always)]
+    fn all(self) -> bool {
+        self.0.iter().all(|&b| b)
+    }
+    #[inline(always)]
+    fn any(self) -> bool {
+        self.0.iter().any(|&b| b)
+    }
+}
+
+impl<const N: usize> Not for M<N> {
+    type Output = M<N>;
+    #[inline(always)]
+    fn not(self) -> M<N> {
+        let mut out = self.0;
+        for v in &mut out {
+            *v = !*v;
+        }
+        M(out)
+    }
+}
+
+macro_rules! mask_op {
+    ($tr:ident, $f:ident, $op:tt) => {
+        impl<const N: usize> $tr for M<N> {
+            type Output = M<N>;
+            #[inline(always)]
+            fn $f(self, o: M<N>) -> M<N> {
+                let mut out = self.0;
+                for (v, w) in out.iter_mut().zip(o.0) {
+                    *v $op w;
+                }
+                M(out)
+            }
+        }
+    };
+}
+mask_op!(BitAnd, bitand, &=);
+mask_op!(BitXor, bitxor, ^=);
+mask_op!(BitOr, bitor, |=);
+
+macro_rules! float_op {
+    ($tr:ident, $f:ident, $op:tt) => {
+        impl<const N: usize> $tr for F<N> {
+            type Output = F<N>;
+            #[inline(always)]
+            fn $f(self, o: F<N>) -> F<N> {
+                self.zip(o, |a, b| a $op b)
+            }
+        }
+        impl<const N: usize> $tr<f32> for F<N> {
+            type Output = F<N>;
+            #[inline(always)]
+            fn $f(self, o: f32) -> F<N> {
+                self.map(|a| a $op o)
+            }
+        }
+        impl<const N: usize> $tr<F<N>> for f32 {
+            type Output = F<N>;
+            #[inline(always)]
+            fn $f(self, o: F<N>) -> F<N> {
+                o.map(|b| self $op b)
+            }
+        }
+        impl<T: Real> $tr for V3<T> {
+            type Output = V3<T>;
+            #[inline(always)]
+            fn $f(self, o: V3<T>) -> V3<T> {
+                V3 { x: self.x $op o.x, y: self.y $op o.y, z: self.z $op o.z }
+            }
+        }
+        /// Each component with the lane's number (glam's `Vec3 op f32`).
+        impl<T: Real> $tr<T> for V3<T> {
+            type Output = V3<T>;
+            #[inline(always)]
+            fn $f(self, o: T) -> V3<T> {
+                V3 { x: self.x $op o, y: self.y $op o, z: self.z $op o }
+            }
+        }
+    };
+}
+float_op!(Add, add, +);
+float_op!(Sub, sub, -);
+float_op!(Mul, mul, *);
+float_op!(Div, div, /);
+
+impl<const N: usize> Neg for F<N> {
+    type Output = F<N>;
+    #[inline(always)]
+    fn neg(self) -> F<N> {
+        self.map(|v| -v)
+    }
+}
+
+/// A 3-vector of `Real`s: glam's `Vec3` for one path (`V3<f32>`, convertible both ways), three
+/// columns for lanes (`V3<F<N>>`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct V3<T> {
+    pub x: T,
+    pub y: T,
+    pub z: T,
+}
+
+impl<T: Real> Neg for V3<T> {
+    type Output = V3<T>;
+    #[inline(always)]
+    fn neg(self) -> V3<T> {
+        V3 {
+            x: -self.x,
+            y: -self.y,
+            z: -self.z,
+        }
+    }
+}
+
+/// `f32 * Vec3` (each component times the lane's number, the scalar first, as glam).
+impl<const N: usize> Mul<V3<F<N>>> for F<N> {
+    type Output = V3<F<N>>;
+    #[inline(always)]
+    fn mul(self, v: V3<F<N>>) -> V3<F<N>> {
+        V3 {
+            x: self * v.x,
+            y: self * v.y,
+            z: self * v.z,
+        }
+    }
+}
+
+/// `f32 * Vec3`, as glam.
+impl Mul<V3<f32>> for f32 {
+    type Output = V3<f32>;
+    #[inline(always)]
+    fn mul(self, v: V3<f32>) -> V3<f32> {
+        V3 {
+            x: self * v.x,
+            y: self * v.y,
+            z: self * v.z,
+        }
+    }
+}
+
+impl<T: Real> V3<T> {
+    #[inline(always)]
+    pub fn new(x: T, y: T, z: T) -> V3<T> {
+        V3 { x, y, z }
+    }
+    /// `v` in every lane.
+    #[inline(always)]
+    pub fn splat(v: Vec3) -> V3<T> {
+        V3 {
+            x: T::splat(v.x),
+            y: T::splat(v.y),
+            z: T::splat(v.z),
+        }
+    }
+    /// glam's `Vec3::dot` (and `Vec3A::dot`): (x x' + y y') + z z'.
+    #[inline(always)]
+    pub fn dot(self, o: V3<T>) -> T {
+        self.x * o.x + self.y * o.y + self.z * o.z
+    }
+    #[inline(always)]
+    pub fn abs(self) -> V3<T> {
+        V3 {
+            x: self.x.abs(),
+            y: self.y.abs(),
+            z: self.z.abs(),
+        }
+    }
+    /// glam's `Vec3::normalize`: times 1 / length.
+    #[inline(always)]
+    pub fn normalize(self) -> V3<T> {
+        self * (T::splat(1.0) / self.dot(self).sqrt())
+    }
+    /// glam's `Vec3::max_element`: max(x, max(y, z)) with max(a, b) = if a > b { a } else { b }.
+    #[inline(always)]
+    pub fn max_element(self) -> T {
+        let max = |a: T, b: T| T::select(a.greater(b), a, b);
+        max(self.x, max(self.y, self.z))
+    }
+    /// Whether every component is zero (`v == Vec3::ZERO`).
+    #[inline(always)]
+    pub fn is_zero(self) -> T::Mask {
+        let zero = T::splat(0.0);
+        self.x.equal(zero) & self.y.equal(zero) & self.z.equal(zero)
+    }
+    /// `if m { a } else { b }`, lane by lane.
+    #[inline(always)]
+    pub fn select(m: T::Mask, a: V3<T>, b: V3<T>) -> V3<T> {
+        V3 {
+            x: T::select(m, a.x, b.x),
+            y: T::select(m, a.y, b.y),
+            z: T::select(m, a.z, b.z),
+        }
+    }
+}
+
+impl From<Vec3> for V3<f32> {
+    #[inline(always)]
+    fn from(v: Vec3) -> V3<f32> {
+        V3::new(v.x, v.y, v.z)
+    }
+}
+
+impl From<V3<f32>> for Vec3 {
+    #[inline(always)]
+    fn from(v: V3<f32>) -> Vec3 {
+        Vec3::new(v.x, v.y, v.z)
+    }
+}
+
+impl<const N: usize> V3<F<N>> {
+    /// Lane `l` is `f(l)`.
+    #[inline(always)]
+    pub fn from_fn(mut f: impl FnMut(usize) -> Vec3) -> V3<F<N>> {
+        let mut v: V3<F<N>> = V3::splat(Vec3::ZERO);
+        for l in 0..N {
+            let w = f(l);
+            v.x.0[l] = w.x;
+            v.y.0[l] = w.y;
+            v.z.0[l] = w.z;
+        }
+        v
+    }
+    /// The lanes of `N` consecutive vectors.
+    #[inline(always)]
+    pub fn load(s: &[Vec3]) -> V3<F<N>> {
+        let s = &s[..N];
+        V3::from_fn(|l| s[l])
+    }
+    #[inline(always)]
+    pub fn lane(&self, l: usize) -> Vec3 {
+        Vec3::new(self.x.0[l], self.y.0[l], self.z.0[l])
+    }
+    /// Writes the lanes to `N` consecutive vectors.
+    #[inline(always)]
+    pub fn store(&self, s: &mut [Vec3]) {
+        let s = &mut s[..N];
+        for (l, v) in s.iter_mut().enumerate() {
+            *v = self.lane(l);
+        }
+    }
+}
+
+/// `[f(0), .., f(N - 1)]` (a plain loop: `std::array::from_fn` was left out of line).
+#[inline(always)]
+pub fn lanes_of<T: Copy + Default, const N: usize>(mut f: impl FnMut(usize) -> T) -> [T; N] {
+    let mut out = [T::default(); N];
+    for (l, v) in out.iter_mut().enumerate() {
+        *v = f(l);
+    }
+    out
+}
+
+/// How many paths the wavefront's lane systems take at a time (`--lanes`): eight fill AVX2's
+/// 256-bit registers, sixteen AVX-512's 512-bit ones. Every width renders the same image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum LaneWidth {
+    Eight,
+    Sixteen,
+}
+
+impl LaneWidth {
+    /// The widest this CPU's vector registers hold.
+    pub fn widest() -> LaneWidth {
+        if crate::cpu::has_avx512() {
+            LaneWidth::Sixteen
+        } else {
+            LaneWidth::Eight
+        }
+    }
+
+    /// `8` or `16`, as `--lanes` takes it.
+    pub fn of(n: usize) -> Option<LaneWidth> {
+        match n {
+            8 => Some(LaneWidth::Eight),
+            16 => Some(LaneWidth::Sixteen),
+            _ => None,
+        }
+    }
+
+    pub fn count(self) -> usize {
+        match self {
+            LaneWidth::Eight => 8,
+            LaneWidth::Sixteen => 16,
+        }
+    }
+}
+
+/// A system's work over one chunk, written once for any lane width `N` (`F<N>`, `M<N>`):
+/// [`run_lanes`] runs it at the width asked for, in the copy compiled for the CPU.
+pub trait LaneKernel {
+    type Output;
+    /// The work at width `N`; `#[inline(always)]`, so that it is compiled into each copy.
+    fn run<const N: usize>(self) -> Self::Output;
+}
+
+/// Runs `kernel` at `width` in the copy compiled for the CPU's widest vector instructions
+/// (AVX-512, else AVX2 and FMA, else the build's baseline; see `crate::cpu`).
+#[inline(always)]
+pub fn run_lanes<K: LaneKernel>(width: LaneWidth, kernel: K) -> K::Output {
+    #[cfg(target_arch = "x86_64")]
+    {
+        if crate::cpu::has_avx512() {
+            // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+            return unsafe {
+                match width {
+                    LaneWidth::Eight => run_avx512::<K, 8>(kernel),
+                    LaneWidth::Sixteen => run_avx512::<K, 16>(kernel),
+                }
+            };
+        }
+        if crate::cpu::has_avx2_fma() {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            return unsafe {
+                match width {
+                    LaneWidth::Eight => run_avx2::<K, 8>(kernel),
+                    LaneWidth::Sixteen => run_avx2::<K, 16>(kernel),
+                }
+            };
+        }
+    }
+    match width {
+        LaneWidth::Eight => kernel.run::<8>(),
+        LaneWidth::Sixteen => kernel.run::<16>(),
+    }
+}
+
+/// `kernel` compiled for AVX-512 (see `crate::cpu::has_avx512`).
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
+fn run_avx512<K: LaneKernel, const N: usize>(kernel: K) -> K::Output {
+    kernel.run::<N>()
+}
+
+/// `kernel` compiled for AVX2 and FMA (see `crate::cpu`): about 15% fewer instructions than
+/// the baseline.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn run_avx2<K: LaneKernel, const N: usize>(kernel: K) -> K::Output {
+    kernel.run::<N>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lanes_compute_the_scalar_bits() {
+        let xs = [0.0f32, -0.0, 1.5, -2.25, 1e-38, f32::INFINITY, 3.0e7, -7.0];
+        let ys = [2.0f32, 0.0, -0.5, 8.0, 1e-3, 1.0, -3.0e7, 0.0];
+        // Opaque to the compiler: folded at compile time, max(-0, 0) and NaNs may come out
+        // otherwise than the CPU computes them.
+        let (xs, ys) = (std::hint::black_box(xs), std::hint::black_box(ys));
+        let (x, y) = (F::<8>(xs), F::<8>(ys));
+        // The same bits, or both NaN (the film counts any NaN alike).
+        let same = |v: F<8>, l: usize, s: f32| {
+            let v = v.0[l];
+            assert!(
+                v.to_bits() == s.to_bits() || (v.is_nan() && s.is_nan()),
+                "lane {l}: {v} against {s}"
+            );
+        };
+        for l in 0..8 {
+            let (a, b) = std::hint::black_box((xs[l], ys[l]));
+            same(x * y + x / y, l, a * b + a / b);
+            same(x.max(y) - y.min(x), l, a.max(b) - b.min(a));
+            same(x.abs().sqrt(), l, a.abs().sqrt());
+            same(x.sign_one(), l, 1.0f32.copysign(a));
+            let m = x.less(y);
+            assert_eq!(m.0[l], a < b);
+            same(F::select(m, x, y), l, f32::select(a < b, a, b));
+        }
+    }
+}
