@@ -188,16 +188,16 @@ pub(super) fn parse_checkpoint_seconds(s: &str) -> std::result::Result<f64, Stri
 /// Longest word of a message repeated whole: a longer one (a 300-digit number) is cut.
 pub(super) const MAX_WORD: usize = 64;
 
-/// A word of the user's as a message repeats it: its first and last 30 characters, the
-/// middle cut when it is longer than `MAX_WORD` (a long path keeps its file name, line and
-/// column, which end it).
+/// A word of the user's as a message repeats it: its first 12 and last 24 characters, the
+/// middle cut, when it is longer than `MAX_WORD` (a long path keeps the end of its file name,
+/// line and column).
 pub(super) fn clip_word(s: &str) -> String {
     let count = s.chars().count();
     if count <= MAX_WORD {
         return s.to_string();
     }
-    let head: String = s.chars().take(30).collect();
-    let tail: String = s.chars().skip(count - 30).collect();
+    let head: String = s.chars().take(12).collect();
+    let tail: String = s.chars().skip(count - 24).collect();
     format!("{head}...({count} characters)...{tail}")
 }
 
