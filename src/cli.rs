@@ -251,7 +251,8 @@ pub struct RenderArgs {
     /// MIS heuristic of bidirectional strategies (bdpt).
     #[arg(long, value_enum, default_value_t = MisName::Power)]
     pub mis: MisName,
-    /// Also write each strategy's weighted contribution as DIR/s{S}_t{T}.exr (bdpt).
+    /// Also write each strategy's weighted contribution as DIR/s{S}_t{T}.exr (bdpt; mmlt: the
+    /// splats of the chain states at each strategy, scaled as the image is).
     #[arg(long, value_name = "DIR")]
     pub strategy_images: Option<PathBuf>,
     /// Light-vertex cache (bdpt; Davidovic et al. 2014): each camera vertex joins M light

@@ -49,7 +49,7 @@ mod seeds;
 
 pub use accept::{
     ChainSplats, Splat, accept_or_reject, acceptance_probability, add_splats, commit_accepted,
-    large_step_targets, splat_expected_values,
+    large_step_targets, splat_expected_values, splat_strategies,
 };
 pub use chains::{ChainStates, Contributions, ContributionsChunk, MltCounters};
 pub use mutate::{MutationSettings, SmallStep, propose_mutations, step_key, wrap_unit};
