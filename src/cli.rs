@@ -282,7 +282,8 @@ pub struct MltArgs {
     /// pssmlt, sigma 0.01 for mmlt).
     #[arg(long, value_parser = parse_sigma)]
     pub sigma: Option<f32>,
-    /// Bootstrap evaluations per seed group, a depth in mmlt (default: grows with --spp).
+    /// Bootstrap evaluations, full BDPT samples (in mmlt each is a candidate at every depth)
+    /// (default: grows with --spp).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub bootstrap: Option<u64>,
     /// Markov chains (default: the mutations / 64, between 256 and 32768).

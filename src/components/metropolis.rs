@@ -76,7 +76,8 @@ pub struct MltSettings {
     pub max_depth: u32,
     pub mis: MisHeuristic,
     pub mutation: MutationSettings,
-    /// Bootstrap evaluations per group (depth in mmlt); None: the automatic rule.
+    /// Bootstrap evaluations (full BDPT samples, each with a weight in every group); None: the
+    /// automatic rule.
     pub bootstrap: Option<u64>,
     /// Chains; None: from the budget.
     pub chains: Option<usize>,

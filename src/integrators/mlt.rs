@@ -12,10 +12,13 @@
 //! once bootstrap:
 //!     loop bootstrap_waves:  begin_bootstrap_wave -> [bdpt evaluation] -> gather_chain_contributions
 //!                            -> collect_bootstrap_weights
-//!     select_seeds -> replay_seeds -> [bdpt evaluation] -> gather_chain_contributions -> adopt_seeds
+//!     select_seeds -> replay_seeds -> [bdpt evaluation] -> gather_chain_contributions
+//!     -> (mmlt: pick_seed_strategies -> [bdpt evaluation] -> gather_chain_contributions)
+//!     -> adopt_seeds
 //! loop mutation_steps:
 //!     propose_mutations -> [bdpt evaluation] -> gather_chain_contributions -> accept_or_reject
-//!     -> estimate_normalisation -> splat_expected_values -> commit_accepted
+//!     -> estimate_normalisation -> splat_expected_values -> splat_strategy_images
+//!     -> commit_accepted
 //! ```
 //!
 //! Chains are the BDPT state's wavefront slots (chain i = sample slot i), all in lock step.
@@ -308,6 +311,16 @@ pub fn bootstrap_nodes() -> Vec<Node<MltState>> {
         Node::system(bootstrap::ReplaySeeds),
         evaluation(),
         Node::system(gather::chain_contributions::GatherChainContributions),
+        // mmlt: each chain's strategy from its replayed full sample, and its state there.
+        Node::Once {
+            name: "multiplexed_seeds",
+            needed: |s: &MltState| s.settings.multiplexed,
+            body: vec![
+                Node::system(bootstrap::PickSeedStrategies),
+                evaluation(),
+                Node::system(gather::chain_contributions::GatherChainContributions),
+            ],
+        },
         Node::system(bootstrap::AdoptSeeds),
     ]
 }
@@ -536,8 +549,15 @@ mod bindings {
             write bootstrap, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
         }
         mutate::bootstrap::CollectBootstrapWeights {
-            read settings, pixels, wave = bdpt.wave, contributions = chains.proposal_contributions;
+            read settings, pixels, wave = bdpt.wave, contributions = chains.proposal_contributions,
+                connections = bdpt.connections, shadow = bdpt.shadow,
+                starts = bdpt.connection_start;
             write bootstrap;
+        }
+        mutate::bootstrap::PickSeedStrategies {
+            read settings, selection, connections = bdpt.connections, shadow = bdpt.shadow,
+                starts = bdpt.connection_start;
+            write chains, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
         }
         mutate::bootstrap::SelectSeeds {
             read settings, bootstrap, pixels;
@@ -548,7 +568,7 @@ mod bindings {
             write chains, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
         }
         mutate::bootstrap::AdoptSeeds {
-            read selection;
+            read settings, selection;
             write chains, bootstrap;
         }
         mutate::propose::ProposeMutations {
