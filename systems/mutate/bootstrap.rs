@@ -217,10 +217,10 @@ crate::system! {
                         continue;
                     }
                     for slot in starts[k]..starts[k + 1] {
-                        if let Some((g, value)) = seed_connection(connections, shadow, slot) {
-                            if g as u32 >= settings.min_depth {
-                                w[g] += luminance(value);
-                            }
+                        if let Some((g, value)) = seed_connection(connections, shadow, slot)
+                            && g as u32 >= settings.min_depth
+                        {
+                            w[g] += luminance(value);
                         }
                     }
                 }
