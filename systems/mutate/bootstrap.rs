@@ -424,7 +424,7 @@ mod tests {
         assert!(done(&weights(2, 1 << 22, 4), chains, 1024, pixels));
         // and within 4 x that many weights in all: mmlt's 17 groups stop at 986k evaluations.
         assert!(!done(&weights(17, 986_000, 4), chains, 1024, pixels));
-        assert!(done(&weights(17, 986_800, 4), chains, 1024, pixels));
+        assert!(done(&weights(17, 987_000, 4), chains, 1024, pixels));
     }
 
     #[test]
@@ -606,9 +606,10 @@ pub fn multiplexed_numbers(
     let strategies = depth + 2;
     let takes = |u: f32| ((u * strategies as f32) as u32).min(strategies - 1) == s;
     let within = |v: f32| ((s as f64 + v as f64) / strategies as f64) as f32;
+    // A primary sample lies in [0, 1): (s + v) / strategies may round up to 1.
     let u_strategy = [within(v_strategy), within(0.5)]
         .into_iter()
-        .find(|&u| takes(u))
+        .find(|&u| u < 1.0 && takes(u))
         .unwrap_or(within(0.5));
     if depth < MULTIPLEX_TAIL_DEPTH {
         return (u_strategy, 0.0);
