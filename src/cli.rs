@@ -267,7 +267,8 @@ pub struct RenderArgs {
     /// MIS heuristic of bidirectional strategies (bdpt).
     #[arg(long, value_enum, default_value_t = MisName::Power)]
     pub mis: MisName,
-    /// Also write each strategy's weighted contribution as DIR/s{S}_t{T}.exr (bdpt).
+    /// Also write each strategy's weighted contribution as DIR/s{S}_t{T}.exr (bdpt; mmlt: the
+    /// splats of the chain states at each strategy, scaled as the image is).
     #[arg(long, value_name = "DIR")]
     pub strategy_images: Option<PathBuf>,
     /// Light-vertex cache (bdpt; Davidovic et al. 2014): each camera vertex joins M light
@@ -297,7 +298,8 @@ pub struct MltArgs {
     /// pssmlt, sigma 0.01 for mmlt).
     #[arg(long, value_parser = parse_sigma)]
     pub sigma: Option<f32>,
-    /// Bootstrap evaluations per seed group, a depth in mmlt (default: grows with --spp).
+    /// Bootstrap evaluations, full BDPT samples (in mmlt each is a candidate at every depth)
+    /// (default: grows with --spp).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub bootstrap: Option<u64>,
     /// Markov chains (default: the mutations / 64, between 256 and 32768).

@@ -43,7 +43,7 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         bail!("{}: the output must be an .exr file", output.display());
     }
     if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
-        bail!("--strategy-images needs --integrator bdpt");
+        bail!("--strategy-images needs --integrator bdpt or mmlt");
     }
     if o.settings.light_vertex_cache > 0
         && !o

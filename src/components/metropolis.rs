@@ -76,7 +76,8 @@ pub struct MltSettings {
     pub max_depth: u32,
     pub mis: MisHeuristic,
     pub mutation: MutationSettings,
-    /// Bootstrap evaluations per group (depth in mmlt); None: the automatic rule.
+    /// Bootstrap evaluations (full BDPT samples, each with a weight in every group); None: the
+    /// automatic rule.
     pub bootstrap: Option<u64>,
     /// Chains; None: from the budget.
     pub chains: Option<usize>,
@@ -84,6 +85,9 @@ pub struct MltSettings {
     pub mutations_per_pixel: Option<u64>,
     /// Keep the bootstrap's own image (tests).
     pub bootstrap_image: bool,
+    /// Keep each strategy's share of the image (mmlt: `--strategy-images`), split by the
+    /// strategy (s, t) of the chain state that made each splat.
+    pub strategy_images: bool,
     /// Depths below this get no weight (path-space MLT renders them apart).
     pub min_depth: u32,
     /// How many chains, unless given.
@@ -114,6 +118,7 @@ impl MltSettings {
             chains: None,
             mutations_per_pixel: None,
             bootstrap_image: false,
+            strategy_images: false,
             min_depth: 0,
             chain_rule: ChainRule::StepsPerChain(STEPS_PER_CHAIN),
             bootstrap_wave: 0,

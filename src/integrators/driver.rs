@@ -60,6 +60,10 @@ pub trait PassState: IntegratorState {
     /// The image of `passes` finished passes, the bytes of state per pixel and the slots in
     /// flight.
     fn finish(self, passes: u64) -> (Film, usize, usize);
+    /// Further images of the render (named), taken before `finish`: mmlt's strategy images.
+    fn layers(&self) -> Vec<(String, Image)> {
+        Vec::new()
+    }
     /// What a later run needs to continue after the passes done (`restore`), as bytes; None
     /// for an integrator that does not resume.
     fn save(&self) -> Option<Vec<u8>> {
@@ -235,6 +239,7 @@ pub fn resume_passes<S: PassState>(
     let interrupted = control.stopped() && total.is_some_and(|t| passes < t);
     let notes = state.report();
     let saved = state.save();
+    let layers = state.layers();
     let (film, bytes_per_path, wavefront) = state.finish(passes);
     let pixels = film.width as u64 * film.height as u64;
     RenderOutcome {
@@ -247,7 +252,7 @@ pub fn resume_passes<S: PassState>(
         systems: graph.system_names(),
         bytes_per_path,
         wavefront,
-        layers: Vec::new(),
+        layers,
         notes,
         counted_rays: None,
         state: saved,

@@ -12,10 +12,13 @@
 //! once bootstrap:
 //!     loop bootstrap_waves:  begin_bootstrap_wave -> [bdpt evaluation] -> gather_chain_contributions
 //!                            -> collect_bootstrap_weights
-//!     select_seeds -> replay_seeds -> [bdpt evaluation] -> gather_chain_contributions -> adopt_seeds
+//!     select_seeds -> replay_seeds -> [bdpt evaluation] -> gather_chain_contributions
+//!     -> (mmlt: pick_seed_strategies -> [bdpt evaluation] -> gather_chain_contributions)
+//!     -> adopt_seeds
 //! loop mutation_steps:
 //!     propose_mutations -> [bdpt evaluation] -> gather_chain_contributions -> accept_or_reject
-//!     -> estimate_normalisation -> splat_expected_values -> commit_accepted
+//!     -> estimate_normalisation -> splat_expected_values -> splat_strategy_images
+//!     -> commit_accepted
 //! ```
 //!
 //! Chains are the BDPT state's wavefront slots (chain i = sample slot i), all in lock step.
@@ -32,7 +35,7 @@
 //! run by every large step's target (fresh uniform vectors: more independent samples of b),
 //! and the image is scaled by it when developed (`estimate_normalisation`).
 
-use crate::film::Film;
+use crate::film::{Film, Image};
 use crate::integrators::bdpt::{self, BdptSettings, BdptState, Numbers};
 use crate::integrators::driver::{IntegratorState, PassState, render_passes};
 use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
@@ -41,6 +44,7 @@ use crate::pipeline::{Graph, Node};
 use crate::sampling::{PrimarySamples, mix64};
 use crate::systems::{gather, mutate};
 use glam::DVec3;
+use std::collections::BTreeMap;
 use std::sync::Arc;
 
 pub use crate::components::metropolis::*;
@@ -72,6 +76,8 @@ impl MltSettings {
             mutation,
             bootstrap: s.mlt.bootstrap,
             chains: s.mlt.chains.map(|c| c as usize),
+            // Each chain state is one strategy only in mmlt; a pssmlt state is all of them.
+            strategy_images: multiplexed && s.strategy_images,
             ..MltSettings::new(s.seed, multiplexed)
         }
     }
@@ -96,6 +102,9 @@ pub struct MltState {
     /// Splat sums per group and pixel (slot `group x pixels + pixel`), in chain order (f64),
     /// in units of the group's b_k.
     pub splat_sums: Vec<DVec3>,
+    /// With `strategy_images` (mmlt): the splat sums again, per (group, depth, s), in units
+    /// of the group's b_k.
+    pub strategy_sums: BTreeMap<(u32, u32, u16), Vec<DVec3>>,
     /// The running b_k: the bootstrap's, then every large step's target too.
     pub normalisation: Normalisation,
     pub nonfinite: u64,
@@ -153,6 +162,38 @@ impl MltState {
             .expect("the image's size");
         film.nonfinite = self.nonfinite;
         film
+    }
+
+    /// Each strategy's image (`s{s}_t{t}`, with `strategy_images`): its splats scaled as the
+    /// image's are (b_k of its group x pixels / steps per chain), so the images of a depth
+    /// sum to that depth's part of the image and all of them to the image.
+    pub fn strategy_images(&self) -> Vec<(String, Image)> {
+        let (w, h) = (self.bdpt.film.width, self.bdpt.film.height);
+        let mut layers: BTreeMap<(u32, u16), Vec<DVec3>> = BTreeMap::new();
+        if self.step > 0 && self.selection.is_some() {
+            let per_step = self.pixels as f64 / self.step as f64;
+            for (&(g, depth, s), sums) in &self.strategy_sums {
+                let scale = self.normalisation.group(g as usize) * per_step;
+                let image = layers
+                    .entry((depth, s))
+                    .or_insert_with(|| vec![DVec3::ZERO; sums.len()]);
+                for (out, v) in image.iter_mut().zip(sums) {
+                    *out += *v * scale;
+                }
+            }
+        }
+        layers
+            .into_iter()
+            .map(|((depth, s), sums)| {
+                let t = depth as u64 + 2 - s as u64;
+                let image = Image {
+                    width: w,
+                    height: h,
+                    pixels: sums.iter().map(|v| v.as_vec3()).collect(),
+                };
+                (format!("s{s}_t{t}"), image)
+            })
+            .collect()
     }
 
     /// The bootstrap's share of the time since the render began.
@@ -270,6 +311,16 @@ pub fn bootstrap_nodes() -> Vec<Node<MltState>> {
         Node::system(bootstrap::ReplaySeeds),
         evaluation(),
         Node::system(gather::chain_contributions::GatherChainContributions),
+        // mmlt: each chain's strategy from its replayed full sample, and its state there.
+        Node::Once {
+            name: "multiplexed_seeds",
+            needed: |s: &MltState| s.settings.multiplexed,
+            body: vec![
+                Node::system(bootstrap::PickSeedStrategies),
+                evaluation(),
+                Node::system(gather::chain_contributions::GatherChainContributions),
+            ],
+        },
         Node::system(bootstrap::AdoptSeeds),
     ]
 }
@@ -301,6 +352,7 @@ pub fn graph() -> Graph<MltState> {
                     Node::system(accept::AcceptOrReject),
                     Node::system(accept::EstimateNormalisation),
                     Node::system(accept::SplatExpectedValues),
+                    Node::system(accept::SplatStrategyImages),
                     Node::system(accept::CommitAccepted),
                 ],
             },
@@ -324,6 +376,7 @@ impl IntegratorState for MltState {
         "counters",
         "splats",
         "splat_sums",
+        "strategy_sums",
         "normalisation",
         "nonfinite",
         "started",
@@ -380,6 +433,7 @@ impl PassState for MltState {
             counters: MltCounters::default(),
             splats: ChainSplats::new(),
             splat_sums: vec![DVec3::ZERO; groups * pixels as usize],
+            strategy_sums: BTreeMap::new(),
             normalisation: Normalisation::default(),
             nonfinite: 0,
             started: std::time::Instant::now(),
@@ -392,6 +446,10 @@ impl PassState for MltState {
 
     fn report(&self) -> Vec<(&'static str, String)> {
         self.report_lines()
+    }
+
+    fn layers(&self) -> Vec<(String, Image)> {
+        self.strategy_images()
     }
 
     fn finish(self, _passes: u64) -> (Film, usize, usize) {
@@ -464,7 +522,8 @@ mod bindings {
         gather::chain_contributions::GatherChainContributions {
             read wave = bdpt.wave, shadow = bdpt.shadow, connections = bdpt.connections,
                 starts = bdpt.connection_start, radiance = bdpt.sample_radiance,
-                sample_pixel = bdpt.sample_pixel, multiplex = bdpt.multiplex;
+                sample_pixel = bdpt.sample_pixel, multiplex = bdpt.multiplex,
+                chosen_s = bdpt.chosen_s;
             write out = chains.proposal_contributions;
         }
         mutate::accept::AcceptOrReject {
@@ -478,6 +537,10 @@ mod bindings {
             read chains, pixels;
             write splats, splat_sums, nonfinite;
         }
+        mutate::accept::SplatStrategyImages {
+            read settings, chains, pixels;
+            write strategy_sums;
+        }
         mutate::accept::CommitAccepted {
             write chains, step, steps_left;
         }
@@ -486,8 +549,15 @@ mod bindings {
             write bootstrap, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
         }
         mutate::bootstrap::CollectBootstrapWeights {
-            read settings, pixels, wave = bdpt.wave, contributions = chains.proposal_contributions;
+            read settings, pixels, wave = bdpt.wave, contributions = chains.proposal_contributions,
+                connections = bdpt.connections, shadow = bdpt.shadow,
+                starts = bdpt.connection_start;
             write bootstrap;
+        }
+        mutate::bootstrap::PickSeedStrategies {
+            read settings, selection, connections = bdpt.connections, shadow = bdpt.shadow,
+                starts = bdpt.connection_start;
+            write chains, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
         }
         mutate::bootstrap::SelectSeeds {
             read settings, bootstrap, pixels;
@@ -498,7 +568,7 @@ mod bindings {
             write chains, numbers = bdpt.sampler, wave = bdpt.wave, multiplex = bdpt.multiplex;
         }
         mutate::bootstrap::AdoptSeeds {
-            read selection;
+            read settings, selection;
             write chains, bootstrap;
         }
         mutate::propose::ProposeMutations {

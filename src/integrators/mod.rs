@@ -68,6 +68,17 @@ const MLT_OPTIONS: &[&str] = &[
     "--mis",
 ];
 
+/// The `render` options of mmlt: the Metropolis ones and the strategy images (each chain
+/// state is one strategy (s, t), so its splats split by strategy as BDPT's connections do).
+const MMLT_OPTIONS: &[&str] = &[
+    "--large-step",
+    "--sigma",
+    "--bootstrap",
+    "--chains",
+    "--mis",
+    "--strategy-images",
+];
+
 /// Every integrator built into this binary, in the order reports list them.
 pub static REGISTRY: [IntegratorInfo; 10] = [
     IntegratorInfo {
@@ -199,7 +210,7 @@ pub static REGISTRY: [IntegratorInfo; 10] = [
         description: "multiplexed MLT: one BDPT strategy per evaluation (pbrt-v4's mlt)",
         unbiased: false,
         resumes: false,
-        options: MLT_OPTIONS,
+        options: MMLT_OPTIONS,
         render: |data, s, budget, control, _| {
             mlt::render(
                 data,

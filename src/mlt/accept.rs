@@ -229,6 +229,43 @@ pub fn splat_expected_values(chains: &ChainStates, splats: &mut ChainSplats, gro
         });
 }
 
+/// The strategy images' sums of one step (mmlt, `--strategy-images`): the same expected-value
+/// weights as `splat_expected_values`, each state's splats added to the sums of its strategy,
+/// keyed (group, depth, s), in units of the group's b_k (`splat_scale` included). Serial, in
+/// chain order, so the sums do not depend on the thread count; a diagnostic, not the hot path.
+pub fn splat_strategies(
+    chains: &ChainStates,
+    sums: &mut std::collections::BTreeMap<(u32, u32, u16), Vec<DVec3>>,
+    pixels: usize,
+) {
+    let (current, proposal) = (
+        &chains.current_contributions,
+        &chains.proposal_contributions,
+    );
+    let mut add = |state: &Contributions, i: usize, weight: f32| {
+        let (depth, s) = state.strategy[i];
+        let image = sums
+            .entry((chains.group[i], depth, s))
+            .or_insert_with(|| vec![DVec3::ZERO; pixels]);
+        for (pixel, value) in state.entries(i) {
+            let v = value * weight;
+            if v.is_finite() && (pixel as usize) < pixels {
+                image[pixel as usize] += v.as_dvec3();
+            }
+        }
+    };
+    for i in 0..chains.chains() {
+        let (a, scale) = (chains.acceptance[i], chains.splat_scale[i]);
+        if a > 0.0 {
+            add(proposal, i, scale * a / proposal.target[i]);
+        }
+        let c_cur = current.target[i];
+        if a < 1.0 && c_cur.is_finite() && c_cur > 0.0 {
+            add(current, i, scale * (1.0 - a) / c_cur);
+        }
+    }
+}
+
 #[inline]
 fn emit(out: &mut Vec<Splat>, state: &Contributions, chain: usize, offset: u32, weight: f32) {
     for (pixel, value) in state.entries(chain) {
@@ -297,6 +334,7 @@ pub fn commit_accepted(chains: &mut ChainStates) {
                 chunk.value[to..to + n].copy_from_slice(&proposal.value[from..from + n]);
                 chunk.count[local] = n as u32;
                 chunk.target[local] = proposal.target[i];
+                chunk.strategy[local] = proposal.strategy[i];
             }
         });
 }

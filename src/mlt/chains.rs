@@ -28,6 +28,9 @@ pub struct Contributions {
     pub count: Vec<u32>,
     pub pixel: Vec<u32>,
     pub value: Vec<Vec3>,
+    /// The strategy of each chain's evaluation, (depth, s), in mmlt (one strategy per
+    /// evaluation); (0, 0) in pssmlt. Only the strategy images read it.
+    pub strategy: Vec<(u32, u16)>,
 }
 
 /// A mutable view of the contributions of one chunk of chains, for an evaluation system that
@@ -40,6 +43,7 @@ pub struct ContributionsChunk<'a> {
     pub count: &'a mut [u32],
     pub pixel: &'a mut [u32],
     pub value: &'a mut [Vec3],
+    pub strategy: &'a mut [(u32, u16)],
 }
 
 impl Contributions {
@@ -52,6 +56,7 @@ impl Contributions {
             count: vec![0; chains],
             pixel: vec![0; chains * stride],
             value: vec![Vec3::ZERO; chains * stride],
+            strategy: vec![(0, 0); chains],
         }
     }
 
@@ -65,6 +70,7 @@ impl Contributions {
         self.count.truncate(chains);
         self.pixel.truncate(chains * self.stride);
         self.value.truncate(chains * self.stride);
+        self.strategy.truncate(chains);
     }
 
     pub fn stride(&self) -> usize {
@@ -138,15 +144,17 @@ impl Contributions {
             .zip(self.count.par_chunks_mut(CHUNK))
             .zip(self.pixel.par_chunks_mut(CHUNK * stride))
             .zip(self.value.par_chunks_mut(CHUNK * stride))
+            .zip(self.strategy.par_chunks_mut(CHUNK))
             .enumerate()
             .map(
-                move |(c, (((target, count), pixel), value))| ContributionsChunk {
+                move |(c, ((((target, count), pixel), value), strategy))| ContributionsChunk {
                     first_chain: c * CHUNK,
                     stride,
                     target,
                     count,
                     pixel,
                     value,
+                    strategy,
                 },
             )
     }

@@ -9,15 +9,18 @@
 //! # How the renderer's graphs use these pieces
 //!
 //! Graph `bootstrap` (once, or at each reseeding):
-//! 1. the BDPT graph with its own sample keys; per bootstrap sample and group (MMLT: depth k,
-//!    PSSMLT: one group) the weight = luminance of its (MIS-weighted) contribution, zeros kept;
+//! 1. the BDPT graph with its own sample keys (full BDPT samples); per bootstrap sample and
+//!    group (MMLT: depth k, PSSMLT: one group) the weight = luminance of its contribution (MMLT:
+//!    of its MIS-weighted connections of depth k), zeros kept;
 //! 2. `needs_more_bootstrap(groups, mutations_per_pixel)`: draw more bootstrap samples until
 //!    false (b's relative error under half the image's; formula in `seeds`);
 //! 3. `select_seeds(groups, chains, seed)` -> `SeedSelection` (b_k, chains per group by largest
 //!    remainder, each chain's candidate by stratified resampling), then
 //!    `SeedSelection::apply(&mut chains)` (group = depth and splat scale per chain);
 //! 4. the renderer replays each chain's candidate into `chains.current` (the numbers its sample
-//!    key gave) and evaluates it into `chains.current_contributions`.
+//!    key gave) and evaluates it into `chains.current_contributions` (MMLT: after picking one
+//!    connection of the chain's depth by luminance and setting the numbers that make a
+//!    multiplexed evaluation take it).
 //!
 //! Graph `mutations`, per step `step` (one step = one mutation of every chain):
 //! 1. `propose_mutations(&mut chains, &settings, seed, step)`: `chains.proposal`, every
@@ -49,7 +52,7 @@ mod seeds;
 
 pub use accept::{
     ChainSplats, Splat, accept_or_reject, acceptance_probability, add_splats, commit_accepted,
-    large_step_targets, splat_expected_values,
+    large_step_targets, splat_expected_values, splat_strategies,
 };
 pub use chains::{ChainStates, Contributions, ContributionsChunk, MltCounters};
 pub use mutate::{MutationSettings, SmallStep, propose_mutations, step_key, wrap_unit};

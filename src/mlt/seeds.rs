@@ -2,8 +2,8 @@
 //! normalisation b, and how large the bootstrap must be.
 //!
 //! Input: per group (the path depth k in MMLT; one group in PSSMLT) one weight per bootstrap
-//! sample of that group, zeros included: the luminance of the sample's contribution (MIS-weighted
-//! in MMLT). A negative, NaN or infinite weight counts as 0 everywhere here.
+//! sample, zeros included: the luminance of the sample's contribution (in MMLT, of its
+//! MIS-weighted connections of that depth). A negative, NaN or infinite weight counts as 0 everywhere here.
 //!
 //! # Bootstrap size
 //!

@@ -19,7 +19,7 @@ pub struct GatherChainContributions;
 crate::system! {
     GatherChainContributions = "gather_chain_contributions";
     read wave: Wave, shadow: ShadowRays, connections: Connections, starts: Vec<usize>,
-        radiance: Vec<Vec3>, sample_pixel: Vec<u32>, multiplex: Vec<u32>;
+        radiance: Vec<Vec3>, sample_pixel: Vec<u32>, multiplex: Vec<u32>, chosen_s: Vec<u16>;
     write out: Contributions;
     run {
         let n = wave.len;
@@ -46,6 +46,11 @@ crate::system! {
                     if k >= n {
                         continue;
                     }
+                    // A multiplexed sample's depth (drawn, in the tail group) and strategy.
+                    chunk.strategy[local] = match multiplex.get(k) {
+                        Some(&depth) => (depth, chosen_s[k]),
+                        None => (0, 0),
+                    };
                     let mut own = radiance[k];
                     let mut total = Vec3::ZERO;
                     for slot in starts[k]..starts[k + 1] {

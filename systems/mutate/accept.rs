@@ -2,9 +2,10 @@
 //! from the BDPT state, a = min(1, c_prop / c_cur), u < a), `estimate_normalisation` (the
 //! large steps' targets into the running b_k), `splat_expected_values` (both states weighted,
 //! added to the f64 splat sums of the chain's group in chain order: the image does not depend
-//! on the thread count), `commit_accepted` (accepted chains take their proposal; the step
-//! ends).
+//! on the thread count), `splat_strategy_images` (with `--strategy-images`, the same splats by
+//! strategy), `commit_accepted` (accepted chains take their proposal; the step ends).
 
+use crate::components::metropolis::MltSettings;
 use crate::components::subpaths::Numbers;
 use crate::mlt::ChainSplats;
 use crate::mlt::ChainStates;
@@ -12,6 +13,7 @@ use crate::mlt::MltCounters;
 use crate::mlt::Normalisation;
 use crate::pipeline::Flow;
 use glam::DVec3;
+use std::collections::BTreeMap;
 
 pub struct AcceptOrReject;
 
@@ -54,6 +56,22 @@ crate::system! {
         let (added, dropped) = splats.add_to(splat_sums);
         *nonfinite += dropped;
         Flow::new(chains.chains(), (added + dropped) as usize)
+    }
+}
+
+pub struct SplatStrategyImages;
+
+crate::system! {
+    SplatStrategyImages = "splat_strategy_images";
+    read settings: MltSettings, chains: ChainStates, pixels: u64;
+    write strategy_sums: BTreeMap<(u32, u32, u16), Vec<DVec3>>;
+    run {
+        // Only with `--strategy-images` (mmlt): each splat again, into its strategy's image.
+        if !settings.strategy_images {
+            return Flow::new(0, 0);
+        }
+        crate::mlt::splat_strategies(chains, strategy_sums, *pixels as usize);
+        Flow::new(chains.chains(), chains.chains())
     }
 }
 
