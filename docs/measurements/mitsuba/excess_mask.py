@@ -2,8 +2,7 @@
 """excess_mask.py A B REF_A REF_B: agree.py's excess ratio, over the whole image and without the four pixels of
 the light's reflection in glass_tube's sphere (rows 22-23, columns 31-32)."""
 import sys, numpy as np
-sys.path.insert(0, '/work/shared/mitsuba')  # agree.py's reader
-from agree import read
+from exr_images import read
 a,b,ra,rb=(read(p) for p in sys.argv[1:5])
 d=0.5*(a+b)-0.5*(ra+rb); var=((a-b)**2+(ra-rb)**2)/4
 m=np.ones(d.shape[:2],bool); m[22:24,31:33]=False

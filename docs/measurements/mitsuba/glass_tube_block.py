@@ -1,12 +1,7 @@
 """block.py REF.exr IMG... : per image, the 16x16 block at (24,24) mean RGB over the reference's;
 then the mean over images with its standard error, and how many are >5% dark (luminance)."""
 import sys, numpy as np, OpenEXR
-def read(p):
-    with OpenEXR.File(p) as f:
-        ch = f.channels()
-        key = "RGB" if "RGB" in ch else ("RGBA" if "RGBA" in ch else None)
-        if key: return np.asarray(ch[key].pixels, dtype=np.float64)[..., :3]
-        return np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in "RGB"], -1)
+from exr_images import read
 Y = np.array([0.2126, 0.7152, 0.0722])
 ref = read(sys.argv[1])[24:40, 24:40].mean((0, 1))
 rs = []

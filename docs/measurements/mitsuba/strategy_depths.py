@@ -2,12 +2,7 @@
 image-mean luminance, averaged over the DIRs (several seeds); also per-depth sums."""
 import sys, os, re, numpy as np, OpenEXR
 from collections import defaultdict
-def read(p):
-    with OpenEXR.File(p) as f:
-        ch = f.channels()
-        key = "RGB" if "RGB" in ch else ("RGBA" if "RGBA" in ch else None)
-        if key: return np.asarray(ch[key].pixels, dtype=np.float64)[..., :3]
-        return np.stack([np.asarray(ch[c].pixels, dtype=np.float64) for c in "RGB"], -1)
+from exr_images import read
 Y = np.array([0.2126, 0.7152, 0.0722])
 dirs = sys.argv[1:]
 acc = defaultdict(lambda: np.zeros((len(dirs), 2)))
