@@ -151,6 +151,13 @@ impl PathContext<'_> {
         self.scene.materials[tris.material[v.triangle as usize] as usize]
     }
 
+    /// The material at surface vertex `v` as seen from direction `wo` (see
+    /// `PreparedScene::material_seen`).
+    #[inline]
+    pub fn material_seen(&self, v: &Vertex, wo: Vec3) -> Material {
+        self.scene.material_seen(v.triangle, wo, v.ng)
+    }
+
     /// Whether a strategy may join a subpath at this vertex: not at a delta surface.
     #[inline]
     pub fn is_connectible(&self, v: &Vertex) -> bool {
@@ -222,7 +229,7 @@ impl PathContext<'_> {
                     // Only reflection is connectible (the dielectric, which refracts, is not).
                     return Vec3::ZERO;
                 }
-                let f = self.material(v).eval_world(v.ns, wo, wi);
+                let f = self.material_seen(v, wo).eval_world(v.ns, wo, wi);
                 match mode {
                     TransportMode::Radiance => f,
                     TransportMode::Importance => f * shading_correction(v, wo, wi),
@@ -248,7 +255,7 @@ impl PathContext<'_> {
                 if wi.dot(v.ng) * wo.dot(v.ng) <= 0.0 {
                     return 0.0;
                 }
-                self.material(v).pdf_world(v.ns, wo, wi)
+                self.material_seen(v, wo).pdf_world(v.ns, wo, wi)
             }
         }
     }
@@ -443,7 +450,7 @@ impl PathContext<'_> {
         let lobe = match v.kind {
             VertexKind::Camera => return None,
             VertexKind::Light => Lobe::Light,
-            VertexKind::Surface => match self.material(v) {
+            VertexKind::Surface => match self.material_seen(v, wo) {
                 Material::Dielectric { .. } => return None,
                 Material::Diffuse { reflectance } => Lobe::Diffuse(reflectance * FRAC_1_PI),
                 material => Lobe::Other(material),

@@ -349,7 +349,7 @@ impl<'a> PathSpace<'a> {
                 })
             }
             VertexKind::Surface => {
-                let material = self.ctx.material(v);
+                let material = self.ctx.material_seen(v, wo);
                 let (frame, ng) = local_frame(&material, v, wo);
                 let (bs, wi) =
                     sample_direction(&material, &frame, ng, wo, frame.to_local(wo), u, mode)?;

@@ -60,6 +60,8 @@ pub struct PreparedScene {
     pub camera: Camera,
     pub triangles: TriangleColumns,
     pub materials: Vec<Material>,
+    /// Per material: black when seen from behind its geometric normal (see `material_seen`).
+    pub black_behind: Vec<bool>,
     pub emitters: Emitters,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
@@ -92,7 +94,31 @@ pub struct LightSample {
     pub radiance: Vec3,
 }
 
+/// What a one-sided surface is from behind: it reflects nothing.
+pub const BLACK: Material = Material::Diffuse {
+    reflectance: Vec3::ZERO,
+};
+
 impl PreparedScene {
+    /// The material of triangle `tri` as a ray arriving from `wo` (unit, pointing away from the
+    /// surface) sees it: a one-sided material seen from behind its geometric normal `ng` (not
+    /// flipped to any side) is `BLACK`, as Mitsuba's `diffuse` outside a `twosided`.
+    #[inline(always)]
+    pub fn material_seen(&self, tri: u32, wo: Vec3, ng: Vec3) -> Material {
+        if self.seen_from_behind(tri, wo, ng) {
+            BLACK
+        } else {
+            self.materials[self.triangles.material[tri as usize] as usize]
+        }
+    }
+
+    /// Whether `material_seen` makes triangle `tri` black: a ray from `wo` sees the back of a
+    /// one-sided material, which absorbs all light arriving there.
+    #[inline(always)]
+    pub fn seen_from_behind(&self, tri: u32, wo: Vec3, ng: Vec3) -> bool {
+        self.black_behind[self.triangles.material[tri as usize] as usize] && wo.dot(ng) < 0.0
+    }
+
     /// Next-event estimation's light sample from the surface point (p, its error bound,
     /// geometric normal ng) seen along wo: an emitter point by `sample_emitter`, or None when
     /// the point faces away from it or it lies on the other side of the surface than wo.

@@ -51,17 +51,26 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     objects.sort_by_key(|o| o.0.order);
 
     // Only the materials some object uses, in declaration order.
-    let mut material_query = world.query::<(Entity, &MaterialInfo, &Material)>();
+    let mut material_query = world.query::<(
+        Entity,
+        &MaterialInfo,
+        &Material,
+        Option<&super::world::OneSided>,
+    )>();
     let mut declared: Vec<_> = material_query.iter().collect();
     declared.sort_by_key(|m| m.1.order);
     let used: HashSet<Entity> = objects.iter().map(|o| o.4.0).collect();
     let mut materials = Vec::new();
+    let mut black_behind = Vec::new();
     let mut material_index = HashMap::new(); // entity -> index into `materials`
     let mut warnings = scene.warnings.clone();
-    for &(entity, info, material) in &declared {
+    for &(entity, info, material, one_sided) in &declared {
         if used.contains(&entity) {
             material_index.insert(entity, materials.len() as u32);
             materials.push(*material);
+            // Conductors are black from behind by their own maths; only the Lambertian lobe,
+            // which the engine mirrors to the side a ray comes from, needs the mark.
+            black_behind.push(one_sided.is_some() && matches!(material, Material::Diffuse { .. }));
         } else {
             warnings.push(format!(
                 "material \"{}\" is not used",
@@ -248,6 +257,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         camera,
         triangles,
         materials,
+        black_behind,
         emitters,
         bounds_min,
         bounds_max,

@@ -27,6 +27,11 @@ pub struct SourceSpot {
     pub column: usize,
 }
 
+/// Marks a material entity that reflects only on the side its geometric normal faces (a
+/// Mitsuba `diffuse` not wrapped in `twosided`): seen from behind it is black.
+#[derive(Clone, Copy, Debug)]
+pub struct OneSided;
+
 /// A material entity's name and declaration order.
 #[derive(Clone, Debug)]
 pub struct MaterialInfo {

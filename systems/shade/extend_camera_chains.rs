@@ -85,6 +85,11 @@ crate::system! {
                         };
                         c.emitted[i] += c.beta[i] * em.radiance[e] * weight;
                     }
+                    if scene.seen_from_behind(tri, wo, sp.ng) {
+                        // Nothing reflects here (a one-sided surface seen from behind): no
+                        // visible point, the chain ends.
+                        continue;
+                    }
                     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let (mut ng, mut ns) = (sp.ng, sp.ns);
                     if wo.dot(ng) < 0.0 && matches!(material, Material::Diffuse { .. }) {

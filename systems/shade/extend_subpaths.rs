@@ -194,8 +194,8 @@ fn scatter(
     d: usize,
     light: bool,
 ) -> Option<Scattered> {
-    let material = scene.materials[scene.triangles.material[here.triangle as usize] as usize];
     let wo = (prev.p - here.p).normalize_or_zero();
+    let material = scene.material_seen(here.triangle, wo, here.ng);
     let (frame, ng) = local_frame(&material, here, wo);
     let wo_local = frame.to_local(wo);
     let (dim, mode) = if light {

@@ -163,8 +163,8 @@ impl<const N: usize> DiffuseLanes<N> {
         let scene = &data.scene;
         let mut reflectance = [Vec3::ZERO; N];
         for (l, r) in reflectance.iter_mut().enumerate() {
-            let material = scene.triangles.material[triangles[i + l] as usize];
-            match scene.materials[material as usize] {
+            let k = i + l;
+            match scene.material_seen(triangles[k], -dirs[k], surfaces.ng[k]) {
                 crate::bsdf::Material::Diffuse { reflectance } => *r = reflectance,
                 _ => return None,
             }

@@ -56,8 +56,13 @@ crate::system! {
                     } else {
                         sp.ns
                     };
-                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let wo = -r.dir[i].normalize();
+                    if scene.seen_from_behind(tri, wo, sp.ng) {
+                        // Absorbed (a one-sided surface seen from behind): nothing gathers
+                        // a photon here and none leaves.
+                        continue;
+                    }
+                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
                     let depth = w.depth[i];
                     // Nothing gathers on surfaces camera chains follow.
                     let followed = chains_follow(&material);

@@ -56,11 +56,10 @@ impl Surface {
     /// `dir`.
     #[inline(always)]
     pub fn new(data: &SceneData, triangle: u32, point: &SurfacePoint, dir: Vec3) -> Surface {
-        let tris = &data.scene.triangles;
-        let material = data.scene.materials[tris.material[triangle as usize] as usize];
+        let wo = -dir;
+        let material = data.scene.material_seen(triangle, wo, point.ng);
         let mut ng = point.ng;
         let mut ns = point.ns;
-        let wo = -dir;
         // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
         if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
             ng = -ng;

@@ -13,10 +13,17 @@ use super::document::{
 use crate::bsdf::Material;
 use crate::scene::shapes::Mesh;
 use crate::scene::world::{
-    DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape,
-    SourceSpot, Transform,
+    DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, OneSided, SceneWorld,
+    Shape, SourceSpot, Transform,
 };
 use crate::scene::{Camera, Limits, SceneError};
+
+/// Whether a material reflects on both sides of a surface or only where its normal points.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Sides {
+    One,
+    Two,
+}
 use glam::{DAffine3, DMat4, DVec3, Vec3};
 use hecs::{Entity, EntityBuilder, World};
 use std::collections::HashMap;
@@ -283,6 +290,7 @@ struct Builder<'a> {
     materials: HashMap<usize, Entity>,
     /// The default BSDF of emitting shapes (Mitsuba's: a black diffuse), made when first needed.
     default_material: Option<Entity>,
+    default_diffuse: Option<Entity>,
     objects: u32,
     triangles_so_far: u64,
     film: Option<(u32, u32)>,
@@ -309,6 +317,7 @@ impl<'a> Builder<'a> {
             settings_only: false,
             materials: HashMap::new(),
             default_material: None,
+            default_diffuse: None,
             objects: 0,
             triangles_so_far: 0,
             film: None,
@@ -684,7 +693,7 @@ impl<'a> Builder<'a> {
             return Ok(e);
         }
         let object = self.object(id);
-        let material = self.material_of(object)?;
+        let (material, sides) = self.material_of(object)?;
         let name = match &object.id {
             Some(id) => id.clone(),
             None => format!("{} at line {}", object.kind, object.spot.line),
@@ -694,11 +703,17 @@ impl<'a> Builder<'a> {
             order: self.materials.len() as u32 + 1,
         };
         let entity = self.world.spawn((info, material));
+        if sides == Sides::One {
+            self.world
+                .insert_one(entity, OneSided)
+                .expect("just spawned");
+        }
         self.materials.insert(id, entity);
         Ok(entity)
     }
 
-    fn material_of(&self, object: &Object) -> Result<Material, XmlError> {
+    /// The material of a BSDF object and whether it reflects on one side or both.
+    fn material_of(&self, object: &Object) -> Result<(Material, Sides), XmlError> {
         let mut params = Params::new(object);
         params.ignore(IGNORED_BSDF);
         let no_children = |object: &Object| -> Result<(), XmlError> {
@@ -734,11 +749,11 @@ impl<'a> Builder<'a> {
                         ),
                     ));
                 }
-                return self.diffuse(inner, true);
+                return Ok((self.diffuse(inner)?, Sides::Two));
             }
             "diffuse" => {
                 drop(params);
-                return self.diffuse(object, false);
+                return Ok((self.diffuse(object)?, Sides::One));
             }
             "dielectric" => {
                 no_children(object)?;
@@ -847,10 +862,11 @@ impl<'a> Builder<'a> {
             }
             _ => return Err(unsupported(object, BSDFS)),
         };
-        Ok(material)
+        // Dielectrics refract on both sides; conductors reflect only on the front.
+        Ok((material, Sides::One))
     }
 
-    fn diffuse(&self, object: &Object, two_sided: bool) -> Result<Material, XmlError> {
+    fn diffuse(&self, object: &Object) -> Result<Material, XmlError> {
         let mut params = Params::new(object);
         if let Some(c) = object.children.first() {
             return Err(XmlError::at(
@@ -863,12 +879,6 @@ impl<'a> Builder<'a> {
             .map(|(c, _)| c)
             .unwrap_or(Vec3::splat(0.5));
         params.finish()?;
-        if !two_sided {
-            return Err(XmlError::at(
-                &object.spot,
-                "a one-sided diffuse is not supported yet: wrap it in <bsdf type=\"twosided\">",
-            ));
-        }
         Ok(Material::Diffuse { reflectance })
     }
 
@@ -1111,11 +1121,24 @@ impl<'a> Builder<'a> {
                 }
             }
         } else {
-            return Err(XmlError::at(
-                &placed.spot,
-                "a shape without a bsdf gets Mitsuba's default, a one-sided diffuse, which \
-                 stagelight does not model yet: give it a bsdf (e.g. a twosided diffuse)",
-            ));
+            // Mitsuba's default BSDF: a one-sided diffuse of reflectance 0.5.
+            match self.default_diffuse {
+                Some(e) => e,
+                None => {
+                    let e = self.world.spawn((
+                        MaterialInfo {
+                            name: "the default BSDF (one-sided diffuse 0.5)".into(),
+                            order: 0,
+                        },
+                        Material::Diffuse {
+                            reflectance: Vec3::splat(0.5),
+                        },
+                        OneSided,
+                    ));
+                    self.default_diffuse = Some(e);
+                    e
+                }
+            }
         };
         let mut entity = EntityBuilder::new();
         entity.add_bundle((

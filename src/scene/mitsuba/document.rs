@@ -563,8 +563,14 @@ impl Reader {
                     return Err(XmlError::at(&spot, "<include> must be a child of <scene>"));
                 }
                 let name = self.required(file, doc, node, "filename")?;
+                // As Mitsuba: the including file's folder first, then the search paths (the
+                // last <path> first, the top file's folder last).
                 let base = file.parent().unwrap_or(Path::new(""));
-                let path = base.join(&name);
+                let path = std::iter::once(base)
+                    .chain(self.search_paths.iter().rev().map(PathBuf::as_path))
+                    .map(|dir| dir.join(&name))
+                    .find(|candidate| candidate.exists())
+                    .unwrap_or_else(|| base.join(&name));
                 self.read_file(&path, Some((parent, &spot)), depth)?;
                 Ok(())
             }
