@@ -13,6 +13,7 @@
 use crate::bsdf::{Material, TransportMode};
 use crate::components::{CAMERA_VERTEX, PathVertex, PathVerticesView};
 use crate::math::Frame;
+use crate::scene::lights;
 use crate::scene::{Frustum, NO_EMITTER, PreparedScene};
 use glam::Vec3;
 use std::f32::consts::FRAC_1_PI;
@@ -81,7 +82,14 @@ impl Vertex {
     }
 
     pub fn is_on_surface(&self) -> bool {
-        self.kind != VertexKind::Camera
+        self.kind != VertexKind::Camera && !self.is_point_light()
+    }
+
+    /// Whether this is a light subpath's vertex on a point light (a delta position: no other
+    /// strategy can reach it, and it emits alike in every direction).
+    #[inline]
+    pub fn is_point_light(&self) -> bool {
+        self.kind == VertexKind::Light && self.triangle & crate::scene::POINT_LIGHT != 0
     }
 }
 
@@ -167,11 +175,22 @@ impl PathContext<'_> {
         }
     }
 
+    /// The emission profile of a point light's vertex (None for any other vertex).
+    #[inline]
+    pub fn point_profile(&self, v: &Vertex) -> Option<&lights::PointProfile> {
+        v.is_point_light().then(|| {
+            &self.scene.emitters.profile[(v.triangle & !crate::scene::POINT_LIGHT) as usize]
+        })
+    }
+
     /// The emitter index of the triangle under `v`, if it emits.
     #[inline]
     pub fn emitter(&self, v: &Vertex) -> Option<usize> {
         if v.kind == VertexKind::Camera {
             return None;
+        }
+        if v.is_point_light() {
+            return Some((v.triangle & !crate::scene::POINT_LIGHT) as usize);
         }
         let e = self.scene.triangles.emitter[v.triangle as usize];
         (e != NO_EMITTER).then_some(e as usize)
@@ -181,6 +200,7 @@ impl PathContext<'_> {
     #[inline]
     pub fn emitted(&self, v: &Vertex, w: Vec3) -> Vec3 {
         match self.emitter(v) {
+            Some(e) if v.is_point_light() => self.scene.emitters.intensity_towards(e, w),
             Some(e) if w.dot(v.ng) > 0.0 => self.scene.emitters.radiance[e],
             _ => Vec3::ZERO,
         }
@@ -200,6 +220,13 @@ impl PathContext<'_> {
     /// distributed about the emitting side).
     #[inline]
     pub fn pdf_light_dir(&self, light: &Vertex, to: &Vertex) -> f32 {
+        if let Some(profile) = self.point_profile(light) {
+            return to_area(
+                lights::pdf_direction(profile, towards(light, to)),
+                light,
+                to,
+            );
+        }
         let w = (to.p - light.p).normalize_or_zero();
         let cos = w.dot(light.ng);
         if cos <= 0.0 {
@@ -218,7 +245,9 @@ impl PathContext<'_> {
         match v.kind {
             VertexKind::Camera => Vec3::ZERO,
             VertexKind::Light => {
-                if wi.dot(v.ng) > 0.0 {
+                if let Some(profile) = self.point_profile(v) {
+                    Vec3::splat(lights::falloff(profile, wi))
+                } else if wi.dot(v.ng) > 0.0 {
                     Vec3::ONE
                 } else {
                     Vec3::ZERO
@@ -249,6 +278,9 @@ impl PathContext<'_> {
     pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
         match v.kind {
             VertexKind::Camera => self.camera.pdf_dir(wi),
+            VertexKind::Light if v.is_point_light() => {
+                lights::pdf_direction(self.point_profile(v).unwrap_or(&None), wi)
+            }
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
             VertexKind::Surface if !self.is_connectible(v) => 1.0,
             VertexKind::Surface => {
@@ -287,6 +319,8 @@ pub struct Joint {
 enum Lobe {
     /// A point on an emitter (its radiance is in `beta`): 1 on the emitting side.
     Light,
+    /// A point light, alike in every direction or a spot.
+    PointLight(lights::PointProfile),
     /// Lambertian: reflectance / pi.
     Diffuse(Vec3),
     /// Any other connectible BSDF.
@@ -302,6 +336,7 @@ impl Joint {
             Lobe::Light => {
                 return if wi_ng > 0.0 { Vec3::ONE } else { Vec3::ZERO };
             }
+            Lobe::PointLight(profile) => return Vec3::splat(lights::falloff(&profile, wi)),
             _ if wi_ng * self.wo_ng <= 0.0 => return Vec3::ZERO,
             Lobe::Diffuse(value) => {
                 if (self.wo_ns > 0.0 && wi_ns > 0.0) || (self.wo_ns < 0.0 && wi_ns < 0.0) {
@@ -419,6 +454,11 @@ impl PathContext<'_> {
     /// the pixel it lands in, or `None` outside the image or for no contribution.
     #[inline]
     pub fn connect_to_camera(&self, y: &Vertex, y_wo: Vec3) -> Option<(Vec3, usize)> {
+        if y.is_point_light() {
+            // A point light is not seen directly, as in Mitsuba and pbrt: no camera ray hits
+            // it, and (s, t) = (1, 1), the only other strategy, is not counted either.
+            return None;
+        }
         let cam = &self.camera;
         let to_y = y.p - cam.position;
         let dist2 = to_y.length_squared();
@@ -426,7 +466,9 @@ impl PathContext<'_> {
         let (pixel, importance) = cam.project(dir)?;
         let wi = -dir;
         let f = self.f(y, y_wo, wi, TransportMode::Importance);
-        let cos_y = if y.kind == VertexKind::Light {
+        let cos_y = if y.is_point_light() {
+            1.0
+        } else if y.kind == VertexKind::Light {
             wi.dot(y.ng).abs()
         } else {
             wi.dot(y.ns).abs()
@@ -449,6 +491,9 @@ impl PathContext<'_> {
     pub fn joint(&self, v: &Vertex, wo: Vec3) -> Option<Joint> {
         let lobe = match v.kind {
             VertexKind::Camera => return None,
+            VertexKind::Light if v.is_point_light() => {
+                Lobe::PointLight(*self.point_profile(v).unwrap_or(&None))
+            }
             VertexKind::Light => Lobe::Light,
             VertexKind::Surface => match self.material_seen(v, wo) {
                 Material::Dielectric { .. } => return None,
@@ -486,7 +531,9 @@ impl PathContext<'_> {
         // Towards z from y: -w, whose dot products are those of w negated, exactly.
         let (w_ng_y, w_ns_y) = (w.dot(y.ng), w.dot(y.ns));
         let fy = yj.f(y, -w, -w_ng_y, -w_ns_y, TransportMode::Importance);
-        let cos_y = if y.kind == VertexKind::Light {
+        let cos_y = if y.is_point_light() {
+            1.0
+        } else if y.kind == VertexKind::Light {
             w_ng_y.abs()
         } else {
             w_ns_y.abs()
@@ -690,7 +737,9 @@ impl PathContext<'_> {
             }
             ratio *= remap0(light_rev(i)) / remap0(light[i].pdf_fwd);
             let delta_before = i > 0 && light_delta(i - 1);
-            if (connect || i == 0) && !light_delta(i) && !delta_before {
+            // No camera path hits a point light: (0, s + t) is no strategy there.
+            let unreachable = i == 0 && light[0].is_point_light();
+            if (connect || i == 0) && !light_delta(i) && !delta_before && !unreachable {
                 sum += h(ratio * relative(i, s + t - i));
             }
         }

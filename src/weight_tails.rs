@@ -70,7 +70,10 @@ impl WeightTail {
         }
         if !v.delta && !prev_delta {
             if side == Side::Light && i == 0 {
-                next.emitter += step;
+                // No camera path hits a point light.
+                if !v.is_point_light() {
+                    next.emitter += step;
+                }
             } else {
                 next.connections += step;
             }
@@ -182,6 +185,8 @@ pub struct MergedLight {
     pub prev_geometry: f32,
     pub prev_pdf_fwd: f32,
     pub prev_delta: bool,
+    /// Whether y_{s-1} is a point light (s = 1), which no camera path reaches.
+    pub prev_point_light: bool,
     /// Whether y_{s-2} is delta (false for s = 1).
     pub before_prev_delta: bool,
     /// The tail over y_0 .. y_{s-2}.
@@ -207,6 +212,7 @@ impl MergedLight {
             prev_geometry,
             prev_pdf_fwd: y.pdf_fwd,
             prev_delta: y.delta,
+            prev_point_light: y.is_point_light(),
             before_prev_delta: s >= 2 && light[s - 2].delta,
             tail: tails[s - 1],
         }
@@ -263,7 +269,10 @@ impl PathContext<'_> {
                 rev: self.pdf_area(z, z_prev, y),
                 fwd: y.pdf_fwd,
                 merge: s >= 2,
-                connect: (connect || s == 1) && !(s >= 2 && light[s - 2].delta),
+                // Past a point light (s = 1) lies no strategy: no camera path hits it.
+                connect: (connect || s == 1)
+                    && !(s >= 2 && light[s - 2].delta)
+                    && !y.is_point_light(),
             };
             let count = if let Some(y_prev) = y_before {
                 near[1] = Near {
@@ -272,7 +281,8 @@ impl PathContext<'_> {
                     merge: s >= 3 && !y_prev.delta,
                     connect: (connect || s == 2)
                         && !y_prev.delta
-                        && !(s >= 3 && light[s - 3].delta),
+                        && !(s >= 3 && light[s - 3].delta)
+                        && !y_prev.is_point_light(),
                 };
                 2
             } else {
@@ -330,7 +340,8 @@ impl PathContext<'_> {
             merge: s >= 2 && !light.prev_delta,
             connect: (connect || s == 1)
                 && !light.prev_delta
-                && !(s >= 2 && light.before_prev_delta),
+                && !(s >= 2 && light.before_prev_delta)
+                && !light.prev_point_light,
         }];
         sum += side_sum(&near, light.tail, heuristic, eta_h, connect);
         own / sum

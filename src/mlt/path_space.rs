@@ -95,14 +95,16 @@ impl<'a> PathSpace<'a> {
     /// Whether `v` scatters only by a delta lobe.
     #[inline]
     pub fn is_specular(&self, v: &Vertex) -> bool {
-        v.kind != VertexKind::Camera && matches!(self.ctx.material(v), Material::Dielectric { .. })
+        v.kind != VertexKind::Camera
+            && !v.is_point_light()
+            && matches!(self.ctx.material(v), Material::Dielectric { .. })
     }
 
     /// The surface vertex of a point on triangle `triangle` given its position (the light
     /// vertices BDPT stores carry the geometric normal as shading normal; a path vertex
     /// carries the surface's own, whatever role it plays).
     pub fn reshade(&self, v: &Vertex) -> Vertex {
-        if v.kind == VertexKind::Camera {
+        if v.kind == VertexKind::Camera || v.is_point_light() {
             return *v;
         }
         let tris = &self.data.scene.triangles;
@@ -147,6 +149,10 @@ impl<'a> PathSpace<'a> {
         if n < 2 || path[n - 1].kind != VertexKind::Camera || path[0].kind != VertexKind::Light {
             return None;
         }
+        if n == 2 && path[0].is_point_light() {
+            // Point lights are not seen directly (`PathContext::connect_to_camera`).
+            return None;
+        }
         let cam = &path[n - 1];
         let (pixel, importance) = self.ctx.camera.project(dir(cam, &path[n - 2]))?;
         let le = self.ctx.emitted(&path[0], dir(&path[0], &path[1]));
@@ -161,7 +167,13 @@ impl<'a> PathSpace<'a> {
             if dist2 == 0.0 {
                 return None;
             }
-            f *= f64::from(a.ng.dot(d).abs()) / (f64::from(dist2) * f64::from(dist2).sqrt());
+            // The cosine at a; a point light has none (its intensity is per solid angle).
+            let cos_a = if a.is_point_light() {
+                dist2.sqrt()
+            } else {
+                a.ng.dot(d).abs()
+            };
+            f *= f64::from(cos_a) / (f64::from(dist2) * f64::from(dist2).sqrt());
         }
         for i in 1..n - 1 {
             let v = &path[i];
@@ -224,6 +236,10 @@ impl<'a> PathSpace<'a> {
         let Some(from) = from else {
             return self.ctx.pdf_light_origin(&path[to]);
         };
+        if to < from && path[to].is_point_light() {
+            // No sampled direction from the camera side hits a point.
+            return 0.0;
+        }
         let v = &path[from];
         let wi = dir(v, &path[to]);
         let pdf = if to > from {
@@ -338,6 +354,11 @@ impl<'a> PathSpace<'a> {
                 let raster = Vec2::new(u.x * cam.width as f32, u.y * cam.height as f32);
                 let w = cam.direction(raster);
                 Some((w, cam.pdf_dir(w)))
+            }
+            VertexKind::Light if v.is_point_light() => {
+                let profile = self.ctx.point_profile(v).unwrap_or(&None);
+                let (w, pdf) = crate::scene::lights::sample_direction(profile, u);
+                (pdf > 0.0).then_some((w, pdf))
             }
             VertexKind::Light => {
                 let local = cosine_hemisphere(u);

@@ -131,6 +131,9 @@ pub fn uniform_triangle(u: Vec2) -> Vec2 {
     Vec2::new(1.0 - su, u.y * su)
 }
 
+/// The density of `uniform_sphere`'s directions: 1 / (4 pi).
+pub const UNIFORM_SPHERE_PDF: f32 = 1.0 / (4.0 * std::f32::consts::PI);
+
 /// Uniform direction on the unit sphere.
 #[inline]
 pub fn uniform_sphere(u: Vec2) -> Vec3 {

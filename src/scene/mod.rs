@@ -4,6 +4,7 @@
 mod camera;
 pub use camera::Frustum;
 pub mod format;
+pub mod lights;
 pub mod mitsuba;
 pub mod obj;
 pub mod parse;
@@ -36,20 +37,49 @@ pub struct Camera {
     pub height: u32,
 }
 
-/// The emitting triangles and the distribution that picks one by power.
+/// The emitters (emitting triangles, then point lights) and the distribution that picks one by
+/// power.
 #[derive(Clone, Debug, Default)]
 pub struct Emitters {
-    /// Triangle id of each emitter.
+    /// Triangle id of each emitter; `POINT_LIGHT | e` for point light `e`, which no triangle
+    /// has (a light vertex's `triangle` names its emitter either way).
     pub triangle: Vec<u32>,
-    /// Constant radiance, emitted on the geometric normal's side only.
+    /// Constant radiance, emitted on the geometric normal's side only; a point light's
+    /// intensity (radiant power per steradian), the same in every direction.
     pub radiance: Vec<Vec3>,
+    /// A triangle's area; 1 for a point light, so that `pmf / area` is its discrete
+    /// probability wherever an area density is asked for.
     pub area: Vec<f32>,
+    /// A point light's position (zero for a triangle).
+    pub position: Vec<Vec3>,
+    /// A point light's spot cone, if it has one (None for a triangle).
+    pub profile: Vec<lights::PointProfile>,
     /// Probability of picking each emitter (proportional to pi * area * luminance(radiance)).
     pub pmf: Vec<f32>,
     /// Running sum of `pmf`, ending at exactly 1.
     pub cdf: Vec<f32>,
     /// Total emitted power, sum of pi * area * radiance (RGB).
     pub total_power: Vec3,
+}
+
+impl Emitters {
+    /// Whether any emitter is a point light (they come after the triangles).
+    #[inline]
+    pub fn has_point_lights(&self) -> bool {
+        self.triangle.last().is_some_and(|&t| t & POINT_LIGHT != 0)
+    }
+
+    /// Whether emitter `e` is a point light.
+    #[inline]
+    pub fn is_point(&self, e: usize) -> bool {
+        self.triangle[e] & POINT_LIGHT != 0
+    }
+
+    /// Point light `e`'s intensity towards unit direction `w`.
+    #[inline]
+    pub fn intensity_towards(&self, e: usize, w: Vec3) -> Vec3 {
+        self.radiance[e] * lights::falloff(&self.profile[e], w)
+    }
 }
 
 /// The render data of a scene: what systems read while rendering. No hecs queries happen
@@ -92,7 +122,13 @@ pub struct LightSample {
     pub dir: Vec3,
     pub t_max: f32,
     pub radiance: Vec3,
+    /// A point light's sample: no BSDF sample can find it, so its MIS weight is 1.
+    pub delta: bool,
 }
+
+/// Marks a light vertex's `triangle` (and `Emitters::triangle`) as point light `e` in the low
+/// bits: scenes hold fewer than 2^31 triangles.
+pub const POINT_LIGHT: u32 = 1 << 31;
 
 /// What a one-sided surface is from behind: it reflects nothing.
 pub const BLACK: Material = Material::Diffuse {
@@ -137,6 +173,23 @@ impl PreparedScene {
         let to_light = light.p - p;
         let dist2 = to_light.length_squared();
         let wi = to_light / dist2.sqrt();
+        if sampled.triangle & POINT_LIGHT != 0 {
+            // A delta position: no other technique finds it, and the intensity falls off
+            // with the squared distance.
+            if !wi.is_finite() || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                return None;
+            }
+            let origin = crate::geometry::offset_ray_origin(p, p_error, ng, wi);
+            return Some(LightSample {
+                wi,
+                pdf: sampled.pdf_area,
+                origin,
+                dir: light.p - origin,
+                t_max: 1.0 - crate::geometry::SHADOW_EPSILON,
+                radiance: self.emitters.intensity_towards(sampled.emitter, -wi) / dist2,
+                delta: true,
+            });
+        }
         let cos_light = -wi.dot(light.ng);
         if cos_light <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
             return None;
@@ -150,6 +203,7 @@ impl PreparedScene {
             dir,
             t_max,
             radiance: self.emitters.radiance[sampled.emitter],
+            delta: false,
         })
     }
 
@@ -159,8 +213,21 @@ impl PreparedScene {
     pub fn sample_emitter(&self, u_pick: f32, u_point: glam::Vec2) -> EmitterPoint {
         let emitters = &self.emitters;
         let e = crate::sampling::sample_cdf(&emitters.cdf, u_pick);
-        let b = crate::sampling::uniform_triangle(u_point);
         let triangle = emitters.triangle[e];
+        if triangle & POINT_LIGHT != 0 {
+            return EmitterPoint {
+                emitter: e,
+                triangle,
+                point: crate::geometry::SurfacePoint {
+                    p: emitters.position[e],
+                    p_error: Vec3::ZERO,
+                    ng: Vec3::Z,
+                    ns: Vec3::Z,
+                },
+                pdf_area: emitters.pmf[e],
+            };
+        }
+        let b = crate::sampling::uniform_triangle(u_point);
         EmitterPoint {
             emitter: e,
             triangle,

@@ -164,7 +164,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                 dropped += 1;
                 continue;
             }
-            if triangles.len() >= u32::MAX as usize - 1 {
+            if triangles.len() >= super::POINT_LIGHT as usize {
                 return Err(error(Some(spot), "too many triangles".to_string()));
             }
             let id = triangles.len() as u32;
@@ -192,6 +192,8 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                     emitters.triangle.push(id);
                     emitters.radiance.push(*radiance);
                     emitters.area.push(area);
+                    emitters.position.push(Vec3::ZERO);
+                    emitters.profile.push(None);
                     power += PI * area as f64 * radiance.as_dvec3();
                     emitting += 1;
                 }
@@ -230,6 +232,38 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     }
     if triangles.is_empty() {
         return Err(error(None, "the scene has no triangles".to_string()));
+    }
+    let mut point_query =
+        world.query::<(&super::world::PointLight, &SourceSpot, Option<&DeclaredIn>)>();
+    let mut points: Vec<_> = point_query.iter().collect();
+    points.sort_by_key(|p| p.0.order);
+    for (light, spot, declared_in) in points {
+        let position = light.position.as_vec3();
+        if !position.is_finite() || light.position.abs().max_element() >= super::MAX_COORDINATE {
+            return Err(error(
+                Some((spot, declared_in)),
+                "point light: its position is not finite or lies beyond the scene's coordinate range".into(),
+            ));
+        }
+        let e = emitters.triangle.len() as u32;
+        emitters.triangle.push(super::POINT_LIGHT | e);
+        emitters.radiance.push(light.intensity);
+        emitters.area.push(1.0);
+        emitters.position.push(position);
+        emitters.profile.push(light.spot);
+        let solid_angle = light.spot.map_or(4.0 * PI, |s| s.weighted_solid_angle());
+        power += solid_angle * light.intensity.as_dvec3();
+        if power.max_element() > super::MAX_POWER {
+            return Err(error(
+                Some((spot, declared_in)),
+                format!(
+                    "point light: the emitted power (4 pi x intensity, summed over the lights \
+                     so far) reaches {:.3e}: it must stay below {:e}",
+                    power.max_element(),
+                    super::MAX_POWER
+                ),
+            ));
+        }
     }
     if emitters.triangle.is_empty() {
         warnings.push("no object emits light: the image will be black".to_string());
@@ -272,7 +306,14 @@ fn build_distribution(emitters: &mut Emitters) {
         .radiance
         .iter()
         .zip(&emitters.area)
-        .map(|(l, &area)| PI * area as f64 * l.as_dvec3())
+        .zip(emitters.triangle.iter().zip(&emitters.profile))
+        .map(|((l, &area), (&triangle, profile))| {
+            if triangle & super::POINT_LIGHT != 0 {
+                profile.map_or(4.0 * PI, |s| s.weighted_solid_angle()) * l.as_dvec3()
+            } else {
+                PI * area as f64 * l.as_dvec3()
+            }
+        })
         .collect();
     let weights: Vec<f64> = powers
         .iter()

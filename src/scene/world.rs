@@ -27,6 +27,17 @@ pub struct SourceSpot {
     pub column: usize,
 }
 
+/// A point light (Mitsuba's `point` emitter): `intensity` (W/sr, RGB) in every direction from
+/// `position`; `order` among the file's point lights.
+#[derive(Clone, Copy, Debug)]
+pub struct PointLight {
+    pub position: glam::DVec3,
+    pub intensity: Vec3,
+    /// A spot light's cone (Mitsuba's `spot`); None: alike in every direction.
+    pub spot: Option<super::lights::Spot>,
+    pub order: u32,
+}
+
 /// Marks a material entity that reflects only on the side its geometric normal faces (a
 /// Mitsuba `diffuse` not wrapped in `twosided`): seen from behind it is black.
 #[derive(Clone, Copy, Debug)]

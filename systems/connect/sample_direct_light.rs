@@ -77,7 +77,7 @@ crate::system! {
                     if f.max_element() <= 0.0 {
                         continue;
                     }
-                    let weight = if mis {
+                    let weight = if mis && !light.delta {
                         power_heuristic(light.pdf, material.pdf(wo_local, wi_local))
                     } else {
                         1.0

@@ -111,9 +111,11 @@ fn sample_chunk<const N: usize>(
             0
         }
     };
-    // Lambertian paths N at a time; the rest (other kinds, the chunk's tail) one by one.
+    // Lambertian paths N at a time; the rest (other kinds, the chunk's tail) one by one. The
+    // lanes sample triangles only: scenes with point lights go one by one.
+    let lanes = !data.scene.emitters.has_point_lights();
     let mut i = 0;
-    while i + N <= c.len() {
+    while lanes && i + N <= c.len() {
         match DiffuseLanes::<N>::at(data, &surfaces, hits.triangle, rays.dir, i) {
             Some(surf) => {
                 let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
@@ -259,7 +261,11 @@ pub fn light_sample(
     if f == Vec3::ZERO {
         return None;
     }
-    let weight = power_heuristic(light.pdf, surf.material.pdf(surf.wo_local, wi_local));
+    let weight = if light.delta {
+        1.0
+    } else {
+        power_heuristic(light.pdf, surf.material.pdf(surf.wo_local, wi_local))
+    };
     Some(LightConnection {
         origin: light.origin,
         dir: light.dir,

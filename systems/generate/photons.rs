@@ -8,6 +8,7 @@ use crate::photons::{DIM_DIRECTION, DIM_PICK, DIM_POINT};
 use crate::pipeline::Flow;
 use crate::sampling::{Stream, cosine_hemisphere};
 use crate::scene::SceneData;
+use crate::scene::lights;
 use glam::Vec3;
 use rayon::prelude::*;
 use std::f32::consts::PI;
@@ -46,14 +47,22 @@ crate::system! {
                         .scene
                         .sample_emitter(sampler.get(key, DIM_PICK), sampler.get2(key, DIM_POINT));
                     let (e, sp) = (light.emitter, light.point);
-                    let local = cosine_hemisphere(sampler.get2(key, DIM_DIRECTION));
-                    let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
+                    let u_dir = sampler.get2(key, DIM_DIRECTION);
                     let pdf_point = light.pdf_area;
-                    // Le cos / (pdf_point cos / pi); a direction in the tangent plane
-                    // carries nothing and is not traced.
-                    let alive = local.z > 0.0;
+                    let (dir, alive, power) = if emitters.is_point(e) {
+                        // Intensity over the pick probability and the direction's density.
+                        let (dir, pdf_dir) = lights::sample_direction(&emitters.profile[e], u_dir);
+                        let power = emitters.intensity_towards(e, dir) * (1.0 / (pdf_point * pdf_dir));
+                        (dir, true, power)
+                    } else {
+                        let local = cosine_hemisphere(u_dir);
+                        let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
+                        // Le cos / (pdf_point cos / pi); a direction in the tangent plane
+                        // carries nothing and is not traced.
+                        (dir, local.z > 0.0, emitters.radiance[e] * (PI / pdf_point))
+                    };
                     w.key[i] = key;
-                    w.power[i] = emitters.radiance[e] * (PI / pdf_point);
+                    w.power[i] = power;
                     w.depth[i] = 0;
                     w.specular_chain[i] = true;
                     w.alive[i] = alive;

@@ -28,6 +28,7 @@ use crate::math::Frame;
 use crate::pipeline::Flow;
 use crate::sampling::{Stream, cosine_hemisphere};
 use crate::scene::SceneData;
+use crate::scene::lights;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -172,9 +173,15 @@ crate::system! {
                     let (e, tri, sp) = (light.emitter, light.triangle, light.point);
                     let pdf_origin = light.pdf_area;
                     let le = emitters.radiance[e];
-                    let local = cosine_hemisphere(sampler.get2(key, LIGHT_DIM_DIRECTION));
-                    let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
-                    let pdf_dir = local.z * FRAC_1_PI;
+                    let u_dir = sampler.get2(key, LIGHT_DIM_DIRECTION);
+                    let point_light = emitters.is_point(e);
+                    let (dir, pdf_dir) = if point_light {
+                        lights::sample_direction(&emitters.profile[e], u_dir)
+                    } else {
+                        let local = cosine_hemisphere(u_dir);
+                        let dir = Frame::from_normal(sp.ng).to_world(local).normalize();
+                        (dir, local.z * FRAC_1_PI)
+                    };
                     v.set(
                         i,
                         PathVertex {
@@ -189,8 +196,11 @@ crate::system! {
                             delta: false,
                         },
                     );
-                    // Le cos / (pdf_origin pdf_dir), with pdf_dir = cos / pi.
-                    let beta = if pdf_dir > 0.0 {
+                    // Le cos / (pdf_origin pdf_dir), with pdf_dir = cos / pi; a point
+                    // light's intensity over its densities.
+                    let beta = if point_light {
+                        emitters.intensity_towards(e, dir) * (1.0 / (pdf_origin * pdf_dir))
+                    } else if pdf_dir > 0.0 {
                         le * (std::f32::consts::PI / pdf_origin)
                     } else {
                         Vec3::ZERO

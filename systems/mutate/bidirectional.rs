@@ -115,6 +115,9 @@ pub fn transition(
     if c.deleted == 0 || c.deleted > n || c.added == 0 {
         return 0.0;
     }
+    if c.l + c.deleted as isize == 0 && x[0].is_point_light() {
+        return 0.0; // as `propose` refuses it
+    }
     let positions = n - c.deleted + 1;
     let kept = n - c.deleted + 1;
     let Some((lo, hi)) = added_range(set, kept) else {
@@ -144,6 +147,10 @@ pub fn propose(
     let positions = n - deleted + 1;
     let l = ((u.get() * positions as f32) as usize).min(positions - 1) as isize - 1;
     let m = (l + deleted as isize) as usize;
+    if m == 0 && x[0].is_point_light() {
+        // The camera side would keep the point light as a surface to scatter from.
+        return None;
+    }
     let kept = n - deleted + 1;
     let (lo, hi) = added_range(set, kept)?;
     let added = sample_two_tailed(deleted, lo, hi, u.get());

@@ -13,8 +13,8 @@ use super::document::{
 use crate::bsdf::Material;
 use crate::scene::shapes::Mesh;
 use crate::scene::world::{
-    DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, OneSided, SceneWorld,
-    Shape, SourceSpot, Transform,
+    DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, OneSided, PointLight,
+    SceneWorld, Shape, SourceSpot, Transform,
 };
 use crate::scene::{Camera, Limits, SceneError};
 
@@ -45,7 +45,7 @@ pub const INTEGRATORS: &str = "path, direct, moment";
 pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
 pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor";
-pub const EMITTERS: &str = "area";
+pub const EMITTERS: &str = "area, point, spot";
 pub const SENSORS: &str = "perspective";
 pub const FILMS: &str = "hdrfilm";
 pub const RFILTERS: &str = "box";
@@ -291,6 +291,7 @@ struct Builder<'a> {
     /// The default BSDF of emitting shapes (Mitsuba's: a black diffuse), made when first needed.
     default_material: Option<Entity>,
     default_diffuse: Option<Entity>,
+    point_lights: u32,
     objects: u32,
     triangles_so_far: u64,
     film: Option<(u32, u32)>,
@@ -318,6 +319,7 @@ impl<'a> Builder<'a> {
             materials: HashMap::new(),
             default_material: None,
             default_diffuse: None,
+            point_lights: 0,
             objects: 0,
             triangles_so_far: 0,
             film: None,
@@ -396,6 +398,14 @@ impl<'a> Builder<'a> {
                             ));
                         }
                         self.area_emitter(child.object)?;
+                    } else if object.kind == "point" || object.kind == "spot" {
+                        let light = self.point_emitter(child.object)?;
+                        let spot = object.spot.clone();
+                        self.world.spawn((
+                            light,
+                            source_spot(&spot),
+                            DeclaredIn(spot.file.to_path_buf()),
+                        ));
                     } else {
                         return Err(unsupported(object, EMITTERS));
                     }
@@ -905,6 +915,83 @@ impl<'a> Builder<'a> {
             ));
         }
         Ok(radiance)
+    }
+
+    /// A `point` emitter: `intensity` (W/sr, default 1) from `position` or from the origin
+    /// placed by `to_world` (one of the two); or a `spot`: the same from to_world's origin
+    /// along its +z, within `cutoff_angle` (default 20 degrees), full within `beam_width`
+    /// (default 3/4 of the cutoff).
+    fn point_emitter(&mut self, id: usize) -> Result<PointLight, XmlError> {
+        let object = self.object(id);
+        let kind = object.kind.as_str();
+        let mut params = Params::new(object);
+        if let Some(c) = object.children.first() {
+            return Err(XmlError::at(
+                &c.spot,
+                format!(
+                    "{kind}: a nested texture (a textured intensity or a spot's projected \
+                     texture) is not supported"
+                ),
+            ));
+        }
+        let position = if kind == "point" {
+            params.point("position")?
+        } else {
+            None
+        };
+        let to_world = params.transform("to_world")?;
+        let (position, axis) = match (position, to_world) {
+            (Some(_), Some((_, spot))) => {
+                return Err(XmlError::at(
+                    &spot,
+                    "point: give either position or to_world, not both (as Mitsuba)",
+                ));
+            }
+            (Some(p), None) => (p, DVec3::Z),
+            (None, Some((m, _))) => (m.w_axis.truncate(), m.z_axis.truncate()),
+            (None, None) => (DVec3::ZERO, DVec3::Z),
+        };
+        let spot = if kind == "spot" {
+            let cutoff = params.float("cutoff_angle")?.map_or(20.0, |(v, _)| v);
+            let beam = params
+                .float("beam_width")?
+                .map_or(cutoff * 0.75, |(v, _)| v);
+            if !(axis.length() > 0.0 && axis.is_finite()) {
+                return Err(XmlError::at(
+                    &object.spot,
+                    "spot: to_world flattens its axis",
+                ));
+            }
+            Some(
+                crate::scene::lights::Spot::new(axis.as_vec3(), cutoff, beam)
+                    .map_err(|m| XmlError::at(&object.spot, m))?,
+            )
+        } else {
+            None
+        };
+        let intensity = match params.color("intensity", Role::Emission)? {
+            Some((c, spot)) => {
+                if !c.is_finite() || c.min_element() < 0.0 {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!(
+                            "intensity {:?} must be finite and not negative",
+                            c.to_array()
+                        ),
+                    ));
+                }
+                c
+            }
+            None => Vec3::ONE,
+        };
+        params.finish()?;
+        self.point_lights += 1;
+        Ok(PointLight {
+            position,
+            intensity,
+            spot,
+            order: self.point_lights,
+        })
     }
 
     /// Meshes a shape (a shapegroup's members through an instance) into `out`.

@@ -1,0 +1,176 @@
+//! Point lights' emission: a plain point sends its intensity alike in every direction; a spot
+//! (Mitsuba's `spot`) only within a cone, at full intensity inside its beam and ramping down
+//! linearly in angle to zero at the cutoff.
+
+use crate::sampling::{UNIFORM_SPHERE_PDF, uniform_sphere};
+use glam::{Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// A spot light's cone about its unit `axis`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Spot {
+    pub axis: Vec3,
+    /// Cosine and angle (radians) of the cutoff: no light beyond it.
+    pub cos_cutoff: f32,
+    pub cutoff: f32,
+    /// Cosine of the beam's half-width: full intensity within it.
+    pub cos_beam: f32,
+    /// 1 / (cutoff - beam width), the slope of the linear ramp in angle.
+    pub inv_transition: f32,
+}
+
+impl Spot {
+    /// The cone of `cutoff_degrees` with a full beam of `beam_degrees` about `axis`, or an error
+    /// message for angles outside (0, 180) (a beam wider than the cutoff is the cutoff).
+    pub fn new(axis: Vec3, cutoff_degrees: f64, beam_degrees: f64) -> Result<Spot, String> {
+        for (name, angle) in [
+            ("cutoff_angle", cutoff_degrees),
+            ("beam_width", beam_degrees),
+        ] {
+            if !(angle > 0.0 && angle < 180.0) {
+                return Err(format!("spot: {name} {angle} must lie in (0, 180) degrees"));
+            }
+        }
+        let (cutoff, beam) = (cutoff_degrees.to_radians(), beam_degrees.to_radians());
+        Ok(Spot {
+            axis: axis.normalize(),
+            cos_cutoff: cutoff.cos() as f32,
+            cutoff: cutoff as f32,
+            cos_beam: beam.cos() as f32,
+            inv_transition: (1.0 / (cutoff - beam)) as f32,
+        })
+    }
+
+    /// The fraction of the intensity sent towards unit direction `w`.
+    #[inline]
+    pub fn falloff(&self, w: Vec3) -> f32 {
+        let cos = w.dot(self.axis);
+        if cos <= self.cos_cutoff {
+            0.0
+        } else if cos >= self.cos_beam {
+            1.0
+        } else {
+            ((self.cutoff - cos.min(1.0).acos()) * self.inv_transition).clamp(0.0, 1.0)
+        }
+    }
+
+    /// The solid angle the intensity covers, weighted by the falloff: power = intensity x this.
+    pub fn weighted_solid_angle(&self) -> f64 {
+        // Midpoint rule in cos(theta) over the cone; the ramp is smooth in it.
+        const STEPS: usize = 1 << 14;
+        let lo = f64::from(self.cos_cutoff);
+        let step = (1.0 - lo) / STEPS as f64;
+        let sum: f64 = (0..STEPS)
+            .map(|i| {
+                let cos = lo + (i as f64 + 0.5) * step;
+                let sin = (1.0 - cos * cos).max(0.0).sqrt();
+                let w = self.axis * cos as f32 + any_perpendicular(self.axis) * sin as f32;
+                f64::from(self.falloff(w))
+            })
+            .sum();
+        2.0 * std::f64::consts::PI * sum * step
+    }
+
+    /// Density of `sample`'s directions inside the cone (uniform in solid angle).
+    #[inline]
+    fn cone_pdf(&self) -> f32 {
+        1.0 / (2.0 * PI * (1.0 - self.cos_cutoff))
+    }
+}
+
+fn any_perpendicular(axis: Vec3) -> Vec3 {
+    crate::math::Frame::from_normal(axis).s
+}
+
+/// How a point light sends its intensity out: `None` alike everywhere, or a spot.
+pub type PointProfile = Option<Spot>;
+
+/// The fraction of a point light's intensity towards unit direction `w`.
+#[inline]
+pub fn falloff(profile: &PointProfile, w: Vec3) -> f32 {
+    match profile {
+        None => 1.0,
+        Some(spot) => spot.falloff(w),
+    }
+}
+
+/// A direction a point light's photon or light subpath leaves by, with its solid-angle density:
+/// uniform over the sphere, or over a spot's cone.
+#[inline]
+pub fn sample_direction(profile: &PointProfile, u: Vec2) -> (Vec3, f32) {
+    match profile {
+        None => (uniform_sphere(u), UNIFORM_SPHERE_PDF),
+        Some(spot) => {
+            let cos = 1.0 - u.x * (1.0 - spot.cos_cutoff);
+            let sin = (1.0 - cos * cos).max(0.0).sqrt();
+            let phi = 2.0 * PI * u.y;
+            let frame = crate::math::Frame::from_normal(spot.axis);
+            let local = Vec3::new(sin * phi.cos(), sin * phi.sin(), cos);
+            (frame.to_world(local).normalize(), spot.cone_pdf())
+        }
+    }
+}
+
+/// The density with which `sample_direction` returns unit direction `w`.
+#[inline]
+pub fn pdf_direction(profile: &PointProfile, w: Vec3) -> f32 {
+    match profile {
+        None => UNIFORM_SPHERE_PDF,
+        Some(spot) if w.dot(spot.axis) > spot.cos_cutoff => spot.cone_pdf(),
+        Some(_) => 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The weighted solid angle against its closed form: the full cone 2 pi (1 - cos c) when
+    /// the beam fills it, and for a ramp, 2 pi times the integral of the linear ramp in angle
+    /// times sin(theta) (by parts: a cosine difference over the transition width).
+    #[test]
+    fn weighted_solid_angle_matches_closed_forms() {
+        let spot = Spot::new(Vec3::Z, 30.0, 30.0).unwrap();
+        let full = 2.0 * std::f64::consts::PI * (1.0 - 30f64.to_radians().cos());
+        assert!((spot.weighted_solid_angle() - full).abs() < 1e-6 * full);
+        let (c, b) = (20f64.to_radians(), 15f64.to_radians());
+        let spot = Spot::new(Vec3::Y, 20.0, 15.0).unwrap();
+        // Integral over [0, b] of sin = 1 - cos b; over [b, c] of (c - t)/(c - b) sin t
+        // = (c - b - (sin c - sin b)) / (c - b) ... evaluated: [-(c - t) cos t - sin t]/(c-b).
+        let ramp = ((c - b) * b.cos() - (c.sin() - b.sin())) / (c - b);
+        let expected = 2.0 * std::f64::consts::PI * (1.0 - b.cos() + ramp);
+        let got = spot.weighted_solid_angle();
+        assert!(
+            (got - expected).abs() < 1e-5 * expected,
+            "{got} vs {expected}"
+        );
+    }
+
+    #[test]
+    fn falloff_is_full_in_the_beam_and_zero_past_the_cutoff() {
+        let spot = Spot::new(Vec3::Z, 20.0, 15.0).unwrap();
+        let at = |deg: f32| {
+            let t = deg.to_radians();
+            spot.falloff(Vec3::new(t.sin(), 0.0, t.cos()))
+        };
+        assert_eq!(at(0.0), 1.0);
+        assert_eq!(at(14.9), 1.0);
+        assert!((at(17.5) - 0.5).abs() < 1e-4);
+        assert_eq!(at(20.1), 0.0);
+        assert_eq!(at(120.0), 0.0);
+        assert!(Spot::new(Vec3::Z, 0.0, 1.0).is_err());
+    }
+
+    #[test]
+    fn cone_samples_lie_in_the_cone_with_the_density_they_report() {
+        let spot = Spot::new(Vec3::new(1.0, 1.0, 0.0), 25.0, 10.0).unwrap();
+        let profile = Some(spot);
+        for i in 0..64 {
+            let u = Vec2::new((i as f32 + 0.5) / 64.0, ((i * 37) % 64) as f32 / 64.0);
+            let (w, pdf) = sample_direction(&profile, u);
+            assert!((w.length() - 1.0).abs() < 1e-5);
+            assert!(w.dot(spot.axis) >= spot.cos_cutoff - 1e-6);
+            assert_eq!(pdf, pdf_direction(&profile, w));
+        }
+    }
+}
