@@ -154,12 +154,17 @@ mod tests {
     }
 
     #[test]
-    fn integral_over_the_whole_line_is_the_continuous_one() {
+    fn integral_over_the_whole_line_is_the_gaussians() {
         let g = Gaussian::new(0.5).unwrap();
-        // sqrt(2 pi) stddev erf(2 sqrt 2) - 2 radius tail
-        let erf = 0.999_936_657_516_334_2; // erf(2 sqrt(2)) = erf(4 / sqrt 2)
+        // sqrt(2 pi) stddev erf(2 sqrt 2) - 2 radius exp(-8): the gaussian less its tail,
+        // which Mitsuba's fit follows to 5e-4.
+        let erf = 0.999_936_657_516_334_2; // erf(2 sqrt(2))
         let exact = (2.0 * std::f64::consts::PI).sqrt() * 0.5 * erf - 2.0 * 2.0 * (-8.0f64).exp();
-        assert!((g.integral_over_film(50, 100) - exact).abs() < 1e-6);
+        let integral = g.integral_over_film(50, 100);
+        assert!(
+            (integral - exact).abs() < 1e-3,
+            "{integral} against {exact}"
+        );
         // At the film's edge only the inner half (and a bit) counts.
         let edge = g.integral_over_film(0, 100);
         assert!(edge < exact * 0.85 && edge > exact * 0.6, "{edge}");
