@@ -95,6 +95,23 @@ impl Gaussian {
         first..((last as usize) + 1).min(size)
     }
 
+    /// `footprint` of film coordinate `pos` on a whole film, as indices of its pixels from
+    /// `offset` on, of which there are `size` (a crop window's): the same pixels the whole
+    /// film's footprint has there.
+    #[inline]
+    pub fn footprint_in(&self, pos: f32, offset: usize, size: usize) -> std::ops::Range<usize> {
+        let centre = pos - 0.5;
+        let (first, last) = (
+            (centre - self.radius).ceil(),
+            (centre + self.radius).floor(),
+        );
+        if last < offset as f32 {
+            return 0..0;
+        }
+        let first = (first.max(0.0) as usize).max(offset) - offset;
+        first..((last as usize + 1).min(offset + size) - offset).max(first)
+    }
+
     /// Half the footprint's widest extent in whole pixels: a sample's weights reach at most
     /// this many pixels away from its own pixel.
     pub fn reach(&self) -> usize {

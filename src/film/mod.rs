@@ -81,6 +81,9 @@ pub struct Film {
     /// With moments on (`with_moments`): per pixel, the (filter-weighted) sum of the samples'
     /// squares, in units of 2^(2 unit_exponent - 64); empty otherwise.
     square: Vec<FixedRgb>,
+    /// Where this film's pixel (0, 0) lies on the whole film (a crop window's offset):
+    /// `add_wave_at` takes positions on the whole film.
+    origin: (usize, usize),
 }
 
 /// The fixed-point parts of one pixel a sample reaches: its value, weight and square sums.
@@ -126,6 +129,14 @@ impl Film {
             Film::scene_unit_exponent(&data.scene),
         )
         .with_filter(cam.filter)
+        .at_origin(cam.crop.x as usize, cam.crop.y as usize)
+    }
+
+    /// The same film lying at (x, y) of a whole film (a crop window): the positions
+    /// `add_wave_at` takes are on the whole film.
+    pub fn at_origin(mut self, x: usize, y: usize) -> Film {
+        self.origin = (x, y);
+        self
     }
 
     /// The unit exponent of a scene's films (`fixed::unit_exponent` of its brightest
@@ -155,6 +166,7 @@ impl Film {
             filter: PixelFilter::Box,
             weight: Vec::new(),
             square: Vec::new(),
+            origin: (0, 0),
         }
     }
 
@@ -280,7 +292,8 @@ impl Film {
     }
 
     /// `add_wave` under the film's filter: `raster(g)` is global sample g's position on the
-    /// film (pixels, x right, y down; inside pixel `g % pixels`). Under the box filter that
+    /// whole film (pixels, x right, y down; inside pixel `g % pixels` once the film's origin
+    /// is added): a crop's weights are then the whole film's, bit for bit. Under the box filter that
     /// is `add_wave`; under the gaussian each sample is splatted into every pixel within the
     /// radius (`Gaussian::footprint`). The film is shared out between threads in bands of
     /// rows, each band taking every sample that reaches it; the sums are exact, so the film
@@ -305,6 +318,7 @@ impl Film {
         let exponent = self.unit_exponent;
         let offset = (first_sample % pixels as u64) as usize;
         let reach = gaussian.reach();
+        let (ox, oy) = self.origin;
         let band = BAND_ROWS * width;
         let squares = optional_chunks(&mut self.square, band);
         let (nonfinite, out_of_range) = self
@@ -326,13 +340,19 @@ impl Film {
                         let value = values[i];
                         let at = raster(first_sample + i as u64);
                         i += pixels;
-                        let xs = gaussian.footprint(at.x, width);
-                        let ys = gaussian.footprint(at.y, height);
-                        let ys = ys.start.max(rows.start)..ys.end.min(rows.end);
+                        let xs = gaussian.footprint_in(at.x, ox, width);
+                        let ys = gaussian.footprint_in(at.y, oy, height);
+                        let ys = ys.start.max(rows.start)..ys.end.min(rows.end).max(rows.start);
                         wx.clear();
-                        wx.extend(xs.clone().map(|x| gaussian.eval(x as f32 + 0.5 - at.x)));
+                        wx.extend(
+                            xs.clone()
+                                .map(|x| gaussian.eval((x + ox) as f32 + 0.5 - at.x)),
+                        );
                         wy.clear();
-                        wy.extend(ys.clone().map(|y| gaussian.eval(y as f32 + 0.5 - at.y)));
+                        wy.extend(
+                            ys.clone()
+                                .map(|y| gaussian.eval((y + oy) as f32 + 0.5 - at.y)),
+                        );
                         let mut rejected = None;
                         for (y, &weight_y) in ys.zip(&wy) {
                             for (x, &weight_x) in xs.clone().zip(&wx) {
@@ -450,7 +470,10 @@ impl Film {
                 self.unit_exponent - fixed::FRACTION_BITS
             ));
         }
-        if self.filter != other.filter || self.has_moments() != other.has_moments() {
+        if self.filter != other.filter
+            || self.has_moments() != other.has_moments()
+            || self.origin != other.origin
+        {
             return Err(format!(
                 "a film made with the {} filter{} cannot be added to one made with the {} \
                  filter{}",
@@ -549,6 +572,7 @@ impl Film {
                 filter: PixelFilter::Box,
                 weight: Vec::new(),
                 square: Vec::new(),
+                origin: (0, 0),
             })
     }
 

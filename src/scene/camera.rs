@@ -76,10 +76,15 @@ impl Frustum {
     /// The unit direction through raster position `raster` (pixels, y down).
     #[inline]
     pub fn direction(&self, raster: Vec2) -> Vec3 {
+        self.direction_on_film(raster + self.offset)
+    }
+
+    /// `direction` of a position on the whole film (the crop's offset included).
+    #[inline]
+    pub fn direction_on_film(&self, r: Vec2) -> Vec3 {
         if let Projection::Orthographic { .. } = self.projection {
             return self.forward;
         }
-        let r = raster + self.offset;
         let (w, h) = (self.film_width as f32, self.film_height as f32);
         let sx = (2.0 * r.x / w - 1.0) * self.tan_half * self.aspect;
         let sy = (1.0 - 2.0 * r.y / h) * self.tan_half;
@@ -92,14 +97,19 @@ impl Frustum {
     /// to_world.
     #[inline]
     pub fn ray(&self, raster: Vec2) -> (Vec3, Vec3) {
+        self.ray_on_film(raster + self.offset)
+    }
+
+    /// `ray` of a position on the whole film (the crop's offset included).
+    #[inline]
+    pub fn ray_on_film(&self, r: Vec2) -> (Vec3, Vec3) {
         match self.projection {
-            Projection::Perspective => (self.position, self.direction(raster)),
+            Projection::Perspective => (self.position, self.direction_on_film(r)),
             Projection::Orthographic {
                 half_width,
                 half_height,
                 near,
             } => {
-                let r = raster + self.offset;
                 let (w, h) = (self.film_width as f32, self.film_height as f32);
                 let sx = (2.0 * r.x / w - 1.0) * half_width;
                 let sy = (1.0 - 2.0 * r.y / h) * half_height;

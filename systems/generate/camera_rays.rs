@@ -131,8 +131,9 @@ fn camera_ray_lanes<const N: usize>(
     for l in 0..N {
         lane_pixel[l] = pixel;
         lane_sample[l] = sample;
-        raster_x.0[l] = x as f32;
-        raster_y.0[l] = y as f32;
+        // On the whole film: a crop's pixels get the film's own rays, bit for bit.
+        raster_x.0[l] = (x + cam.offset.x as u64) as f32;
+        raster_y.0[l] = (y + cam.offset.y as u64) as f32;
         pixel += 1;
         x += 1;
         if x == w {
@@ -153,11 +154,8 @@ fn camera_ray_lanes<const N: usize>(
         F(SampleKey::get_lanes(&keys, &[DIM_PIXEL; N])),
         F(SampleKey::get_lanes(&keys, &[DIM_PIXEL + 1; N])),
     );
-    let (raster_x, raster_y) = (
-        raster_x + jitter_x + F::splat(cam.offset.x),
-        raster_y + jitter_y + F::splat(cam.offset.y),
-    );
-    // Frustum::direction
+    let (raster_x, raster_y) = (raster_x + jitter_x, raster_y + jitter_y);
+    // Frustum::direction_on_film
     let (w, h) = (cam.film_width as f32, cam.film_height as f32);
     let sx = (2.0 * raster_x / w - 1.0) * cam.tan_half * cam.aspect;
     let sy = (1.0 - 2.0 * raster_y / h) * cam.tan_half;
@@ -178,7 +176,7 @@ pub struct CameraRay {
 #[inline(always)]
 pub fn camera_ray(sampler: &Sampler, cam: &Frustum, pixels: u64, g: u64) -> CameraRay {
     let (key, raster) = sample_raster(sampler, cam, pixels, g);
-    let (origin, dir) = cam.ray(raster);
+    let (origin, dir) = cam.ray_on_film(raster);
     CameraRay { key, origin, dir }
 }
 

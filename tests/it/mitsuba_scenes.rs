@@ -241,7 +241,7 @@ fn broken() -> Vec<(
             )],
             "a.xml",
             4,
-            49,
+            46,
             "crop window must lie inside the 8-pixel film",
         ),
         (
