@@ -43,6 +43,14 @@ impl Camera {
         }
     }
 
+    /// The camera rendering the whole film at another size (tests and tools shrink scenes):
+    /// any crop window is dropped.
+    pub fn resize(&mut self, width: u32, height: u32) {
+        self.width = width;
+        self.height = height;
+        self.crop = super::Crop::whole(width, height);
+    }
+
     /// Whether the camera's rays share one origin (a pinhole): only such a camera can be
     /// reached by a light path's connection (t = 1 strategies, light tracing).
     pub fn is_pinhole(&self) -> bool {

@@ -180,17 +180,19 @@ pub fn camera_ray(sampler: &Sampler, cam: &Frustum, pixels: u64, g: u64) -> Came
     CameraRay { key, origin, dir }
 }
 
-/// The random-number key and raster position (pixels of the rendered image) of global sample
-/// `g`: uniform in pixel `g % pixels`, keyed by the pixel's place on the whole film (so a crop
-/// renders the film's own samples). The film's filter weighs the sample by this position.
+/// The random-number key and position on the whole film (pixels, the crop window's offset
+/// included) of global sample `g`: uniform in pixel `g % pixels` of the rendered image, keyed
+/// by its place on the whole film, so a crop renders the film's own samples bit for bit. The
+/// film's filter weighs the sample by this position.
 #[inline(always)]
 pub fn sample_raster(sampler: &Sampler, cam: &Frustum, pixels: u64, g: u64) -> (SampleKey, Vec2) {
     let w = cam.width as u64;
     let pixel = g % pixels;
     let key = sampler.key(Stream::Camera, cam.film_pixel(pixel), g / pixels);
     let jitter = sampler.get2(key, DIM_PIXEL);
-    (
-        key,
-        Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter,
-    )
+    let (x, y) = (
+        pixel % w + cam.offset.x as u64,
+        pixel / w + cam.offset.y as u64,
+    );
+    (key, Vec2::new(x as f32, y as f32) + jitter)
 }
