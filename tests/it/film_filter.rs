@@ -182,6 +182,7 @@ fn orthographic_agrees_with_mitsuba() {
     let outcome = render(&scene, spp, 3, 2);
     let variance = outcome.film.variance_image().unwrap();
     let frac = pass_fraction(&outcome.film.image(), &variance, spp, &reference);
+    eprintln!("orthographic.xml: {frac:.4} of the pixel channels pass");
     assert!(frac >= 0.9975, "{frac} of the pixel channels pass");
     // The same view through a pinhole is another image: the test can fail.
     let pinhole = load_xml("orthographic.xml", |t| {
@@ -195,6 +196,7 @@ fn orthographic_agrees_with_mitsuba() {
     let outcome = render(&pinhole, spp, 3, 2);
     let variance = outcome.film.variance_image().unwrap();
     let frac = pass_fraction(&outcome.film.image(), &variance, spp, &reference);
+    eprintln!("orthographic.xml as a pinhole: {frac:.4} pass");
     assert!(frac < 0.9, "a pinhole: {frac} pass");
 }
 
@@ -291,6 +293,7 @@ fn variance_image_matches_the_spread_of_seeds() {
         }
     }
     let ratio = observed / predicted;
+    eprintln!("variance: observed / predicted {ratio:.4}");
     assert!(
         predicted > 0.0 && (ratio - 1.0).abs() < 0.15,
         "observed / predicted {ratio}"
