@@ -279,6 +279,11 @@ pub struct RenderArgs {
     /// Output EXR (default render/SCENE_INTEGRATOR.exr); a PNG preview is written beside it.
     #[arg(short, long)]
     pub output: Option<PathBuf>,
+    /// Also write each pixel's sample variance as an EXR (pt): the per-channel variance of a
+    /// single sample's estimate, E[x^2] - E[x]^2 over the pixel's (filter-weighted) samples,
+    /// as Mitsuba's `moment` integrator gives it.
+    #[arg(long, value_name = "PATH")]
+    pub variance: Option<PathBuf>,
     #[command(flatten)]
     pub kernel: KernelArgs,
     #[command(flatten)]

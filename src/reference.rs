@@ -739,9 +739,17 @@ pub fn render_reference(
     stop: &AtomicBool,
     progress: &(dyn Fn(f64, f64) + Sync),
 ) -> Result<ReferenceOutcome, ReferenceError> {
+    let cam = job.data.scene.camera;
+    if let crate::film::PixelFilter::Gaussian(_) = cam.filter {
+        return Err(error(
+            &job.data.scene.source,
+            "a reference's checkpoints hold box-filtered sums, not the gaussian rfilter's \
+             weights: add <rfilter type=\"box\"/> to the film (or render the image with \
+             `stagelight render`)",
+        ));
+    }
     let _lock = ReferenceLock::acquire(job.output)?;
     let checkpoint_file = checkpoint_path(job.output);
-    let cam = job.data.scene.camera;
     let (width, height) = (cam.width as usize, cam.height as usize);
     let mut header = CheckpointHeader::start(
         job.scene_path,

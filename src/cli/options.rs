@@ -165,11 +165,13 @@ impl RenderArgs {
                 mis: self.mis.heuristic(),
                 strategy_images: self.strategy_images.is_some(),
                 light_vertex_cache: self.light_vertex_cache.unwrap_or(0),
+                moments: self.variance.is_some(),
                 photons: self.photons.settings(),
                 mlt: self.mlt.options(),
                 ..RenderSettings::default()
             }),
             strategy_images: self.strategy_images.clone(),
+            variance: self.variance.clone(),
             output,
             shard: self.shard.choice(),
             threads: self.threads.map(|t| t as usize),

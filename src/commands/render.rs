@@ -22,6 +22,9 @@ pub struct RenderOptions {
     pub strategy_images: Option<PathBuf>,
     /// Output EXR; the PNG preview goes beside it.
     pub output: PathBuf,
+    /// Where each pixel's sample variance goes (`--variance`; pt; `settings.moments` says
+    /// the same).
+    pub variance: Option<PathBuf>,
     /// Only a shard of the passes (`--shard I/N` or `--pass-range`): its image and its
     /// partial film (`OUT.exr.checkpoint`) for `stagelight merge`.
     pub shard: Option<super::ShardChoice>,
@@ -57,6 +60,26 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
             o.integrator
         );
     }
+    if let Some(path) = &o.variance {
+        if o.integrator.as_str() != "pt" {
+            bail!(
+                "--variance: a pixel's sample variance is that of pt's per-sample estimates; {} \
+                 has no such samples (its pixels mix light-path splats or density estimates)",
+                o.integrator
+            );
+        }
+        if path
+            .extension()
+            .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+        {
+            bail!("{}: --variance must be an .exr file", path.display());
+        }
+        if o.shard.is_some() {
+            bail!(
+                "--variance is not made by shards (their checkpoints hold no squares): render it without --shard"
+            );
+        }
+    }
     check_threads(o.threads)?;
     check_kernel(o.integrator, &o.settings)?;
     let data = load_scene(&o.scene)?;
@@ -67,6 +90,14 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
         (None, _) => None,
         (Some(_), _) if o.strategy_images.is_some() => {
             bail!("--strategy-images are not made by shards: render them without --shard")
+        }
+        (Some(_), _) if data.scene.camera.filter != crate::film::PixelFilter::Box => {
+            bail!(
+                "{}: --shard writes a checkpoint of box-filtered sums, not the gaussian \
+                 rfilter's weights: add <rfilter type=\"box\"/> to the film, or render without \
+                 --shard",
+                o.scene.display()
+            )
         }
         (Some(choice), Budget::SamplesPerPixel(spp)) => Some(choice.range(spp)?),
         (Some(_), Budget::Seconds(_)) => {
@@ -82,6 +113,7 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     }
     let strategy_probe = o.strategy_images.as_ref().map(|dir| dir.join("s1_t1.exr"));
     outputs.extend(strategy_probe.as_deref());
+    outputs.extend(o.variance.as_deref());
     check_outputs(&outputs, &[&o.scene])?;
     let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
@@ -181,6 +213,12 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     let image = outcome.film.image();
     image.write_exr(output)?;
     image.write_png(&png)?;
+    let variance = o
+        .variance
+        .as_ref()
+        .zip(outcome.film.variance_image())
+        .map(|(path, v)| v.write_exr(path).map(|()| path));
+    let variance = variance.transpose()?;
     if let Some(dir) = &o.strategy_images {
         for (name, layer) in &outcome.layers {
             layer.write_exr(&dir.join(format!("{name}.exr")))?;
@@ -189,6 +227,9 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
     let mut report =
         crate::report::render_report(&o.scene, o.integrator, threads, &outcome, cpu, &data);
     report += &format!("wrote {} and {}\n", output.display(), png.display());
+    if let Some(path) = variance {
+        report += &format!("wrote {} (each pixel's sample variance)\n", path.display());
+    }
     if let Some(range) = shard {
         report += &format!(
             "shard: passes {}..{shard_end} of {}; its film is {} (stagelight merge adds the \

@@ -35,6 +35,8 @@ pub struct PtSettings {
     pub max_depth: u32,
     /// Paths the lane systems take at a time (`--lanes`); the image is the same.
     pub lanes: LaneWidth,
+    /// The film also sums each pixel's sample squares (`Film::variance_image`).
+    pub moments: bool,
 }
 
 impl PtSettings {
@@ -45,6 +47,7 @@ impl PtSettings {
             sampler: SamplerKind::Independent,
             max_depth,
             lanes: LaneWidth::widest(),
+            moments: false,
         }
     }
 }

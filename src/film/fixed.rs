@@ -56,6 +56,18 @@ pub fn unit_exponent_of_sums(largest: f64) -> i32 {
     (biased.max(1) - 1023 - 40).clamp(-900, 900)
 }
 
+/// A filter weight (in [0, 1]) in units of 2^-64, rounded to nearest: weights sum exactly,
+/// in any order, as the samples do. None when it is not finite or not below 2^63.
+#[inline]
+pub fn weight_units(w: f32) -> Option<i128> {
+    units_of_f32(w, 0)
+}
+
+/// Units of 2^-64 (`weight_units`) back to f64.
+pub fn weight_of_units(units: i128) -> f64 {
+    f64_of_units(units, 0)
+}
+
 /// Why a sample did not go into a sum.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Rejected {

@@ -12,12 +12,14 @@
 //! beyond the film's range (a pixel sum beyond +-2^63 times the film's scale) is rejected the
 //! same way and counted apart (`out_of_range`).
 
+pub mod filter;
 pub mod fixed;
 pub mod output;
 
+pub use filter::{Gaussian, PixelFilter};
 use fixed::{FixedRgb, Rejected};
 
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use std::io::{Read, Seek};
 use std::path::Path;
 
@@ -70,6 +72,43 @@ pub struct Film {
     /// Samples and splats rejected because they would take their pixel's sum beyond the
     /// film's range, +-2^(unit_exponent + 63) (samples count as black, splats are dropped).
     pub out_of_range: u64,
+    /// How samples reach pixels. With `Gaussian`, `sum` holds each pixel's filter-weighted
+    /// sum of the samples splatted into it and `weight` the sum of their weights.
+    filter: PixelFilter,
+    /// Gaussian only: per pixel, the sum of the filter weights it received (units of 2^-64,
+    /// `fixed::weight_units`), rejected samples included (they weigh as black).
+    weight: Vec<i128>,
+    /// With moments on (`with_moments`): per pixel, the (filter-weighted) sum of the samples'
+    /// squares, in units of 2^(2 unit_exponent - 64); empty otherwise.
+    square: Vec<FixedRgb>,
+    /// Where this film's pixel (0, 0) lies on the whole film (a crop window's offset):
+    /// `add_wave_at` takes positions on the whole film.
+    origin: (usize, usize),
+}
+
+/// The fixed-point parts of one pixel a sample reaches: its value, weight and square sums.
+struct PixelSums<'a> {
+    sum: &'a mut FixedRgb,
+    weight: Option<&'a mut i128>,
+    square: Option<&'a mut FixedRgb>,
+}
+
+impl PixelSums<'_> {
+    /// Adds a sample with filter weight `w` (1 for the box filter); a rejected value still
+    /// adds its weight. The value's rejection, if any.
+    #[inline]
+    fn add(&mut self, value: Vec3, w: f32, exponent: i32) -> Result<(), Rejected> {
+        if let Some(weight) = self.weight.as_deref_mut() {
+            *weight += fixed::weight_units(w).unwrap_or(0);
+        }
+        let weighted = if w == 1.0 { value } else { value * w };
+        self.sum.add_sample(weighted, exponent)?;
+        if let Some(square) = self.square.as_deref_mut() {
+            // A square beyond the range drops from the moments alone: the image keeps it.
+            let _ = square.add_sample(weighted * value, 2 * exponent);
+        }
+        Ok(())
+    }
 }
 
 impl Film {
@@ -89,6 +128,15 @@ impl Film {
             cam.height as usize,
             Film::scene_unit_exponent(&data.scene),
         )
+        .with_filter(cam.filter)
+        .at_origin(cam.crop.x as usize, cam.crop.y as usize)
+    }
+
+    /// The same film lying at (x, y) of a whole film (a crop window): the positions
+    /// `add_wave_at` takes are on the whole film.
+    pub fn at_origin(mut self, x: usize, y: usize) -> Film {
+        self.origin = (x, y);
+        self
     }
 
     /// The unit exponent of a scene's films (`fixed::unit_exponent` of its brightest
@@ -115,15 +163,60 @@ impl Film {
             nonfinite: 0,
             nonfinite_splats: 0,
             out_of_range: 0,
+            filter: PixelFilter::Box,
+            weight: Vec::new(),
+            square: Vec::new(),
+            origin: (0, 0),
         }
+    }
+
+    /// The same empty film with a reconstruction filter (a film with samples keeps its own).
+    pub fn with_filter(mut self, filter: PixelFilter) -> Film {
+        debug_assert_eq!(
+            self.total_samples(),
+            0,
+            "a filter is chosen before any sample"
+        );
+        self.filter = filter;
+        self.weight = match filter {
+            PixelFilter::Box => Vec::new(),
+            PixelFilter::Gaussian(_) => vec![0; self.width * self.height],
+        };
+        self
+    }
+
+    /// The same empty film, also summing each pixel's (filter-weighted) sample squares, for
+    /// `variance_image`.
+    pub fn with_moments(mut self) -> Film {
+        self.square = vec![FixedRgb::ZERO; self.width * self.height];
+        self
+    }
+
+    pub fn filter(&self) -> PixelFilter {
+        self.filter
+    }
+
+    /// Whether the film sums sample squares (`with_moments`).
+    pub fn has_moments(&self) -> bool {
+        !self.square.is_empty()
     }
 
     /// Adds one sample to a pixel; a rejected one (NaN, infinite, out of range) is counted
     /// instead.
     #[inline]
     pub fn add_sample(&mut self, pixel: usize, value: Vec3) {
+        debug_assert_eq!(
+            self.filter,
+            PixelFilter::Box,
+            "a filtered sample needs its position"
+        );
         self.samples[pixel] += 1;
-        match self.sum[pixel].add_sample(value, self.unit_exponent) {
+        let mut sums = PixelSums {
+            sum: &mut self.sum[pixel],
+            weight: None,
+            square: self.square.get_mut(pixel),
+        };
+        match sums.add(value, 1.0, self.unit_exponent) {
             Ok(()) => {}
             Err(Rejected::NonFinite) => self.nonfinite += 1,
             Err(Rejected::OutOfRange) => self.out_of_range += 1,
@@ -133,10 +226,16 @@ impl Film {
     /// Adds a wave of samples: `values[i]` is global sample `first_sample + i`, which lands in
     /// pixel `(first_sample + i) % pixels` (as `add_sample` one by one would add them). Each
     /// pixel's samples are added in sample order, so the pixels are shared out between threads
-    /// in fixed blocks and the film is the same for any thread count.
+    /// in fixed blocks and the film is the same for any thread count. Box filter only
+    /// (`add_wave_at` takes the samples' film positions for any filter).
     pub fn add_wave(&mut self, first_sample: u64, values: &[Vec3]) {
         use rayon::prelude::*;
         const BLOCK: usize = 1024;
+        debug_assert_eq!(
+            self.filter,
+            PixelFilter::Box,
+            "a filtered sample needs its position"
+        );
         let pixels = self.sum.len();
         if pixels == 0 {
             return;
@@ -145,12 +244,14 @@ impl Film {
         // Sample i lands in pixel (offset + i) % pixels: pixel p's first sample is
         // (p + pixels - offset) % pixels, then every `pixels` further.
         let offset = (first_sample % pixels as u64) as usize;
+        let squares = optional_chunks(&mut self.square, BLOCK);
         let (nonfinite, out_of_range) = self
             .sum
             .par_chunks_mut(BLOCK)
             .zip(self.samples.par_chunks_mut(BLOCK))
+            .zip(squares)
             .enumerate()
-            .map(|(block, (sums, counts))| {
+            .map(|(block, ((sums, counts), mut squares))| {
                 let (mut nonfinite, mut out_of_range) = (0, 0);
                 // A wave shorter than a pass covers the pixels offset.. offset + len (mod
                 // pixels): a block outside them has no sample (small waves, `--wavefront`).
@@ -162,20 +263,122 @@ impl Film {
                 // The block's first pixel's first sample, then stepped pixel by pixel rather
                 // than divided out for each pixel.
                 let mut first_sample = (first + pixels - offset) % pixels;
-                for (sum, count) in sums.iter_mut().zip(counts) {
+                for (k, (sum, count)) in sums.iter_mut().zip(counts).enumerate() {
                     let mut i = first_sample;
                     first_sample += 1;
                     if first_sample == pixels {
                         first_sample = 0;
                     }
+                    let mut pixel = PixelSums {
+                        sum,
+                        weight: None,
+                        square: squares.as_deref_mut().map(|s| &mut s[k]),
+                    };
                     while i < values.len() {
                         *count += 1;
-                        match sum.add_sample(values[i], exponent) {
+                        match pixel.add(values[i], 1.0, exponent) {
                             Ok(()) => {}
                             Err(Rejected::NonFinite) => nonfinite += 1,
                             Err(Rejected::OutOfRange) => out_of_range += 1,
                         }
                         i += pixels;
+                    }
+                }
+                (nonfinite, out_of_range)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        self.nonfinite += nonfinite;
+        self.out_of_range += out_of_range;
+    }
+
+    /// `add_wave` under the film's filter: `raster(g)` is global sample g's position on the
+    /// whole film (pixels, x right, y down; inside pixel `g % pixels` once the film's origin
+    /// is added): a crop's weights are then the whole film's, bit for bit. Under the box filter that
+    /// is `add_wave`; under the gaussian each sample is splatted into every pixel within the
+    /// radius (`Gaussian::footprint`). The film is shared out between threads in bands of
+    /// rows, each band taking every sample that reaches it; the sums are exact, so the film
+    /// does not depend on the thread count. A sample counts (in `sample_counts`, `nonfinite`)
+    /// in its own pixel; a rejected one adds its weights, as black.
+    pub fn add_wave_at(
+        &mut self,
+        first_sample: u64,
+        values: &[Vec3],
+        raster: &(dyn Fn(u64) -> Vec2 + Sync),
+    ) {
+        use rayon::prelude::*;
+        let PixelFilter::Gaussian(gaussian) = self.filter else {
+            return self.add_wave(first_sample, values);
+        };
+        const BAND_ROWS: usize = 8;
+        let (width, height) = (self.width, self.height);
+        let pixels = width * height;
+        if pixels == 0 || values.is_empty() {
+            return;
+        }
+        let exponent = self.unit_exponent;
+        let offset = (first_sample % pixels as u64) as usize;
+        let reach = gaussian.reach();
+        let (ox, oy) = self.origin;
+        let band = BAND_ROWS * width;
+        let squares = optional_chunks(&mut self.square, band);
+        let (nonfinite, out_of_range) = self
+            .sum
+            .par_chunks_mut(band)
+            .zip(self.weight.par_chunks_mut(band))
+            .zip(self.samples.par_chunks_mut(band))
+            .zip(squares)
+            .enumerate()
+            .map(|(b, (((sums, weights), counts), mut squares))| {
+                let (mut nonfinite, mut out_of_range) = (0, 0);
+                let rows = b * BAND_ROWS..(b * BAND_ROWS + sums.len() / width);
+                let (mut wx, mut wy) = (Vec::new(), Vec::new());
+                let sample_rows = rows.start.saturating_sub(reach)..(rows.end + reach).min(height);
+                for p in sample_rows.start * width..sample_rows.end * width {
+                    let own = rows.contains(&(p / width));
+                    let mut i = (p + pixels - offset) % pixels;
+                    while i < values.len() {
+                        let value = values[i];
+                        let at = raster(first_sample + i as u64);
+                        i += pixels;
+                        let xs = gaussian.footprint_in(at.x, ox, width);
+                        let ys = gaussian.footprint_in(at.y, oy, height);
+                        let ys = ys.start.max(rows.start)..ys.end.min(rows.end).max(rows.start);
+                        wx.clear();
+                        wx.extend(
+                            xs.clone()
+                                .map(|x| gaussian.eval((x + ox) as f32 + 0.5 - at.x)),
+                        );
+                        wy.clear();
+                        wy.extend(
+                            ys.clone()
+                                .map(|y| gaussian.eval((y + oy) as f32 + 0.5 - at.y)),
+                        );
+                        let mut rejected = None;
+                        for (y, &weight_y) in ys.zip(&wy) {
+                            for (x, &weight_x) in xs.clone().zip(&wx) {
+                                let q = (y - rows.start) * width + x;
+                                let mut pixel = PixelSums {
+                                    sum: &mut sums[q],
+                                    weight: Some(&mut weights[q]),
+                                    square: squares.as_deref_mut().map(|s| &mut s[q]),
+                                };
+                                if let Err(e) = pixel.add(value, weight_x * weight_y, exponent) {
+                                    rejected = Some(e);
+                                }
+                            }
+                        }
+                        if own {
+                            counts[p - rows.start * width] += 1;
+                            // Counted once, in the sample's own pixel's band.
+                            match FixedRgb::of(value, exponent) {
+                                Err(Rejected::NonFinite) => nonfinite += 1,
+                                Err(Rejected::OutOfRange) => out_of_range += 1,
+                                Ok(_) if rejected == Some(Rejected::OutOfRange) => {
+                                    out_of_range += 1
+                                }
+                                Ok(_) => {}
+                            }
+                        }
                     }
                 }
                 (nonfinite, out_of_range)
@@ -267,6 +470,27 @@ impl Film {
                 self.unit_exponent - fixed::FRACTION_BITS
             ));
         }
+        if self.filter != other.filter
+            || self.has_moments() != other.has_moments()
+            || self.origin != other.origin
+        {
+            return Err(format!(
+                "a film made with the {} filter{} cannot be added to one made with the {} \
+                 filter{}",
+                other.filter.name(),
+                if other.has_moments() {
+                    " and moments"
+                } else {
+                    ""
+                },
+                self.filter.name(),
+                if self.has_moments() {
+                    " and moments"
+                } else {
+                    ""
+                },
+            ));
+        }
         let add = |a: &[FixedRgb], b: &[FixedRgb], what: &str| -> Result<Vec<FixedRgb>, String> {
             a.iter()
                 .zip(b)
@@ -290,9 +514,20 @@ impl Film {
             (true, false) => Some(other.splat.clone()),
             (false, false) => Some(add(&self.splat, &other.splat, "splat sum")?),
         };
+        // Squares beyond the range drop from the moments alone, as when they are added.
+        let square: Vec<FixedRgb> = self
+            .square
+            .iter()
+            .zip(&other.square)
+            .map(|(a, b)| a.checked_add(b).unwrap_or(*a))
+            .collect();
         self.sum = sum;
         if let Some(splat) = splat {
             self.splat = splat;
+        }
+        self.square = square;
+        for (a, &b) in self.weight.iter_mut().zip(&other.weight) {
+            *a += b;
         }
         for (a, &b) in self.samples.iter_mut().zip(&other.samples) {
             *a += b;
@@ -334,6 +569,10 @@ impl Film {
                 nonfinite,
                 nonfinite_splats: 0,
                 out_of_range: 0,
+                filter: PixelFilter::Box,
+                weight: Vec::new(),
+                square: Vec::new(),
+                origin: (0, 0),
             })
     }
 
@@ -365,6 +604,12 @@ impl Film {
             unit_exponent,
             sum: convert(&self.sum)?,
             splat: convert(&self.splat)?,
+            // Squares in units of 2^(2E - 64); those that do not fit drop from the moments.
+            square: self
+                .square
+                .iter()
+                .map(|s| s.rescaled(2 * from, 2 * to).unwrap_or(FixedRgb::ZERO))
+                .collect(),
             ..self.clone()
         })
     }
@@ -453,24 +698,26 @@ impl Film {
     }
 
     /// The per-pixel mean as an image, plus the splats divided by the passes (samples per
-    /// pixel on average).
+    /// pixel on average). Under the gaussian filter a pixel is its weighted sum over its
+    /// weight sum, and a splat's filter weight is divided by what the weights of one sample per
+    /// pixel add up to there on average (`Gaussian::integral_over_film`), so that splats and
+    /// samples estimate the same filtered pixel.
     pub fn image(&self) -> Image {
         let passes = self.total_samples() as f64 / (self.width * self.height).max(1) as f64;
+        let splat_norm = self.splat_normalisation();
         let pixels = self
             .sum
             .iter()
-            .zip(&self.samples)
             .enumerate()
-            .map(|(i, (s, &n))| {
-                let mut v = if n == 0 {
-                    DVec3::ZERO
-                } else {
-                    s.to_dvec3(self.unit_exponent) / n as f64
+            .map(|(i, s)| {
+                let mut v = match self.mean_divisor(i) {
+                    Some(d) => s.to_dvec3(self.unit_exponent) / d,
+                    None => DVec3::ZERO,
                 };
                 if let Some(splat) = self.splat.get(i)
                     && passes > 0.0
                 {
-                    v += splat.to_dvec3(self.unit_exponent) / passes;
+                    v += splat.to_dvec3(self.unit_exponent) / (passes * splat_norm(i));
                 }
                 v.as_vec3()
             })
@@ -480,6 +727,78 @@ impl Film {
             height: self.height,
             pixels,
         }
+    }
+
+    /// What pixel `i`'s sums are divided by for its mean: its sample count (box) or its
+    /// weight sum (gaussian); None when it has none.
+    fn mean_divisor(&self, i: usize) -> Option<f64> {
+        let d = match self.filter {
+            PixelFilter::Box => self.samples[i] as f64,
+            PixelFilter::Gaussian(_) => fixed::weight_of_units(self.weight[i]),
+        };
+        (d > 0.0).then_some(d)
+    }
+
+    /// Per pixel, the factor a splat's sum is divided by beyond the passes: 1 under the box
+    /// filter, the film-clipped integral of the filter around the pixel under the gaussian.
+    fn splat_normalisation(&self) -> impl Fn(usize) -> f64 + '_ {
+        let (columns, rows): (Vec<f64>, Vec<f64>) = match self.filter {
+            PixelFilter::Box => (Vec::new(), Vec::new()),
+            PixelFilter::Gaussian(g) => (
+                (0..self.width)
+                    .map(|x| g.integral_over_film(x, self.width))
+                    .collect(),
+                (0..self.height)
+                    .map(|y| g.integral_over_film(y, self.height))
+                    .collect(),
+            ),
+        };
+        move |i| {
+            if columns.is_empty() {
+                1.0
+            } else {
+                columns[i % self.width] * rows[i / self.width]
+            }
+        }
+    }
+
+    /// Per pixel and channel, the sample variance of the per-sample estimate: the (filter-
+    /// weighted) mean of the squares less the square of the mean, as Mitsuba's `moment`
+    /// integrator gives it (E[x^2] - E[x]^2), at least 0; None for a film without moments.
+    /// Splats are not samples of a pixel and take no part.
+    pub fn variance_image(&self) -> Option<Image> {
+        if !self.has_moments() {
+            return None;
+        }
+        let pixels = (0..self.sum.len())
+            .map(|i| match self.mean_divisor(i) {
+                Some(d) => {
+                    let mean = self.sum[i].to_dvec3(self.unit_exponent) / d;
+                    let squares = self.square[i].to_dvec3(2 * self.unit_exponent) / d;
+                    (squares - mean * mean).max(DVec3::ZERO).as_vec3()
+                }
+                None => Vec3::ZERO,
+            })
+            .collect();
+        Some(Image {
+            width: self.width,
+            height: self.height,
+            pixels,
+        })
+    }
+}
+
+/// Parallel chunks of an optional per-pixel column: its chunks, or `None` for every chunk
+/// when it is empty (zipped with the film's other columns).
+fn optional_chunks<T: Send>(
+    column: &mut [T],
+    chunk: usize,
+) -> impl rayon::iter::IndexedParallelIterator<Item = Option<&mut [T]>> {
+    use rayon::prelude::*;
+    if column.is_empty() {
+        rayon::iter::Either::Left((0..usize::MAX).into_par_iter().map(|_| None))
+    } else {
+        rayon::iter::Either::Right(column.par_chunks_mut(chunk).map(Some))
     }
 }
 

@@ -420,6 +420,8 @@ pub struct RenderSettings {
     /// Paths PT's wavefront shades at a time in vector lanes (`--lanes`); None: as many as the
     /// CPU's vector registers hold. The image is the same.
     pub lanes: Option<crate::lanes::LaneWidth>,
+    /// Also sum each pixel's sample squares, for the variance image (`--variance`; pt).
+    pub moments: bool,
 }
 
 /// Options of the Metropolis integrators (pssmlt, mmlt); None: the integrator's default.
@@ -456,6 +458,7 @@ impl Default for RenderSettings {
             kernel: pt::Kernel::Wavefront,
             wavefront: None,
             lanes: None,
+            moments: false,
         }
     }
 }
@@ -512,6 +515,32 @@ pub fn film_settings(kind: IntegratorKind, settings: &RenderSettings) -> String 
     } else {
         String::new()
     }
+}
+
+/// Refuses a camera the integrator cannot render as the scene asks: an orthographic camera
+/// (its rays' direction is a delta, which light paths joined to the camera cannot meet:
+/// BDPT's t = 1 strategies and everything built on them; the photon mappers' camera passes
+/// shoot pinhole rays) and a filter wider than a pixel (only pt's film knows where each of its
+/// samples fell) anywhere but pt. The message names the integrator, the camera and what works.
+pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Result<(), String> {
+    if kind.as_str() == "pt" {
+        return Ok(());
+    }
+    if !camera.is_pinhole() {
+        return Err(format!(
+            "{kind} cannot render an orthographic sensor (its rays all have one direction, a \
+             delta that light paths joined to the camera or pinhole camera passes cannot meet): \
+             render it with pt"
+        ));
+    }
+    if let crate::film::PixelFilter::Gaussian(_) = camera.filter {
+        return Err(format!(
+            "{kind} cannot reconstruct with the gaussian rfilter (Mitsuba's default when a film \
+             has none): only pt splats its samples by where they fell; render it with pt, or \
+             add <rfilter type=\"box\"/> to the film"
+        ));
+    }
+    Ok(())
 }
 
 /// Renders a scene with an integrator from nothing.

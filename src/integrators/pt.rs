@@ -29,6 +29,7 @@ impl From<&RenderSettings> for PtSettings {
             sampler: s.sampler,
             max_depth: s.max_depth,
             lanes: s.lanes.unwrap_or_else(crate::lanes::LaneWidth::widest),
+            moments: s.moments,
         }
     }
 }
@@ -64,8 +65,18 @@ impl PtState {
         let cam = data.scene.camera;
         let pixels = cam.width as u64 * cam.height as u64;
         let film = Film::for_scene(&data);
+        let film = if settings.moments {
+            film.with_moments()
+        } else {
+            film
+        };
         PtState {
-            sampler: Sampler::new(settings.sampler, settings.seed, cam.width, cam.height),
+            sampler: Sampler::new(
+                settings.sampler,
+                settings.seed,
+                cam.crop.film_width,
+                cam.crop.film_height,
+            ),
             data,
             settings,
             pixels,
@@ -276,7 +287,7 @@ mod bindings {
             write shadow, shadow_len;
         }
         gather::film::AccumulateFilm {
-            read sample_radiance, wave, pixels;
+            read sample_radiance, wave, pixels, camera = data.scene.camera, sampler;
             write film;
         }
         generate::camera_rays::GenerateCameraRays {

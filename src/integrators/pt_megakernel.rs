@@ -50,9 +50,18 @@ impl WaveState for MegakernelState {
     fn new(data: Arc<SceneData>, settings: PtSettings, capacity: usize) -> MegakernelState {
         let cam = data.scene.camera;
         MegakernelState {
-            sampler: Sampler::new(settings.sampler, settings.seed, cam.width, cam.height),
+            sampler: Sampler::new(
+                settings.sampler,
+                settings.seed,
+                cam.crop.film_width,
+                cam.crop.film_height,
+            ),
             pixels: cam.width as u64 * cam.height as u64,
-            film: Film::for_scene(&data),
+            film: if settings.moments {
+                Film::for_scene(&data).with_moments()
+            } else {
+                Film::for_scene(&data)
+            },
             data,
             settings,
             wave: Wave::default(),
@@ -92,7 +101,7 @@ mod bindings {
     crate::bind! {
         MegakernelState:
         gather::film::AccumulateFilm {
-            read sample_radiance, wave, pixels;
+            read sample_radiance, wave, pixels, camera = data.scene.camera, sampler;
             write film;
         }
         trace::paths::TracePaths {

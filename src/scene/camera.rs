@@ -1,11 +1,15 @@
-//! The pinhole camera's geometry and importance: the mapping between raster positions and
-//! directions, and the directional density of its rays, which bidirectional methods need to
-//! connect light subpaths to the camera and to weigh those connections.
+//! The camera's geometry and importance: the mapping between raster positions and rays, and
+//! the directional density of a pinhole's rays, which bidirectional methods need to connect
+//! light subpaths to the camera and to weigh those connections.
 //!
-//! The image plane sits at distance 1 along `forward` and spans `2 tan(fov/2) aspect` by
-//! `2 tan(fov/2)`; raster x runs right and raster y down, in pixels.
+//! A pinhole's image plane sits at distance 1 along `forward` and spans `2 tan(fov/2) aspect`
+//! by `2 tan(fov/2)` for the whole film; raster x runs right and raster y down, in pixels of
+//! the rendered image (the crop window, whose pixel (0, 0) is the film's (crop.x, crop.y)).
+//! An orthographic camera's rays are parallel: their direction is a delta, so no direction
+//! from a point in the scene reaches it (`raster_of` is None, `pdf_dir` 0) and the integrators
+//! that connect light paths to the camera refuse it.
 
-use super::Camera;
+use super::{Camera, Projection};
 use glam::{Vec2, Vec3};
 
 impl Camera {
@@ -18,7 +22,10 @@ impl Camera {
     /// The camera's projection with its constants worked out once.
     pub fn frustum(&self) -> Frustum {
         let tan_half = self.tan_half_fov();
-        let aspect = self.width as f32 / self.height as f32;
+        let (film_w, film_h) = (self.crop.film_width, self.crop.film_height);
+        let aspect = film_w as f32 / film_h as f32;
+        // The crop's share of the film (exactly 1 without a crop).
+        let share = (self.width as f32 * self.height as f32) / (film_w as f32 * film_h as f32);
         Frustum {
             position: self.position,
             forward: self.forward,
@@ -28,12 +35,30 @@ impl Camera {
             aspect,
             width: self.width,
             height: self.height,
-            area: 4.0 * tan_half * tan_half * aspect,
+            film_width: film_w,
+            film_height: film_h,
+            offset: Vec2::new(self.crop.x as f32, self.crop.y as f32),
+            area: 4.0 * tan_half * tan_half * aspect * share,
+            projection: self.projection,
         }
+    }
+
+    /// The camera rendering the whole film at another size (tests and tools shrink scenes):
+    /// any crop window is dropped.
+    pub fn resize(&mut self, width: u32, height: u32) {
+        self.width = width;
+        self.height = height;
+        self.crop = super::Crop::whole(width, height);
+    }
+
+    /// Whether the camera's rays share one origin (a pinhole): only such a camera can be
+    /// reached by a light path's connection (t = 1 strategies, light tracing).
+    pub fn is_pinhole(&self) -> bool {
+        self.projection == Projection::Perspective
     }
 }
 
-/// A pinhole camera's projection: built once per render by `Camera::frustum`, used per ray.
+/// A camera's projection: built once per render by `Camera::frustum`, used per ray.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frustum {
     pub position: Vec3,
@@ -41,35 +66,97 @@ pub struct Frustum {
     pub right: Vec3,
     pub up: Vec3,
     pub tan_half: f32,
+    /// The whole film's width over its height.
     pub aspect: f32,
+    /// The rendered image (the crop window).
     pub width: u32,
     pub height: u32,
-    /// The area of the image plane at distance 1.
+    /// The whole film, and where the rendered image's pixel (0, 0) lies on it.
+    pub film_width: u32,
+    pub film_height: u32,
+    pub offset: Vec2,
+    /// The area of the rendered image on the image plane at distance 1.
     pub area: f32,
+    pub projection: Projection,
 }
 
 impl Frustum {
     /// The unit direction through raster position `raster` (pixels, y down).
     #[inline]
     pub fn direction(&self, raster: Vec2) -> Vec3 {
-        let (w, h) = (self.width as f32, self.height as f32);
-        let sx = (2.0 * raster.x / w - 1.0) * self.tan_half * self.aspect;
-        let sy = (1.0 - 2.0 * raster.y / h) * self.tan_half;
+        self.direction_on_film(raster + self.offset)
+    }
+
+    /// `direction` of a position on the whole film (the crop's offset included).
+    #[inline]
+    pub fn direction_on_film(&self, r: Vec2) -> Vec3 {
+        if let Projection::Orthographic { .. } = self.projection {
+            return self.forward;
+        }
+        let (w, h) = (self.film_width as f32, self.film_height as f32);
+        let sx = (2.0 * r.x / w - 1.0) * self.tan_half * self.aspect;
+        let sy = (1.0 - 2.0 * r.y / h) * self.tan_half;
         (self.forward + self.right * sx + self.up * sy).normalize()
     }
 
+    /// The origin and unit direction of the ray through raster position `raster`: from the
+    /// pinhole, or (orthographic) from the point of the near plane the raster position maps
+    /// to, Mitsuba's camera x in [-1, 1] and y in [-1/aspect, 1/aspect] scaled by the sensor's
+    /// to_world.
+    #[inline]
+    pub fn ray(&self, raster: Vec2) -> (Vec3, Vec3) {
+        self.ray_on_film(raster + self.offset)
+    }
+
+    /// `ray` of a position on the whole film (the crop's offset included).
+    #[inline]
+    pub fn ray_on_film(&self, r: Vec2) -> (Vec3, Vec3) {
+        match self.projection {
+            Projection::Perspective => (self.position, self.direction_on_film(r)),
+            Projection::Orthographic {
+                half_width,
+                half_height,
+                near,
+            } => {
+                let (w, h) = (self.film_width as f32, self.film_height as f32);
+                let sx = (2.0 * r.x / w - 1.0) * half_width;
+                let sy = (1.0 - 2.0 * r.y / h) * half_height;
+                let origin = self.position + self.forward * near + self.right * sx + self.up * sy;
+                (origin, self.forward)
+            }
+        }
+    }
+
+    /// Pixel `pixel` of the rendered image as a pixel index of the whole film (the same
+    /// index without a crop): what keys a sample's random numbers, so that a crop renders
+    /// the same samples as the whole film there.
+    #[inline]
+    pub fn film_pixel(&self, pixel: u64) -> u64 {
+        let (w, film_w) = (self.width as u64, self.film_width as u64);
+        let (x, y) = (
+            pixel % w + self.offset.x as u64,
+            pixel / w + self.offset.y as u64,
+        );
+        y * film_w + x
+    }
+
     /// The raster position a direction from the camera projects to, or `None` when it points
-    /// outside the image (or backwards).
+    /// outside the image (or backwards), or the camera is orthographic (no direction from a
+    /// point reaches it).
     #[inline]
     pub fn raster_of(&self, dir: Vec3) -> Option<Vec2> {
+        if let Projection::Orthographic { .. } = self.projection {
+            return None;
+        }
         let cos = dir.dot(self.forward);
         if cos <= 0.0 {
             return None;
         }
         let q = dir / cos;
+        let (w, h) = (self.film_width as f32, self.film_height as f32);
+        let x = (q.dot(self.right) / (self.tan_half * self.aspect) + 1.0) * 0.5 * w - self.offset.x;
+        let y = (1.0 - q.dot(self.up) / self.tan_half) * 0.5 * h - self.offset.y;
         let (w, h) = (self.width as f32, self.height as f32);
-        let x = (q.dot(self.right) / (self.tan_half * self.aspect) + 1.0) * 0.5 * w;
-        let y = (1.0 - q.dot(self.up) / self.tan_half) * 0.5 * h;
         ((0.0..w).contains(&x) && (0.0..h).contains(&y)).then_some(Vec2::new(x, y))
     }
 
@@ -124,6 +211,9 @@ mod tests {
             fov_y_degrees: 40.0,
             width: 64,
             height: 48,
+            crop: super::super::Crop::whole(64, 48),
+            projection: Projection::Perspective,
+            filter: crate::film::PixelFilter::Box,
         }
     }
 

@@ -23,7 +23,8 @@ use std::path::{Path, PathBuf};
 
 pub use crate::geometry::{FLAT, MAX_COORDINATE, NO_EMITTER, TriangleColumns};
 
-/// A pinhole camera. The image's right is forward x up; row 0 is the top row.
+/// A camera: a pinhole by default, or orthographic. The image's right is forward x up; row 0
+/// is the top row.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Camera {
     pub position: Vec3,
@@ -31,10 +32,55 @@ pub struct Camera {
     pub forward: Vec3,
     pub right: Vec3,
     pub up: Vec3,
-    /// Full vertical field of view in degrees, in (0, 180).
+    /// Full vertical field of view of the whole film in degrees, in (0, 180) (a pinhole's).
     pub fov_y_degrees: f32,
+    /// The rendered image's size: the crop window's (the whole film without one).
     pub width: u32,
     pub height: u32,
+    /// Where the rendered image lies on the film the projection is defined on.
+    pub crop: Crop,
+    pub projection: Projection,
+    /// How samples are reconstructed into pixels.
+    pub filter: crate::film::PixelFilter,
+}
+
+/// A crop window (Mitsuba's hdrfilm crop_offset_x/y, crop_width/height): the rendered image
+/// is the camera's `width` x `height` pixels from (x, y) of a `film_width` x `film_height`
+/// film, whose rays are those of the whole film.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Crop {
+    pub film_width: u32,
+    pub film_height: u32,
+    pub x: u32,
+    pub y: u32,
+}
+
+impl Crop {
+    /// No crop: the whole `width` x `height` film.
+    pub fn whole(width: u32, height: u32) -> Crop {
+        Crop {
+            film_width: width,
+            film_height: height,
+            x: 0,
+            y: 0,
+        }
+    }
+}
+
+/// How film positions become camera rays.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum Projection {
+    /// A pinhole at `position` with `fov_y_degrees`.
+    #[default]
+    Perspective,
+    /// Parallel rays along `forward`, from a rectangle `2 half_width` by `2 half_height`
+    /// (world units) centred `near` along `forward` from `position` (Mitsuba's near_clip:
+    /// rays start on the near plane).
+    Orthographic {
+        half_width: f32,
+        half_height: f32,
+        near: f32,
+    },
 }
 
 /// The emitters (emitting triangles, then point lights) and the distribution that picks one by

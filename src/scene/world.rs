@@ -238,6 +238,9 @@ fn make_camera(desc: &CameraDesc) -> Result<Camera, String> {
         fov_y_degrees: desc.fov.0 as f32,
         width: desc.width.0,
         height: desc.height.0,
+        crop: super::Crop::whole(desc.width.0, desc.height.0),
+        projection: super::Projection::Perspective,
+        filter: crate::film::PixelFilter::Box,
     })
 }
 

@@ -1,5 +1,5 @@
-//! Generates one camera ray per sample of the wave: a pinhole camera, each sample uniform
-//! inside its pixel (a one-pixel box filter).
+//! Generates one camera ray per sample of the wave: each sample uniform inside its pixel
+//! (the film's filter then weighs it by where it fell: `sample_raster`).
 
 use crate::components::Wave;
 use crate::components::path_tracing::DIM_PIXEL;
@@ -86,7 +86,10 @@ fn generate_chunk<const N: usize>(
         flags: PathFlags(PathFlags::SPECULAR),
     };
     let mut i = 0;
-    if let Sampler::Independent { .. } = *sampler {
+    // The lanes' fast path is the pinhole's (an orthographic ray's origin varies).
+    if let (Sampler::Independent { .. }, crate::scene::Projection::Perspective) =
+        (*sampler, cam.projection)
+    {
         while i + N <= r.len() {
             let slot = r.start + i;
             let (keys, dir) = camera_ray_lanes::<N>(sampler, cam, pixels, first + slot as u64);
@@ -128,8 +131,9 @@ fn camera_ray_lanes<const N: usize>(
     for l in 0..N {
         lane_pixel[l] = pixel;
         lane_sample[l] = sample;
-        raster_x.0[l] = x as f32;
-        raster_y.0[l] = y as f32;
+        // On the whole film: a crop's pixels get the film's own rays, bit for bit.
+        raster_x.0[l] = (x + cam.offset.x as u64) as f32;
+        raster_y.0[l] = (y + cam.offset.y as u64) as f32;
         pixel += 1;
         x += 1;
         if x == w {
@@ -139,15 +143,20 @@ fn camera_ray_lanes<const N: usize>(
             (pixel, sample, x, y) = (0, sample + 1, 0, 0);
         }
     }
-    let keys: [SampleKey; N] =
-        lanes_of(|l| sampler.key(Stream::Camera, lane_pixel[l], lane_sample[l]));
+    let keys: [SampleKey; N] = lanes_of(|l| {
+        sampler.key(
+            Stream::Camera,
+            cam.film_pixel(lane_pixel[l]),
+            lane_sample[l],
+        )
+    });
     let (jitter_x, jitter_y) = (
         F(SampleKey::get_lanes(&keys, &[DIM_PIXEL; N])),
         F(SampleKey::get_lanes(&keys, &[DIM_PIXEL + 1; N])),
     );
     let (raster_x, raster_y) = (raster_x + jitter_x, raster_y + jitter_y);
-    // Frustum::direction
-    let (w, h) = (cam.width as f32, cam.height as f32);
+    // Frustum::direction_on_film
+    let (w, h) = (cam.film_width as f32, cam.film_height as f32);
     let sx = (2.0 * raster_x / w - 1.0) * cam.tan_half * cam.aspect;
     let sy = (1.0 - 2.0 * raster_y / h) * cam.tan_half;
     let dir = V3::splat(cam.forward) + V3::splat(cam.right) * sx + V3::splat(cam.up) * sy;
@@ -166,14 +175,24 @@ pub struct CameraRay {
 /// one per-sample step of this system, shared with the megakernel (`systems/trace/paths.rs`).
 #[inline(always)]
 pub fn camera_ray(sampler: &Sampler, cam: &Frustum, pixels: u64, g: u64) -> CameraRay {
+    let (key, raster) = sample_raster(sampler, cam, pixels, g);
+    let (origin, dir) = cam.ray_on_film(raster);
+    CameraRay { key, origin, dir }
+}
+
+/// The random-number key and position on the whole film (pixels, the crop window's offset
+/// included) of global sample `g`: uniform in pixel `g % pixels` of the rendered image, keyed
+/// by its place on the whole film, so a crop renders the film's own samples bit for bit. The
+/// film's filter weighs the sample by this position.
+#[inline(always)]
+pub fn sample_raster(sampler: &Sampler, cam: &Frustum, pixels: u64, g: u64) -> (SampleKey, Vec2) {
     let w = cam.width as u64;
     let pixel = g % pixels;
-    let key = sampler.key(Stream::Camera, pixel, g / pixels);
+    let key = sampler.key(Stream::Camera, cam.film_pixel(pixel), g / pixels);
     let jitter = sampler.get2(key, DIM_PIXEL);
-    let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + jitter;
-    CameraRay {
-        key,
-        origin: cam.position,
-        dir: cam.direction(raster),
-    }
+    let (x, y) = (
+        pixel % w + cam.offset.x as u64,
+        pixel / w + cam.offset.y as u64,
+    );
+    (key, Vec2::new(x as f32, y as f32) + jitter)
 }

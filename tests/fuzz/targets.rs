@@ -79,8 +79,8 @@ pub fn scene(data: &[u8]) -> String {
         Err(e) => return check_message(&e.to_string(), "fuzz.ron"),
     };
     check_prepared(&prepared);
-    prepared.camera.width = prepared.camera.width.min(8);
-    prepared.camera.height = prepared.camera.height.min(8);
+    let (w, h) = (prepared.camera.width.min(8), prepared.camera.height.min(8));
+    prepared.camera.resize(w, h);
     let lights = prepared.emitters.triangle.len();
     let data_arc = Arc::new(SceneData::new(prepared));
     let stop = AtomicBool::new(false);
@@ -129,8 +129,8 @@ pub fn mitsuba(data: &[u8]) -> String {
         Err(e) => return check_message(&e.to_string(), "fuzz.xml"),
     };
     check_prepared(&prepared);
-    prepared.camera.width = prepared.camera.width.min(8);
-    prepared.camera.height = prepared.camera.height.min(8);
+    let (w, h) = (prepared.camera.width.min(8), prepared.camera.height.min(8));
+    prepared.camera.resize(w, h);
     let stop = AtomicBool::new(false);
     let control = Control {
         stop: &stop,

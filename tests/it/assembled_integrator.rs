@@ -86,7 +86,7 @@ stagelight::bind! {
         write paths, rays;
     }
     gather::film::AccumulateFilm {
-        read sample_radiance, wave, pixels;
+        read sample_radiance, wave, pixels, camera = data.scene.camera, sampler;
         write film;
     }
 }

@@ -27,8 +27,8 @@ pub fn load_test_scene(name: &str) -> stagelight::scene::PreparedScene {
 /// Loads a scene from scenes/ and shrinks its image to `size` x `size`.
 pub fn load_small(name: &str, size: u32) -> stagelight::scene::PreparedScene {
     let mut scene = stagelight::scene::load(&scene_path(name)).expect("scene loads");
-    scene.camera.width = size;
-    scene.camera.height = size;
+    let (w, h) = (size, size);
+    scene.camera.resize(w, h);
     scene
 }
 

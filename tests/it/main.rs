@@ -12,6 +12,7 @@ mod cli;
 mod compare;
 mod determinism;
 mod docs;
+mod film_filter;
 mod film_precision;
 mod fuzz;
 #[path = "../fuzz/targets.rs"]

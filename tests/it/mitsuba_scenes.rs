@@ -234,15 +234,48 @@ fn broken() -> Vec<(
             "participating media",
         ),
         (
-            "gaussian filter by default",
+            "crop window beyond the film",
             vec![(
                 "a.xml",
-                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <film type=\"hdrfilm\"/>\n</sensor>\n</scene>\n".into(),
+                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <film type=\"hdrfilm\"><integer name=\"width\" value=\"8\"/>\n    <integer name=\"crop_offset_x\" value=\"2\"/><integer name=\"crop_width\" value=\"7\"/></film>\n</sensor>\n</scene>\n".into(),
             )],
             "a.xml",
-            3,
-            3,
-            "gaussian",
+            4,
+            46,
+            "crop window must lie inside the 8-pixel film",
+        ),
+        (
+            "negative crop offset",
+            vec![(
+                "a.xml",
+                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <film type=\"hdrfilm\">\n    <integer name=\"crop_offset_y\" value=\"-1\"/></film>\n</sensor>\n</scene>\n".into(),
+            )],
+            "a.xml",
+            4,
+            5,
+            "crop_offset_y -1 must lie in 0..576",
+        ),
+        (
+            "negative stddev",
+            vec![(
+                "a.xml",
+                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <film type=\"hdrfilm\"><rfilter type=\"gaussian\">\n    <float name=\"stddev\" value=\"-0.5\"/></rfilter></film>\n</sensor>\n</scene>\n".into(),
+            )],
+            "a.xml",
+            4,
+            5,
+            "stddev -0.5 must lie in (0, 16]",
+        ),
+        (
+            "unknown rfilter",
+            vec![(
+                "a.xml",
+                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\">\n  <film type=\"hdrfilm\">\n    <rfilter type=\"lanczos\"/></film>\n</sensor>\n</scene>\n".into(),
+            )],
+            "a.xml",
+            4,
+            5,
+            "rfilter type \"lanczos\" is not supported (supported: box, gaussian)",
         ),
         (
             "duplicate id",

@@ -399,8 +399,8 @@ fn merge_radii_follow_the_pixel_footprint_not_the_scene_bounds() {
     use stagelight::components::photon_mapping::{ProgressiveSettings, pixel_footprint};
     let door = SceneData::new(load_small("door_ajar.ron", 64));
     let mut stretched = crate::common::load_test_scene("stretched_wall.ron");
-    stretched.camera.width = 64;
-    stretched.camera.height = 64;
+    let (w, h) = (64, 64);
+    stretched.camera.resize(w, h);
     let stretched = SceneData::new(stretched);
     let size = |d: &SceneData| (d.scene.bounds_max - d.scene.bounds_min).length();
     assert!(size(&stretched) > 1e9 * size(&door));

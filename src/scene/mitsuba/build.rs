@@ -11,12 +11,13 @@ use super::document::{
     Child, Class, Defines, Document, Object, Property, Spectrum, Spot, Value, XmlError,
 };
 use crate::bsdf::Material;
+use crate::film::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::world::{
     DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, OneSided, PointLight,
     SceneWorld, Shape, SourceSpot, Transform,
 };
-use crate::scene::{Camera, Limits, SceneError};
+use crate::scene::{Camera, Crop, Limits, Projection, SceneError};
 
 /// Whether a material reflects on both sides of a surface or only where its normal points.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -46,9 +47,9 @@ pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
 pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor";
 pub const EMITTERS: &str = "area, point, spot";
-pub const SENSORS: &str = "perspective";
+pub const SENSORS: &str = "perspective, orthographic";
 pub const FILMS: &str = "hdrfilm";
-pub const RFILTERS: &str = "box";
+pub const RFILTERS: &str = "box, gaussian";
 
 /// Parameters that change only noise or nothing (see docs/scene-format.md): read and ignored.
 const IGNORED_INTEGRATOR: &[&str] = &[
@@ -68,6 +69,19 @@ const IGNORED_FILM: &[&str] = &[
 ];
 const IGNORED_SAMPLER: &[&str] = &["seed", "jitter", "scramble"];
 const IGNORED_BSDF: &[&str] = &["sample_visible"];
+
+/// Mitsuba's near and far clipping distances when the sensor gives none.
+const DEFAULT_NEAR_CLIP: f64 = 1e-2;
+const DEFAULT_FAR_CLIP: f64 = 1e4;
+
+/// What a sensor's film says: the rendered image (its crop window) and its filter.
+#[derive(Clone, Copy, Debug)]
+struct FilmSpec {
+    width: u32,
+    height: u32,
+    crop: Crop,
+    filter: PixelFilter,
+}
 
 /// Mitsuba's film size when the file gives none.
 const DEFAULT_WIDTH: i64 = 768;
@@ -294,7 +308,7 @@ struct Builder<'a> {
     point_lights: u32,
     objects: u32,
     triangles_so_far: u64,
-    film: Option<(u32, u32)>,
+    film: Option<FilmSpec>,
 }
 
 /// A shape's mesh with its placement, ready to spawn.
@@ -486,9 +500,11 @@ impl<'a> Builder<'a> {
 
     fn sensor(&mut self, id: usize) -> Result<(), XmlError> {
         let object = self.object(id);
-        if object.kind != "perspective" {
-            return Err(unsupported(object, SENSORS));
-        }
+        let orthographic = match object.kind.as_str() {
+            "perspective" => false,
+            "orthographic" => true,
+            _ => return Err(unsupported(object, SENSORS)),
+        };
         let mut params = Params::new(object);
         let mut film = None;
         for child in &object.children {
@@ -507,83 +523,64 @@ impl<'a> Builder<'a> {
                 }
             }
         }
-        let (width, height) = film.unwrap_or((DEFAULT_WIDTH as u32, DEFAULT_HEIGHT as u32));
-        self.film = Some((width, height));
-        let aspect = width as f64 / height as f64;
-        let fov = params.float("fov")?;
-        let focal = params.string("focal_length")?;
-        let axis = params.string("fov_axis")?;
-        let fov_y = match (fov, focal) {
-            (Some(_), Some((_, spot))) => {
-                return Err(XmlError::at(
-                    &spot,
-                    "perspective: give fov or focal_length, not both",
-                ));
-            }
-            (Some((fov, spot)), None) => {
-                if !(fov > 0.0 && fov < 180.0) {
-                    return Err(XmlError::at(
-                        &spot,
-                        format!("fov {fov} must lie in (0, 180) degrees"),
-                    ));
-                }
-                let (axis, axis_spot) = axis.unwrap_or(("x", spot));
-                fov_y_degrees(fov, axis, aspect).map_err(|m| XmlError::at(&axis_spot, m))?
-            }
-            (None, focal) => {
-                if let Some((_, spot)) = axis {
-                    return Err(XmlError::at(
-                        &spot,
-                        "fov_axis applies to fov, not to focal_length",
-                    ));
-                }
-                let (text, spot) = focal.unwrap_or(("50mm", object.spot.clone()));
-                let mm = text
-                    .strip_suffix("mm")
-                    .unwrap_or(text)
-                    .trim()
-                    .parse::<f64>()
-                    .ok()
-                    .filter(|v| v.is_finite() && *v > 0.0)
-                    .ok_or_else(|| {
-                        XmlError::at(
-                            &spot,
-                            format!(
-                                "focal_length \"{}\" is not of the form <x>mm",
-                                super::super::echo(text)
-                            ),
-                        )
-                    })?;
-                // A 35 mm film's diagonal over twice the focal length.
-                let diagonal_fov = 2.0
-                    * ((36.0f64 * 36.0 + 24.0 * 24.0).sqrt() / (2.0 * mm))
-                        .atan()
-                        .to_degrees();
-                fov_y_degrees(diagonal_fov, "diagonal", aspect)
-                    .map_err(|m| XmlError::at(&spot, m))?
-            }
+        let film = match film {
+            Some(film) => film,
+            None => FilmSpec {
+                width: DEFAULT_WIDTH as u32,
+                height: DEFAULT_HEIGHT as u32,
+                crop: Crop::whole(DEFAULT_WIDTH as u32, DEFAULT_HEIGHT as u32),
+                filter: PixelFilter::mitsuba_default(),
+            },
         };
-        for name in ["principal_point_offset_x", "principal_point_offset_y"] {
-            if let Some((v, spot)) = params.float(name)?
-                && v != 0.0
-            {
+        self.film = Some(film);
+        let (film_width, film_height) = (film.crop.film_width, film.crop.film_height);
+        let aspect = film_width as f64 / film_height as f64;
+        let fov_y = if orthographic {
+            None
+        } else {
+            Some(perspective_fov_y(object, &mut params, aspect)?)
+        };
+        let near_clip = params.float("near_clip")?;
+        let far_clip = params.float("far_clip")?;
+        for (clip, spot) in near_clip.iter().chain(&far_clip) {
+            if !(clip.is_finite() && *clip > 0.0) {
                 return Err(XmlError::at(
-                    &spot,
-                    format!(
-                        "perspective: {name} {v} is not supported (only 0: the image centred on the view)"
-                    ),
+                    spot,
+                    format!("a clipping distance must be finite and positive, not {clip}"),
                 ));
             }
         }
-        let near_clip = params.float("near_clip")?;
-        let far_clip = params.float("far_clip")?;
+        let near = near_clip.as_ref().map_or(DEFAULT_NEAR_CLIP, |c| c.0);
+        let far = far_clip.as_ref().map_or(DEFAULT_FAR_CLIP, |c| c.0);
+        if near >= far {
+            let spot = far_clip.as_ref().or(near_clip.as_ref()).map(|c| &c.1);
+            return Err(XmlError::at(
+                spot.unwrap_or(&object.spot),
+                format!("near_clip {near} must be less than far_clip {far}"),
+            ));
+        }
         params.ignore(IGNORED_SENSOR);
         let to_world = params.transform("to_world")?;
         params.finish()?;
         let (matrix, spot) = to_world.unwrap_or((DMat4::IDENTITY, object.spot.clone()));
-        let camera =
-            camera_of(&matrix, fov_y, width, height).map_err(|m| XmlError::at(&spot, m))?;
+        let lens = match fov_y {
+            Some(fov_y) => Lens::Pinhole { fov_y },
+            None => Lens::Orthographic { near },
+        };
+        let mut camera = camera_of(&matrix, lens, film_width, film_height)
+            .map_err(|m| XmlError::at(&spot, m))?;
+        camera.width = film.width;
+        camera.height = film.height;
+        camera.crop = film.crop;
+        camera.filter = film.filter;
         if !self.settings_only {
+            // An orthographic camera's rays start on the near plane (as Mitsuba's): only its
+            // far plane can hide what a ray would otherwise reach.
+            let near_clip = if orthographic { None } else { near_clip };
+            let far_clip = match (orthographic, far_clip) {
+                (true, None) => Some((DEFAULT_FAR_CLIP, object.spot.clone())),
+                (_, far) => far,
+            };
             self.world.spawn((
                 camera,
                 source_spot(&object.spot),
@@ -597,7 +594,7 @@ impl<'a> Builder<'a> {
         Ok(())
     }
 
-    fn film(&mut self, id: usize) -> Result<(u32, u32), XmlError> {
+    fn film(&mut self, id: usize) -> Result<FilmSpec, XmlError> {
         let object = self.object(id);
         if object.kind != "hdrfilm" {
             return Err(unsupported(object, FILMS));
@@ -623,23 +620,41 @@ impl<'a> Builder<'a> {
         };
         let width = size(params.integer("width")?, DEFAULT_WIDTH)?;
         let height = size(params.integer("height")?, DEFAULT_HEIGHT)?;
-        // A crop window that covers the whole film changes nothing.
-        let crop = [
-            ("crop_offset_x", 0),
-            ("crop_offset_y", 0),
-            ("crop_width", width as i64),
-            ("crop_height", height as i64),
-        ];
-        for (name, full) in crop {
-            if let Some((v, spot)) = params.integer(name)?
-                && v != full
-            {
+        // The crop window, as Mitsuba's hdrfilm checks it: inside the film, at least a pixel.
+        let mut window = |axis: &str, film: u32| -> Result<(u32, u32), XmlError> {
+            let offset = params.integer(&format!("crop_offset_{axis}"))?;
+            let extent_name = if axis == "x" {
+                "crop_width"
+            } else {
+                "crop_height"
+            };
+            let extent = params.integer(extent_name)?;
+            let o = offset.as_ref().map_or(0, |v| v.0);
+            if !(0..film as i64).contains(&o) {
+                let spot = offset.map(|v| v.1).unwrap_or_else(|| object.spot.clone());
                 return Err(XmlError::at(
                     &spot,
-                    format!("hdrfilm: {name} {v} is not supported yet (only the whole film)"),
+                    format!(
+                        "hdrfilm: crop_offset_{axis} {o} must lie in 0..{film} (the film's pixels)"
+                    ),
                 ));
             }
-        }
+            let e = extent.as_ref().map_or(film as i64 - o, |v| v.0);
+            if e < 1 || o + e > film as i64 {
+                let spot = extent.map(|v| v.1).unwrap_or_else(|| object.spot.clone());
+                return Err(XmlError::at(
+                    &spot,
+                    format!(
+                        "hdrfilm: {extent_name} {e} from crop_offset_{axis} {o} must lie in 1..={} \
+                         (the crop window must lie inside the {film}-pixel film)",
+                        film as i64 - o
+                    ),
+                ));
+            }
+            Ok((o as u32, e as u32))
+        };
+        let (x, crop_width) = window("x", width)?;
+        let (y, crop_height) = window("y", height)?;
         params.ignore(IGNORED_FILM);
         params.finish()?;
         let mut filter = None;
@@ -653,7 +668,7 @@ impl<'a> Builder<'a> {
             }
             filter = Some(inner);
         }
-        match filter {
+        let filter = match filter {
             Some(f) if f.kind == "box" => {
                 let mut p = Params::new(f);
                 if let Some((radius, spot)) = p.float("radius")?
@@ -667,17 +682,41 @@ impl<'a> Builder<'a> {
                     ));
                 }
                 p.finish()?;
+                PixelFilter::Box
+            }
+            Some(f) if f.kind == "gaussian" => {
+                let mut p = Params::new(f);
+                let stddev = match p.float("stddev")? {
+                    None => crate::film::filter::DEFAULT_STDDEV,
+                    Some((v, spot)) => {
+                        // Wider than 64 pixels would splat each sample into 65536 pixels.
+                        if !(v.is_finite() && v > 0.0 && v <= 16.0) {
+                            return Err(XmlError::at(
+                                &spot,
+                                format!("rfilter gaussian: stddev {v} must lie in (0, 16] pixels"),
+                            ));
+                        }
+                        v as f32
+                    }
+                };
+                p.finish()?;
+                PixelFilter::Gaussian(Gaussian::new(stddev).expect("checked positive"))
             }
             Some(f) => return Err(unsupported(f, RFILTERS)),
-            None => {
-                return Err(XmlError::at(
-                    &object.spot,
-                    "hdrfilm without an rfilter uses Mitsuba's default, the gaussian filter, which \
-                     stagelight does not model yet: add <rfilter type=\"box\"/> to the film",
-                ));
-            }
-        }
-        Ok((width, height))
+            // Mitsuba's default (texture_interp and most of mitsuba-data rely on it).
+            None => PixelFilter::mitsuba_default(),
+        };
+        Ok(FilmSpec {
+            width: crop_width,
+            height: crop_height,
+            crop: Crop {
+                film_width: width,
+                film_height: height,
+                x,
+                y,
+            },
+            filter,
+        })
     }
 
     fn sampler(&mut self, id: usize) -> Result<(), XmlError> {
@@ -1272,6 +1311,77 @@ fn check_similarity(m: &DAffine3) -> Result<(), String> {
     }
 }
 
+/// A perspective sensor's vertical field of view (degrees) on a film of this aspect: from
+/// `fov` along `fov_axis`, or from `focal_length` (50 mm by default) across the diagonal;
+/// principal point offsets other than 0 are refused.
+fn perspective_fov_y(object: &Object, params: &mut Params, aspect: f64) -> Result<f64, XmlError> {
+    let fov = params.float("fov")?;
+    let focal = params.string("focal_length")?;
+    let axis = params.string("fov_axis")?;
+    let fov_y = match (fov, focal) {
+        (Some(_), Some((_, spot))) => {
+            return Err(XmlError::at(
+                &spot,
+                "perspective: give fov or focal_length, not both",
+            ));
+        }
+        (Some((fov, spot)), None) => {
+            if !(fov > 0.0 && fov < 180.0) {
+                return Err(XmlError::at(
+                    &spot,
+                    format!("fov {fov} must lie in (0, 180) degrees"),
+                ));
+            }
+            let (axis, axis_spot) = axis.unwrap_or(("x", spot));
+            fov_y_degrees(fov, axis, aspect).map_err(|m| XmlError::at(&axis_spot, m))?
+        }
+        (None, focal) => {
+            if let Some((_, spot)) = axis {
+                return Err(XmlError::at(
+                    &spot,
+                    "fov_axis applies to fov, not to focal_length",
+                ));
+            }
+            let (text, spot) = focal.unwrap_or(("50mm", object.spot.clone()));
+            let mm = text
+                .strip_suffix("mm")
+                .unwrap_or(text)
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite() && *v > 0.0)
+                .ok_or_else(|| {
+                    XmlError::at(
+                        &spot,
+                        format!(
+                            "focal_length \"{}\" is not of the form <x>mm",
+                            super::super::echo(text)
+                        ),
+                    )
+                })?;
+            // A 35 mm film's diagonal over twice the focal length.
+            let diagonal_fov = 2.0
+                * ((36.0f64 * 36.0 + 24.0 * 24.0).sqrt() / (2.0 * mm))
+                    .atan()
+                    .to_degrees();
+            fov_y_degrees(diagonal_fov, "diagonal", aspect).map_err(|m| XmlError::at(&spot, m))?
+        }
+    };
+    for name in ["principal_point_offset_x", "principal_point_offset_y"] {
+        if let Some((v, spot)) = params.float(name)?
+            && v != 0.0
+        {
+            return Err(XmlError::at(
+                &spot,
+                format!(
+                    "perspective: {name} {v} is not supported (only 0: the image centred on the view)"
+                ),
+            ));
+        }
+    }
+    Ok(fov_y)
+}
+
 /// Near and far clipping distances a perspective sensor gives (checked against the scene once
 /// its triangles are placed: see `check_clip_planes`).
 #[derive(Clone, Debug)]
@@ -1293,7 +1403,7 @@ fn check_clip_planes(world: &World) -> Result<(), XmlError> {
         return Ok(());
     }
     let tan_y = (0.5 * (camera.fov_y_degrees as f64).to_radians()).tan();
-    let tan_x = tan_y * camera.width as f64 / camera.height as f64;
+    let tan_x = tan_y * camera.crop.film_width as f64 / camera.crop.film_height as f64;
     let (o, r, u, f) = (
         camera.position.as_dvec3(),
         camera.right.as_dvec3(),
@@ -1314,14 +1424,28 @@ fn check_clip_planes(world: &World) -> Result<(), XmlError> {
         for tri in &shape.0.triangles {
             let corners = tri.map(|i| local[i as usize]);
             // Frustum sides: x <= z tan_x, -x <= z tan_x, y <= z tan_y, -y <= z tan_y, z >= 0,
-            // each as a plane a.p <= b.
-            let sides = [
-                (DVec3::new(1.0, 0.0, -tan_x), 0.0),
-                (DVec3::new(-1.0, 0.0, -tan_x), 0.0),
-                (DVec3::new(0.0, 1.0, -tan_y), 0.0),
-                (DVec3::new(0.0, -1.0, -tan_y), 0.0),
-                (DVec3::new(0.0, 0.0, -1.0), 0.0),
-            ];
+            // each as a plane a.p <= b; an orthographic camera's box: |x| <= half width,
+            // |y| <= half height, z >= near.
+            let sides = match camera.projection {
+                Projection::Perspective => [
+                    (DVec3::new(1.0, 0.0, -tan_x), 0.0),
+                    (DVec3::new(-1.0, 0.0, -tan_x), 0.0),
+                    (DVec3::new(0.0, 1.0, -tan_y), 0.0),
+                    (DVec3::new(0.0, -1.0, -tan_y), 0.0),
+                    (DVec3::new(0.0, 0.0, -1.0), 0.0),
+                ],
+                Projection::Orthographic {
+                    half_width,
+                    half_height,
+                    near,
+                } => [
+                    (DVec3::X, half_width as f64),
+                    (-DVec3::X, half_width as f64),
+                    (DVec3::Y, half_height as f64),
+                    (-DVec3::Y, half_height as f64),
+                    (-DVec3::Z, -near as f64),
+                ],
+            };
             if let Some((near, spot)) = &clip.near {
                 let mut planes = sides.to_vec();
                 planes.push((DVec3::Z, *near));
@@ -1329,7 +1453,7 @@ fn check_clip_planes(world: &World) -> Result<(), XmlError> {
                     return Err(XmlError::at(
                         spot,
                         format!(
-                            "near_clip {near} hides part of the scene in view: camera rays are not                              clipped in stagelight (lower near_clip below the nearest visible surface)"
+                            "near_clip {near} hides part of the scene in view: camera rays are not clipped in stagelight (lower near_clip below the nearest visible surface)"
                         ),
                     ));
                 }
@@ -1341,7 +1465,7 @@ fn check_clip_planes(world: &World) -> Result<(), XmlError> {
                     return Err(XmlError::at(
                         spot,
                         format!(
-                            "far_clip {far} hides part of the scene in view: camera rays are not                              clipped in stagelight (raise far_clip beyond the farthest surface)"
+                            "far_clip {far} hides part of the scene in view: camera rays are not clipped in stagelight (raise far_clip beyond the farthest surface)"
                         ),
                     ));
                 }
@@ -1461,19 +1585,36 @@ pub fn fov_y_degrees(fov: f64, axis: &str, aspect: f64) -> Result<f64, String> {
     })
 }
 
-/// The camera of a sensor's to_world: Mitsuba's camera looks along its +z with +y up; the
-/// image's right is its -x.
-fn camera_of(m: &DMat4, fov_y: f64, width: u32, height: u32) -> Result<Camera, String> {
+/// What a sensor projects through.
+#[derive(Clone, Copy, Debug)]
+enum Lens {
+    Pinhole {
+        fov_y: f64,
+    },
+    /// Mitsuba's orthographic sensor, its rays starting `near` (camera units) along its +z.
+    Orthographic {
+        near: f64,
+    },
+}
+
+/// The camera of a sensor's to_world on a `film_width` x `film_height` film (the whole film,
+/// no filter: the caller sets those): Mitsuba's camera looks along its +z with +y up; the
+/// image's right is its -x. An orthographic sensor's view is camera x in [-1, 1] and y in
+/// [-1/aspect, 1/aspect], so to_world's scale along x sets the view's width.
+fn camera_of(m: &DMat4, lens: Lens, film_width: u32, film_height: u32) -> Result<Camera, String> {
     let affine = super::document::affine(m).ok_or("a sensor's to_world must be affine")?;
     let position = affine.transform_point3(DVec3::ZERO);
-    let forward = affine
-        .transform_vector3(DVec3::Z)
+    let z = affine.transform_vector3(DVec3::Z);
+    let forward = z
         .try_normalize()
         .ok_or("the sensor's to_world flattens its view direction")?;
-    let up = affine.transform_vector3(DVec3::Y);
-    let right = -affine.transform_vector3(DVec3::X);
+    let (up, right) = (
+        affine.transform_vector3(DVec3::Y),
+        -affine.transform_vector3(DVec3::X),
+    );
+    let (half_width, half_height) = (right.length(), up.length());
     // The frame must stay orthogonal: a sensor's to_world is a rotation, translation and
-    // possibly a mirror; shear would skew the image.
+    // possibly a mirror (and, orthographic, a scale); shear would skew the image.
     let (up, right) = (
         up.try_normalize()
             .ok_or("the sensor's to_world flattens its up direction")?,
@@ -1488,19 +1629,43 @@ fn camera_of(m: &DMat4, fov_y: f64, width: u32, height: u32) -> Result<Camera, S
     if position.abs().max_element() >= crate::scene::MAX_COORDINATE {
         return Err("the sensor's position is too far out".into());
     }
-    if !(fov_y > 0.0 && fov_y < 180.0) {
-        return Err(format!(
-            "the vertical field of view {fov_y} degrees is out of (0, 180)"
-        ));
-    }
+    let aspect = film_width as f64 / film_height as f64;
+    let (fov_y, projection) = match lens {
+        Lens::Pinhole { fov_y } => {
+            if !(fov_y > 0.0 && fov_y < 180.0) {
+                return Err(format!(
+                    "the vertical field of view {fov_y} degrees is out of (0, 180)"
+                ));
+            }
+            (fov_y, Projection::Perspective)
+        }
+        Lens::Orthographic { near } => {
+            let extent = half_width.max(half_height / aspect).max(near * z.length());
+            if !(extent.is_finite() && extent < crate::scene::MAX_COORDINATE) {
+                return Err("the orthographic sensor's view is too large".into());
+            }
+            // The field of view of a pinhole is meaningless here; kept at a valid value.
+            (
+                90.0,
+                Projection::Orthographic {
+                    half_width: half_width as f32,
+                    half_height: (half_height / aspect) as f32,
+                    near: (near * z.length()) as f32,
+                },
+            )
+        }
+    };
     Ok(Camera {
         position: position.as_vec3(),
         forward: forward.as_vec3(),
         right: right.as_vec3(),
         up: up.as_vec3(),
         fov_y_degrees: fov_y as f32,
-        width,
-        height,
+        width: film_width,
+        height: film_height,
+        crop: Crop::whole(film_width, film_height),
+        projection,
+        filter: PixelFilter::Box,
     })
 }
 
