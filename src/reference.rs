@@ -341,7 +341,7 @@ impl std::fmt::Write for Fnv1a {
 }
 
 /// A fingerprint of what a render depends on in a prepared scene: camera, triangles,
-/// materials and emitters (their Debug text, which prints floats exactly). A scene edited
+/// materials (sides and textures too) and emitters (their Debug text, which prints floats exactly). A scene edited
 /// after a reference was started, mesh files included, gets a different fingerprint.
 pub fn scene_fingerprint(data: &SceneData) -> u64 {
     use std::fmt::Write;
@@ -349,8 +349,15 @@ pub fn scene_fingerprint(data: &SceneData) -> u64 {
     let mut hash = Fnv1a::new();
     let _ = write!(
         hash,
-        "{:?}{:?}{:?}{:?}",
-        s.camera, s.triangles, s.materials, s.emitters
+        "{:?}{:?}{:?}{:?}{:?}{:?}{:?}{:?}",
+        s.camera,
+        s.triangles,
+        s.materials,
+        s.emitters,
+        s.black_behind,
+        s.reflectance_texture,
+        s.textures,
+        s.triangle_uvs
     );
     hash.0
 }

@@ -348,7 +348,7 @@ impl<'a> GatherPoint<'a> {
             ng,
             frame,
             wo_local: frame.to_local(visible.wo[i]),
-            material: scene.materials[scene.triangles.material[tri as usize] as usize],
+            material: scene.material_at(tri, p),
             accel: &data.accel,
         })
     }

@@ -11,6 +11,7 @@ pub mod parse;
 pub mod ply;
 pub mod prepare;
 pub mod shapes;
+pub mod textures;
 pub mod world;
 
 pub use parse::{Located, ParsedScene, parse};
@@ -138,6 +139,12 @@ pub struct PreparedScene {
     pub materials: Vec<Material>,
     /// Per material: black when seen from behind its geometric normal (see `material_seen`).
     pub black_behind: Vec<bool>,
+    /// Per material: the index into `textures` of its reflectance, if textured (a Diffuse's).
+    pub reflectance_texture: Vec<Option<u32>>,
+    pub textures: Vec<textures::Texture>,
+    /// Per triangle, the uvs of its corners (Mitsuba's (0, 0), (1, 0), (0, 1) where the mesh has
+    /// none); empty when no material is textured.
+    pub triangle_uvs: Vec<[glam::Vec2; 3]>,
     pub emitters: Emitters,
     pub bounds_min: Vec3,
     pub bounds_max: Vec3,
@@ -186,12 +193,44 @@ impl PreparedScene {
     /// surface) sees it: a one-sided material seen from behind its geometric normal `ng` (not
     /// flipped to any side) is `BLACK`, as Mitsuba's `diffuse` outside a `twosided`.
     #[inline(always)]
-    pub fn material_seen(&self, tri: u32, wo: Vec3, ng: Vec3) -> Material {
+    pub fn material_seen(&self, tri: u32, p: Vec3, wo: Vec3, ng: Vec3) -> Material {
         if self.seen_from_behind(tri, wo, ng) {
             BLACK
         } else {
-            self.materials[self.triangles.material[tri as usize] as usize]
+            self.material_at(tri, p)
         }
+    }
+
+    /// The material of triangle `tri` at point `p` on it, its textures looked up there.
+    #[inline(always)]
+    pub fn material_at(&self, tri: u32, p: Vec3) -> Material {
+        let m = self.triangles.material[tri as usize] as usize;
+        let mut material = self.materials[m];
+        if let Some(t) = self.reflectance_texture[m]
+            && let Material::Diffuse { reflectance } = &mut material
+        {
+            *reflectance = self.textures[t as usize].eval(self.uv_at(tri, p));
+        }
+        material
+    }
+
+    /// The surface uv at point `p` of triangle `tri` (from its barycentric coordinates).
+    #[inline]
+    pub fn uv_at(&self, tri: u32, p: Vec3) -> glam::Vec2 {
+        let t = &self.triangles;
+        let i = tri as usize;
+        let (p0, e1, e2) = (t.p0[i], t.p1[i] - t.p0[i], t.p2[i] - t.p0[i]);
+        let v = p - p0;
+        let (d00, d01, d11) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+        let (d20, d21) = (v.dot(e1), v.dot(e2));
+        let den = d00 * d11 - d01 * d01;
+        let (b1, b2) = if den > 0.0 {
+            ((d11 * d20 - d01 * d21) / den, (d00 * d21 - d01 * d20) / den)
+        } else {
+            (0.0, 0.0)
+        };
+        let [uv0, uv1, uv2] = self.triangle_uvs[i];
+        uv0 * (1.0 - b1 - b2) + uv1 * b1 + uv2 * b2
     }
 
     /// Whether `material_seen` makes triangle `tri` black: a ray from `wo` sees the back of a

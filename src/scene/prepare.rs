@@ -56,16 +56,23 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         &MaterialInfo,
         &Material,
         Option<&super::world::OneSided>,
+        Option<&super::world::ReflectanceTexture>,
     )>();
     let mut declared: Vec<_> = material_query.iter().collect();
     declared.sort_by_key(|m| m.1.order);
     let used: HashSet<Entity> = objects.iter().map(|o| o.4.0).collect();
     let mut materials = Vec::new();
     let mut black_behind = Vec::new();
+    let mut reflectance_texture = Vec::new();
+    let mut textures = Vec::new();
     let mut material_index = HashMap::new(); // entity -> index into `materials`
     let mut warnings = scene.warnings.clone();
-    for &(entity, info, material, one_sided) in &declared {
+    for &(entity, info, material, one_sided, texture) in &declared {
         if used.contains(&entity) {
+            reflectance_texture.push(texture.map(|t| {
+                textures.push(t.0.clone());
+                textures.len() as u32 - 1
+            }));
             material_index.insert(entity, materials.len() as u32);
             materials.push(*material);
             // Conductors are black from behind by their own maths; only the Lambertian lobe,
@@ -79,6 +86,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         }
     }
     let mut power = DVec3::ZERO;
+    let mut triangle_uvs = Vec::new();
 
     let mut triangles = TriangleColumns::default();
     let mut emitters = Emitters::default();
@@ -143,6 +151,12 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         let mut emitting = 0usize;
         for &[a, b, c] in &mesh.triangles {
             let corners = if reverse { [a, c, b] } else { [a, b, c] };
+            // Mitsuba's uv where a mesh has none: the barycentric coordinates (b1, b2).
+            let uvs = match &mesh.uvs {
+                Some(uvs) => corners.map(|i| uvs[i as usize].as_vec2()),
+                None if reverse => [glam::Vec2::ZERO, glam::Vec2::Y, glam::Vec2::X],
+                None => [glam::Vec2::ZERO, glam::Vec2::X, glam::Vec2::Y],
+            };
             let [p0, p1, p2] = corners.map(|i| positions[i as usize]);
             let (e1, e2, e3) = (
                 (p1 - p0).as_dvec3(),
@@ -173,6 +187,9 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             triangles.p2.push(p2);
             triangles.normal.push(e1.cross(e2).normalize().as_vec3());
             triangles.material.push(material);
+            if !textures.is_empty() {
+                triangle_uvs.push(uvs);
+            }
 
             let vertex_normals = normals
                 .as_ref()
@@ -292,6 +309,9 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         triangles,
         materials,
         black_behind,
+        reflectance_texture,
+        textures,
+        triangle_uvs,
         emitters,
         bounds_min,
         bounds_max,

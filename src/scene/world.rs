@@ -38,6 +38,10 @@ pub struct PointLight {
     pub order: u32,
 }
 
+/// A material entity's textured reflectance (a Mitsuba `diffuse` with a nested texture).
+#[derive(Clone, Debug)]
+pub struct ReflectanceTexture(pub super::textures::Texture);
+
 /// Marks a material entity that reflects only on the side its geometric normal faces (a
 /// Mitsuba `diffuse` not wrapped in `twosided`): seen from behind it is black.
 #[derive(Clone, Copy, Debug)]

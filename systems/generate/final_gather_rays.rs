@@ -46,7 +46,7 @@ crate::system! {
                     }
                     let key = sampler.key(Stream::FinalGather, pixel as u64, pass);
                     c.key[i] = key;
-                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
+                    let material = scene.material_at(tri, visible.p[pixel]);
                     let (ng, wo) = (visible.ng[pixel], visible.wo[pixel]);
                     let frame = Frame::from_normal(visible.ns[pixel]);
                     let wo_local = frame.to_local(wo);

@@ -90,7 +90,7 @@ crate::system! {
                         // visible point, the chain ends.
                         continue;
                     }
-                    let material = scene.materials[scene.triangles.material[tri as usize] as usize];
+                    let material = scene.material_at(tri, sp.p);
                     let (mut ng, mut ns) = (sp.ng, sp.ns);
                     if wo.dot(ng) < 0.0 && matches!(material, Material::Diffuse { .. }) {
                         // Lambertian surfaces reflect on both sides: gather on wo's side.

@@ -13,9 +13,10 @@ use super::document::{
 use crate::bsdf::Material;
 use crate::film::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
+use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
     DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, OneSided, PointLight,
-    SceneWorld, Shape, SourceSpot, Transform,
+    ReflectanceTexture, SceneWorld, Shape, SourceSpot, Transform,
 };
 use crate::scene::{Camera, Crop, Limits, Projection, SceneError};
 
@@ -47,6 +48,7 @@ pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
 pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor";
 pub const EMITTERS: &str = "area, point, spot";
+pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
 pub const FILMS: &str = "hdrfilm";
 pub const RFILTERS: &str = "box, gaussian";
@@ -743,6 +745,7 @@ impl<'a> Builder<'a> {
         }
         let object = self.object(id);
         let (material, sides) = self.material_of(object)?;
+        let texture = self.reflectance_texture_of(object)?;
         let name = match &object.id {
             Some(id) => id.clone(),
             None => format!("{} at line {}", object.kind, object.spot.line),
@@ -755,6 +758,11 @@ impl<'a> Builder<'a> {
         if sides == Sides::One {
             self.world
                 .insert_one(entity, OneSided)
+                .expect("just spawned");
+        }
+        if let Some(texture) = texture {
+            self.world
+                .insert_one(entity, ReflectanceTexture(texture))
                 .expect("just spawned");
         }
         self.materials.insert(id, entity);
@@ -915,13 +923,120 @@ impl<'a> Builder<'a> {
         Ok((material, Sides::One))
     }
 
-    fn diffuse(&self, object: &Object) -> Result<Material, XmlError> {
+    /// The texture of a (twosided) diffuse's reflectance, if it has one.
+    fn reflectance_texture_of(&self, object: &Object) -> Result<Option<Texture>, XmlError> {
+        let diffuse = match object.kind.as_str() {
+            "diffuse" => object,
+            "twosided" => match object.children.first() {
+                Some(c) => self.object(c.object),
+                None => return Ok(None),
+            },
+            _ => return Ok(None),
+        };
+        match diffuse.children.first() {
+            Some(c) => self.texture(c.object).map(Some),
+            None => Ok(None),
+        }
+    }
+
+    /// A `bitmap` or `checkerboard` texture.
+    fn texture(&self, id: usize) -> Result<Texture, XmlError> {
+        let object = self.object(id);
         let mut params = Params::new(object);
         if let Some(c) = object.children.first() {
             return Err(XmlError::at(
                 &c.spot,
-                "diffuse: a nested texture is not supported yet (textures are not modelled yet)",
+                "a texture inside a texture is not supported",
             ));
+        }
+        let to_uv = match params.transform("to_uv")? {
+            Some((m, _)) => UvTransform::from_mat4(&m),
+            None => UvTransform::IDENTITY,
+        };
+        let pattern = match object.kind.as_str() {
+            "bitmap" => {
+                let (name, spot) = params
+                    .string("filename")?
+                    .ok_or_else(|| XmlError::at(&object.spot, "bitmap needs a filename"))?;
+                let path = self.doc.resolve(name);
+                let raw = params.boolean("raw")?.unwrap_or(false);
+                let filter = match params.string("filter_type")? {
+                    None | Some(("bilinear", _)) => Filter::Bilinear,
+                    Some(("nearest", _)) => Filter::Nearest,
+                    Some((other, spot)) => {
+                        return Err(XmlError::at(
+                            &spot,
+                            format!(
+                                "bitmap filter_type \"{}\" is not supported (supported: bilinear, nearest)",
+                                super::super::echo(other)
+                            ),
+                        ));
+                    }
+                };
+                let wrap = match params.string("wrap_mode")? {
+                    None | Some(("repeat", _)) => Wrap::Repeat,
+                    Some(("mirror", _)) => Wrap::Mirror,
+                    Some(("clamp", _)) => Wrap::Clamp,
+                    Some((other, spot)) => {
+                        return Err(XmlError::at(
+                            &spot,
+                            format!(
+                                "bitmap wrap_mode \"{}\" is not supported (supported: repeat, mirror, clamp)",
+                                super::super::echo(other)
+                            ),
+                        ));
+                    }
+                };
+                params.finish()?;
+                let (width, height, texels) =
+                    read_image(&path, raw).map_err(|m| XmlError::at(&spot, m))?;
+                if width == 0 || height == 0 || texels.iter().any(|t| !t.is_finite()) {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!(
+                            "{}: an empty image or one with NaN or infinite texels",
+                            path.display()
+                        ),
+                    ));
+                }
+                Pattern::Bitmap(Bitmap {
+                    width,
+                    height,
+                    texels: std::sync::Arc::new(texels),
+                    filter,
+                    wrap,
+                })
+            }
+            "checkerboard" => {
+                let color0 = params
+                    .color("color0", Role::Reflectance)?
+                    .map_or(Vec3::splat(0.4), |(c, _)| c);
+                let color1 = params
+                    .color("color1", Role::Reflectance)?
+                    .map_or(Vec3::splat(0.2), |(c, _)| c);
+                params.finish()?;
+                Pattern::Checkerboard { color0, color1 }
+            }
+            _ => return Err(unsupported(object, TEXTURES)),
+        };
+        Ok(Texture { pattern, to_uv })
+    }
+
+    fn diffuse(&self, object: &Object) -> Result<Material, XmlError> {
+        let mut params = Params::new(object);
+        if let Some(c) = object.children.first() {
+            let child = self.object(c.object);
+            if child.class != Class::Texture || c.name.as_deref() != Some("reflectance") {
+                return Err(XmlError::at(
+                    &c.spot,
+                    "diffuse: only a texture named \"reflectance\" may be nested",
+                ));
+            }
+            // Read by `reflectance_texture_of`; the constant stands for it in the material.
+            params.finish()?;
+            return Ok(Material::Diffuse {
+                reflectance: Vec3::splat(0.5),
+            });
         }
         let reflectance = params
             .color("reflectance", Role::Reflectance)?
