@@ -12,11 +12,10 @@
 //! beyond the film's range (a pixel sum beyond +-2^63 times the film's scale) is rejected the
 //! same way and counted apart (`out_of_range`).
 
-pub mod filter;
 pub mod fixed;
 pub mod output;
 
-pub use filter::{Gaussian, PixelFilter};
+pub use crate::scene::filter::{self, Gaussian, PixelFilter};
 use fixed::{FixedRgb, Rejected};
 
 use glam::{DVec3, Vec2, Vec3};

@@ -213,7 +213,7 @@ mod tests {
             height: 48,
             crop: super::super::Crop::whole(64, 48),
             projection: Projection::Perspective,
-            filter: crate::film::PixelFilter::Box,
+            filter: crate::scene::filter::PixelFilter::Box,
         }
     }
 

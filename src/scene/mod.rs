@@ -3,6 +3,7 @@
 
 mod camera;
 pub use camera::Frustum;
+pub mod filter;
 pub mod format;
 pub mod lights;
 pub mod mitsuba;
@@ -42,7 +43,7 @@ pub struct Camera {
     pub crop: Crop,
     pub projection: Projection,
     /// How samples are reconstructed into pixels.
-    pub filter: crate::film::PixelFilter,
+    pub filter: crate::scene::filter::PixelFilter,
 }
 
 /// A crop window (Mitsuba's hdrfilm crop_offset_x/y, crop_width/height): the rendered image

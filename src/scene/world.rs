@@ -244,7 +244,7 @@ fn make_camera(desc: &CameraDesc) -> Result<Camera, String> {
         height: desc.height.0,
         crop: super::Crop::whole(desc.width.0, desc.height.0),
         projection: super::Projection::Perspective,
-        filter: crate::film::PixelFilter::Box,
+        filter: crate::scene::filter::PixelFilter::Box,
     })
 }
 

@@ -131,6 +131,22 @@ fn broken() -> Vec<(
 )> {
     vec![
         (
+            "a texture that is not an image",
+            vec![
+                (
+                    "a.xml",
+                    scene_with(
+                        "<shape type=\"rectangle\"><bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\"><string name=\"filename\" value=\"notes.txt\"/></texture></bsdf></shape>",
+                    ),
+                ),
+                ("notes.txt", "not an image\n".to_string()),
+            ],
+            "a.xml",
+            5,
+            88,
+            "is not an image stagelight reads",
+        ),
+        (
             "unknown plugin",
             vec![("a.xml", scene_with("<bsdf type=\"principled\" id=\"p\"/>"))],
             "a.xml",
@@ -657,4 +673,29 @@ fn textures_agree_with_mitsuba_in_every_integrator() {
         }
     }
     assert_integrators_agree_with_mitsuba(scene, "textured_mitsuba.exr");
+}
+
+/// A texture declared at the top level and referred to by id from two diffuse BSDFs: read once
+/// per use, the same values, as Mitsuba shares it.
+#[test]
+fn a_top_level_texture_is_shared_by_reference() {
+    let text = scene_with(
+        "<texture type=\"checkerboard\" id=\"checks\"><rgb name=\"color0\" value=\"0.9\"/></texture>\n\
+         <shape type=\"rectangle\"><bsdf type=\"diffuse\"><ref name=\"reflectance\" id=\"checks\"/></bsdf>\n\
+         <emitter type=\"area\"><rgb name=\"radiance\" value=\"1\"/></emitter></shape>\n\
+         <shape type=\"rectangle\"><transform name=\"to_world\"><translate z=\"-1\"/></transform>\n\
+         <bsdf type=\"twosided\"><bsdf type=\"diffuse\"><ref name=\"reflectance\" id=\"checks\"/></bsdf></bsdf></shape>",
+    );
+    let path = temp_dir("mitsuba-texture-ref").join("a.xml");
+    let scene = scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine())
+        .unwrap()
+        .0;
+    assert_eq!(scene.textures.len(), 2);
+    assert_eq!(scene.textures[0], scene.textures[1]);
+    assert!(scene.reflectance_texture.iter().all(Option::is_some));
+    assert_eq!(scene.triangle_uvs.len(), scene.triangles.len());
+    // uv (0.1, 0.1) and (0.6, 0.1) of the first rectangle: color0 (0.9) then the default color1.
+    let at = |u: f32, v: f32| scene.textures[0].eval(glam::Vec2::new(u, v));
+    assert_eq!(at(0.1, 0.1), glam::Vec3::splat(0.9));
+    assert_eq!(at(0.6, 0.1), glam::Vec3::splat(0.2));
 }

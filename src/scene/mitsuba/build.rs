@@ -11,7 +11,7 @@ use super::document::{
     Child, Class, Defines, Document, Object, Property, Spectrum, Spot, Value, XmlError,
 };
 use crate::bsdf::Material;
-use crate::film::{Gaussian, PixelFilter};
+use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
@@ -394,13 +394,9 @@ impl<'a> Builder<'a> {
                         ));
                     }
                     if object.class == Class::Texture {
-                        return Err(XmlError::at(
-                            &object.spot,
-                            format!(
-                                "texture \"{}\" is not supported (textures are not modelled yet)",
-                                super::super::echo(&object.kind)
-                            ),
-                        ));
+                        // Checked now (a diffuse refers to it by id); read where it is used.
+                        self.texture(child.object)?;
+                        continue;
                     }
                     // Checked now, so an unused BSDF's errors are not hidden.
                     self.material(child.object)?;
@@ -689,7 +685,7 @@ impl<'a> Builder<'a> {
             Some(f) if f.kind == "gaussian" => {
                 let mut p = Params::new(f);
                 let stddev = match p.float("stddev")? {
-                    None => crate::film::filter::DEFAULT_STDDEV,
+                    None => crate::scene::filter::DEFAULT_STDDEV,
                     Some((v, spot)) => {
                         // Wider than 64 pixels would splat each sample into 65536 pixels.
                         if !(v.is_finite() && v > 0.0 && v <= 16.0) {
@@ -778,7 +774,7 @@ impl<'a> Builder<'a> {
                 Some(c) => Err(XmlError::at(
                     &c.spot,
                     format!(
-                        "bsdf \"{}\": a nested <{}> is not supported here (textures are not modelled yet)",
+                        "bsdf \"{}\": a nested <{}> is not supported here (textures are read for a diffuse's reflectance only)",
                         super::super::echo(&object.kind),
                         self.object(c.object).class.tag()
                     ),
