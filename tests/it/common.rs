@@ -51,6 +51,23 @@ pub fn render_pt(
     )
 }
 
+/// A render by any integrator at `spp` samples per pixel (never stopped early).
+pub fn render_with(
+    kind: stagelight::integrators::IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &stagelight::integrators::RenderSettings,
+    spp: u64,
+) -> Image {
+    let stop = AtomicBool::new(false);
+    let control = Control {
+        stop: &stop,
+        progress: &|_, _| {},
+    };
+    stagelight::integrators::render(kind, data, settings, Budget::SamplesPerPixel(spp), &control)
+        .film
+        .image()
+}
+
 /// Mean and standard deviation of one channel over pixels.
 pub fn pixel_stats(image: &Image, channel: usize) -> (f64, f64) {
     let n = image.pixels.len() as f64;

@@ -484,9 +484,8 @@ fn one_sided_scene(card: &str) -> PreparedScene {
 /// and the same card wrapped in `twosided` is not (light from the floor reaches its back).
 #[test]
 fn one_sided_diffuse_is_black_from_behind_in_every_integrator() {
-    use stagelight::integrators::{Budget, Control, IntegratorKind, RenderSettings, SceneData};
+    use stagelight::integrators::{IntegratorKind, RenderSettings, SceneData};
     use std::sync::Arc;
-    use std::sync::atomic::AtomicBool;
     // Pixels of the card's back, well inside its silhouette (rows 8-19, columns 14-33).
     let card_back = |image: &stagelight::film::Image| -> (f64, usize) {
         let (mut sum, mut n) = (0.0, 0);
@@ -502,23 +501,11 @@ fn one_sided_diffuse_is_black_from_behind_in_every_integrator() {
     for kind in IntegratorKind::all() {
         for (card, black) in [("card_one_sided", true), ("card_two_sided", false)] {
             let data = Arc::new(SceneData::new(one_sided_scene(card)));
-            let stop = AtomicBool::new(false);
-            let control = Control {
-                stop: &stop,
-                progress: &|_, _| {},
-            };
             let settings = RenderSettings {
                 max_depth: 5,
                 ..RenderSettings::default()
             };
-            let outcome = stagelight::integrators::render(
-                kind,
-                data,
-                &settings,
-                Budget::SamplesPerPixel(4),
-                &control,
-            );
-            let (sum, n) = card_back(&outcome.film.image());
+            let (sum, n) = card_back(&crate::common::render_with(kind, data, &settings, 4));
             if black {
                 assert_eq!(sum, 0.0, "{kind}: the one-sided card's back is not black");
             } else {
@@ -573,9 +560,8 @@ fn spot_light_agrees_with_mitsuba_in_every_integrator() {
 }
 
 fn assert_integrators_agree_with_mitsuba(scene: PreparedScene, reference: &str) {
-    use stagelight::integrators::{Budget, Control, IntegratorKind, RenderSettings, SceneData};
+    use stagelight::integrators::{IntegratorKind, RenderSettings, SceneData};
     use std::sync::Arc;
-    use std::sync::atomic::AtomicBool;
     let reference = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("tests/scenes/mitsuba")
         .join(reference);
@@ -590,11 +576,6 @@ fn assert_integrators_agree_with_mitsuba(scene: PreparedScene, reference: &str) 
         ("mlt", 64),
     ] {
         let kind = IntegratorKind::from_name(name).unwrap();
-        let stop = AtomicBool::new(false);
-        let control = Control {
-            stop: &stop,
-            progress: &|_, _| {},
-        };
         let mut settings = RenderSettings {
             max_depth: 4,
             seed: 3,
@@ -603,14 +584,8 @@ fn assert_integrators_agree_with_mitsuba(scene: PreparedScene, reference: &str) 
         // VCM's default radius, a multiple of a pixel's width on this 48-pixel image, blurs the
         // spot's cone edge and the 1/d^2 peak by 3-4%: a small one shows the estimator.
         settings.photons.radius = Some(0.01);
-        let outcome = stagelight::integrators::render(
-            kind,
-            data.clone(),
-            &settings,
-            Budget::SamplesPerPixel(spp),
-            &control,
-        );
-        let mean = image_mean(&outcome.film.image());
+        let image = crate::common::render_with(kind, data.clone(), &settings, spp);
+        let mean = image_mean(&image);
         for c in 0..3 {
             let ratio = mean[c] / expected[c];
             assert!(
@@ -675,8 +650,8 @@ fn textures_agree_with_mitsuba_in_every_integrator() {
     assert_integrators_agree_with_mitsuba(scene, "textured_mitsuba.exr");
 }
 
-/// A texture declared at the top level and referred to by id from two diffuse BSDFs: read once
-/// per use, the same values, as Mitsuba shares it.
+/// A texture declared at the top level and referred to by id from two diffuse BSDFs: read once,
+/// both materials looking up the same values, as Mitsuba shares it.
 #[test]
 fn a_top_level_texture_is_shared_by_reference() {
     let text = scene_with(

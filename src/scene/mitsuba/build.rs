@@ -270,6 +270,34 @@ impl<'a> Params<'a> {
         Ok(Some((rgb, p.spot.clone())))
     }
 
+    /// A string parameter that names one of `choices` (`default` when absent); any other value
+    /// is an error listing them.
+    fn keyword<T: Copy>(
+        &mut self,
+        name: &str,
+        choices: &[(&str, T)],
+        default: T,
+    ) -> Result<T, XmlError> {
+        let Some((value, spot)) = self.string(name)? else {
+            return Ok(default);
+        };
+        match choices.iter().find(|(k, _)| *k == value) {
+            Some(&(_, t)) => Ok(t),
+            None => {
+                let names: Vec<&str> = choices.iter().map(|(k, _)| *k).collect();
+                Err(XmlError::at(
+                    &spot,
+                    format!(
+                        "{} {name} \"{}\" is not supported (supported: {})",
+                        self.plugin(),
+                        super::super::echo(value),
+                        names.join(", ")
+                    ),
+                ))
+            }
+        }
+    }
+
     /// Marks these parameters read: they change only noise or nothing.
     fn ignore(&mut self, names: &[&str]) {
         for name in names {
@@ -308,6 +336,8 @@ struct Builder<'a> {
     default_material: Option<Entity>,
     default_diffuse: Option<Entity>,
     point_lights: u32,
+    /// Textures read so far, by object (shared by every ref, as the image data is).
+    textures: HashMap<usize, Texture>,
     objects: u32,
     triangles_so_far: u64,
     film: Option<FilmSpec>,
@@ -336,6 +366,7 @@ impl<'a> Builder<'a> {
             default_material: None,
             default_diffuse: None,
             point_lights: 0,
+            textures: HashMap::new(),
             objects: 0,
             triangles_so_far: 0,
             film: None,
@@ -920,7 +951,7 @@ impl<'a> Builder<'a> {
     }
 
     /// The texture of a (twosided) diffuse's reflectance, if it has one.
-    fn reflectance_texture_of(&self, object: &Object) -> Result<Option<Texture>, XmlError> {
+    fn reflectance_texture_of(&mut self, object: &Object) -> Result<Option<Texture>, XmlError> {
         let diffuse = match object.kind.as_str() {
             "diffuse" => object,
             "twosided" => match object.children.first() {
@@ -936,7 +967,17 @@ impl<'a> Builder<'a> {
     }
 
     /// A `bitmap` or `checkerboard` texture.
-    fn texture(&self, id: usize) -> Result<Texture, XmlError> {
+    fn texture(&mut self, id: usize) -> Result<Texture, XmlError> {
+        if let Some(t) = self.textures.get(&id) {
+            return Ok(t.clone());
+        }
+        let texture = self.read_texture(id)?;
+        self.textures.insert(id, texture.clone());
+        Ok(texture)
+    }
+
+    /// `texture`'s work, once per texture object (its image read once however many refs).
+    fn read_texture(&self, id: usize) -> Result<Texture, XmlError> {
         let object = self.object(id);
         let mut params = Params::new(object);
         if let Some(c) = object.children.first() {
@@ -956,33 +997,20 @@ impl<'a> Builder<'a> {
                     .ok_or_else(|| XmlError::at(&object.spot, "bitmap needs a filename"))?;
                 let path = self.doc.resolve(name);
                 let raw = params.boolean("raw")?.unwrap_or(false);
-                let filter = match params.string("filter_type")? {
-                    None | Some(("bilinear", _)) => Filter::Bilinear,
-                    Some(("nearest", _)) => Filter::Nearest,
-                    Some((other, spot)) => {
-                        return Err(XmlError::at(
-                            &spot,
-                            format!(
-                                "bitmap filter_type \"{}\" is not supported (supported: bilinear, nearest)",
-                                super::super::echo(other)
-                            ),
-                        ));
-                    }
-                };
-                let wrap = match params.string("wrap_mode")? {
-                    None | Some(("repeat", _)) => Wrap::Repeat,
-                    Some(("mirror", _)) => Wrap::Mirror,
-                    Some(("clamp", _)) => Wrap::Clamp,
-                    Some((other, spot)) => {
-                        return Err(XmlError::at(
-                            &spot,
-                            format!(
-                                "bitmap wrap_mode \"{}\" is not supported (supported: repeat, mirror, clamp)",
-                                super::super::echo(other)
-                            ),
-                        ));
-                    }
-                };
+                let filter = params.keyword(
+                    "filter_type",
+                    &[("bilinear", Filter::Bilinear), ("nearest", Filter::Nearest)],
+                    Filter::Bilinear,
+                )?;
+                let wrap = params.keyword(
+                    "wrap_mode",
+                    &[
+                        ("repeat", Wrap::Repeat),
+                        ("mirror", Wrap::Mirror),
+                        ("clamp", Wrap::Clamp),
+                    ],
+                    Wrap::Repeat,
+                )?;
                 params.finish()?;
                 let (width, height, texels) =
                     read_image(&path, raw).map_err(|m| XmlError::at(&spot, m))?;
