@@ -245,8 +245,9 @@ impl PathContext<'_> {
         match v.kind {
             VertexKind::Camera => Vec3::ZERO,
             VertexKind::Light => {
-                if let Some(profile) = self.point_profile(v) {
-                    Vec3::splat(lights::falloff(profile, wi))
+                if v.is_point_light() {
+                    let e = (v.triangle & !crate::scene::POINT_LIGHT) as usize;
+                    self.scene.emitters.profile_towards(e, wi)
                 } else if wi.dot(v.ng) > 0.0 {
                     Vec3::ONE
                 } else {
@@ -319,8 +320,8 @@ pub struct Joint {
 enum Lobe {
     /// A point on an emitter (its radiance is in `beta`): 1 on the emitting side.
     Light,
-    /// A point light, alike in every direction or a spot.
-    PointLight(lights::PointProfile),
+    /// Point light `e` (its intensity is in `beta`; `Emitters::profile_towards` shapes it).
+    PointLight(usize),
     /// Lambertian: reflectance / pi.
     Diffuse(Vec3),
     /// Any other connectible BSDF.
@@ -331,12 +332,21 @@ impl Joint {
     /// f(wo, wi) at vertex `v` (the one the joint was prepared for) for unit `wi`, given
     /// wi . ng and wi . ns.
     #[inline]
-    fn f(&self, v: &Vertex, wi: Vec3, wi_ng: f32, wi_ns: f32, mode: TransportMode) -> Vec3 {
+    #[allow(clippy::too_many_arguments)]
+    fn f(
+        &self,
+        emitters: &crate::scene::Emitters,
+        v: &Vertex,
+        wi: Vec3,
+        wi_ng: f32,
+        wi_ns: f32,
+        mode: TransportMode,
+    ) -> Vec3 {
         let f = match self.lobe {
             Lobe::Light => {
                 return if wi_ng > 0.0 { Vec3::ONE } else { Vec3::ZERO };
             }
-            Lobe::PointLight(profile) => return Vec3::splat(lights::falloff(&profile, wi)),
+            Lobe::PointLight(e) => return emitters.profile_towards(e, wi),
             _ if wi_ng * self.wo_ng <= 0.0 => return Vec3::ZERO,
             Lobe::Diffuse(value) => {
                 if (self.wo_ns > 0.0 && wi_ns > 0.0) || (self.wo_ns < 0.0 && wi_ns < 0.0) {
@@ -492,7 +502,7 @@ impl PathContext<'_> {
         let lobe = match v.kind {
             VertexKind::Camera => return None,
             VertexKind::Light if v.is_point_light() => {
-                Lobe::PointLight(*self.point_profile(v).unwrap_or(&None))
+                Lobe::PointLight((v.triangle & !crate::scene::POINT_LIGHT) as usize)
             }
             VertexKind::Light => Lobe::Light,
             VertexKind::Surface => match self.material_seen(v, wo) {
@@ -524,13 +534,21 @@ impl PathContext<'_> {
             return None;
         }
         let w = d / dist2.sqrt(); // from z towards y
-        let fz = zj.f(z, w, w.dot(z.ng), w.dot(z.ns), TransportMode::Radiance);
+        let emitters = &self.scene.emitters;
+        let fz = zj.f(
+            emitters,
+            z,
+            w,
+            w.dot(z.ng),
+            w.dot(z.ns),
+            TransportMode::Radiance,
+        );
         if fz == Vec3::ZERO {
             return None;
         }
         // Towards z from y: -w, whose dot products are those of w negated, exactly.
         let (w_ng_y, w_ns_y) = (w.dot(y.ng), w.dot(y.ns));
-        let fy = yj.f(y, -w, -w_ng_y, -w_ns_y, TransportMode::Importance);
+        let fy = yj.f(emitters, y, -w, -w_ng_y, -w_ns_y, TransportMode::Importance);
         let cos_y = if y.is_point_light() {
             1.0
         } else if y.kind == VertexKind::Light {

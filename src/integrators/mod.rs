@@ -543,6 +543,23 @@ pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Resu
     Ok(())
 }
 
+/// Refuses lights the integrator does not carry yet: a light at infinity (constant, envmap)
+/// renders under pt only, where paths that leave the scene see it and next-event estimation
+/// samples it; the bidirectional, photon-mapping and Metropolis integrators would need light
+/// paths that start at infinity, which they do not have yet.
+pub fn check_lights(
+    kind: IntegratorKind,
+    scene: &crate::scene::PreparedScene,
+) -> Result<(), String> {
+    if kind.as_str() != "pt" && scene.emitters.environment.is_some() {
+        return Err(format!(
+            "{kind} cannot render a light at infinity (a constant or envmap emitter) yet: only \
+             pt carries it; render it with pt"
+        ));
+    }
+    Ok(())
+}
+
 /// Renders a scene with an integrator from nothing.
 pub fn render(
     kind: IntegratorKind,

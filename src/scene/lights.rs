@@ -17,6 +17,30 @@ pub struct Spot {
     pub cos_beam: f32,
     /// 1 / (cutoff - beam width), the slope of the linear ramp in angle.
     pub inv_transition: f32,
+    /// A texture projected along the cone (Mitsuba's spot `texture`), if any.
+    pub projection: Option<SpotProjection>,
+}
+
+/// How a spot projects its texture: a direction `w` in the light's frame (`to_local * w`, +z
+/// along the axis) looks up uv = 1/2 + (x, y) / (2 z tan(cutoff)), so the cutoff cone's
+/// square of tangents spans the image (Mitsuba's `direction_to_uv`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SpotProjection {
+    pub to_local: glam::Mat3,
+    /// tan(cutoff).
+    pub uv_factor: f32,
+    /// Index into `Emitters::spot_textures`.
+    pub texture: u32,
+}
+
+impl SpotProjection {
+    /// The texture coordinates unit direction `w` looks up.
+    #[inline]
+    pub fn uv(&self, w: Vec3) -> Vec2 {
+        let local = self.to_local * w;
+        let scale = 0.5 / (local.z * self.uv_factor);
+        Vec2::new(0.5 + local.x * scale, 0.5 + local.y * scale)
+    }
 }
 
 impl Spot {
@@ -38,6 +62,7 @@ impl Spot {
             cutoff: cutoff as f32,
             cos_beam: beam.cos() as f32,
             inv_transition: (1.0 / (cutoff - beam)) as f32,
+            projection: None,
         })
     }
 

@@ -3,6 +3,7 @@
 
 mod camera;
 pub use camera::Frustum;
+pub mod environment;
 pub mod filter;
 pub mod format;
 pub mod lights;
@@ -108,6 +109,11 @@ pub struct Emitters {
     pub cdf: Vec<f32>,
     /// Total emitted power, sum of pi * area * radiance (RGB).
     pub total_power: Vec3,
+    /// The textures spots project (`lights::SpotProjection::texture` indexes them).
+    pub spot_textures: Vec<textures::Texture>,
+    /// The light at infinity, if the scene has one: the last emitter, its `triangle`
+    /// `ENVIRONMENT`.
+    pub environment: Option<environment::Environment>,
 }
 
 impl Emitters {
@@ -123,10 +129,41 @@ impl Emitters {
         self.triangle[e] & POINT_LIGHT != 0
     }
 
+    /// Whether every emitter is a triangle (no point light, no light at infinity).
+    #[inline]
+    pub fn only_triangles(&self) -> bool {
+        !self.has_point_lights() && self.environment.is_none()
+    }
+
+    /// The light at infinity with its emitter index.
+    #[inline]
+    pub fn environment(&self) -> Option<(usize, &environment::Environment)> {
+        self.environment
+            .as_ref()
+            .map(|env| (self.triangle.len() - 1, env))
+    }
+
     /// Point light `e`'s intensity towards unit direction `w`.
     #[inline]
     pub fn intensity_towards(&self, e: usize, w: Vec3) -> Vec3 {
-        self.radiance[e] * lights::falloff(&self.profile[e], w)
+        self.radiance[e] * self.profile_towards(e, w)
+    }
+
+    /// The fraction of point light `e`'s intensity it sends towards unit direction `w`, per
+    /// channel: its spot's falloff times the texture it projects there.
+    #[inline]
+    pub fn profile_towards(&self, e: usize, w: Vec3) -> Vec3 {
+        let profile = &self.profile[e];
+        let falloff = lights::falloff(profile, w);
+        match profile {
+            Some(lights::Spot {
+                projection: Some(projection),
+                ..
+            }) if falloff > 0.0 => {
+                self.spot_textures[projection.texture as usize].eval(projection.uv(w)) * falloff
+            }
+            _ => Vec3::splat(falloff),
+        }
     }
 }
 
@@ -183,6 +220,10 @@ pub struct LightSample {
 /// Marks a light vertex's `triangle` (and `Emitters::triangle`) as point light `e` in the low
 /// bits: scenes hold fewer than 2^31 triangles.
 pub const POINT_LIGHT: u32 = 1 << 31;
+
+/// `Emitters::triangle` of the light at infinity (no triangle has this id: scenes hold fewer
+/// than 2^30 triangles).
+pub const ENVIRONMENT: u32 = 1 << 30;
 
 /// What a one-sided surface is from behind: it reflects nothing.
 pub const BLACK: Material = Material::Diffuse {
@@ -254,6 +295,11 @@ impl PreparedScene {
         u_pick: f32,
         u_point: glam::Vec2,
     ) -> Option<LightSample> {
+        if let Some((env_index, env)) = self.emitters.environment()
+            && crate::sampling::sample_cdf(&self.emitters.cdf, u_pick) == env_index
+        {
+            return self.sample_environment_from(p, p_error, ng, wo, env_index, env, u_point);
+        }
         let sampled = self.sample_emitter(u_pick, u_point);
         let light = sampled.point;
         let to_light = light.p - p;
@@ -291,6 +337,47 @@ impl PreparedScene {
             radiance: self.emitters.radiance[sampled.emitter],
             delta: false,
         })
+    }
+
+    /// `sample_light_from` when it picked the light at infinity (emitter `e`): a direction by
+    /// the environment's own distribution and a shadow ray that must leave the scene.
+    #[inline(never)]
+    #[allow(clippy::too_many_arguments)]
+    fn sample_environment_from(
+        &self,
+        p: Vec3,
+        p_error: Vec3,
+        ng: Vec3,
+        wo: Vec3,
+        e: usize,
+        env: &environment::Environment,
+        u: glam::Vec2,
+    ) -> Option<LightSample> {
+        let (wi, pdf_dir) = env.sample(u);
+        if pdf_dir <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+            return None;
+        }
+        let origin = crate::geometry::offset_ray_origin(p, p_error, ng, wi);
+        Some(LightSample {
+            wi,
+            pdf: self.emitters.pmf[e] * pdf_dir,
+            origin,
+            dir: wi,
+            t_max: f32::INFINITY,
+            radiance: env.eval(wi),
+            delta: false,
+        })
+    }
+
+    /// The density with which light sampling picks the light at infinity in direction `dir`
+    /// (the emitter's probability times the environment's solid-angle density), for MIS of
+    /// paths that leave the scene.
+    #[inline]
+    pub fn environment_light_pdf(&self, dir: Vec3) -> f32 {
+        match self.emitters.environment() {
+            Some((e, env)) => self.emitters.pmf[e] * env.pdf(dir),
+            None => 0.0,
+        }
     }
 
     /// The emitter point for `u_pick` (which emitter) and `u_point` (where on it). The scene

@@ -250,11 +250,22 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     if triangles.is_empty() {
         return Err(error(None, "the scene has no triangles".to_string()));
     }
-    let mut point_query =
-        world.query::<(&super::world::PointLight, &SourceSpot, Option<&DeclaredIn>)>();
+    let mut point_query = world.query::<(
+        &super::world::PointLight,
+        &SourceSpot,
+        Option<&DeclaredIn>,
+        Option<&super::world::SpotTexture>,
+    )>();
     let mut points: Vec<_> = point_query.iter().collect();
     points.sort_by_key(|p| p.0.order);
-    for (light, spot, declared_in) in points {
+    for (light, spot, declared_in, texture) in points {
+        let mut light = *light;
+        if let (Some(texture), Some(cone)) = (texture, light.spot.as_mut())
+            && let Some(projection) = cone.projection.as_mut()
+        {
+            projection.texture = emitters.spot_textures.len() as u32;
+            emitters.spot_textures.push(texture.0.clone());
+        }
         let position = light.position.as_vec3();
         if !position.is_finite() || light.position.abs().max_element() >= super::MAX_COORDINATE {
             return Err(error(
@@ -282,10 +293,55 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             ));
         }
     }
+    let mut environment_query = world.query::<(
+        &super::world::EnvironmentLight,
+        &SourceSpot,
+        Option<&DeclaredIn>,
+    )>();
+    let environments: Vec<_> = environment_query.iter().collect();
+    let mut environment_power = DVec3::ZERO;
+    if let [(light, spot, declared_in), rest @ ..] = environments.as_slice() {
+        if !rest.is_empty() {
+            return Err(error(
+                Some((rest[0].1, rest[0].2)),
+                "a scene holds at most one light at infinity (constant or envmap), as in Mitsuba"
+                    .into(),
+            ));
+        }
+        let env = &light.0;
+        // Its power as pbrt-v4 counts it: what crosses the disk of the scene's bounding
+        // sphere (pi r^2) from every direction.
+        let (lo, hi) = (
+            all_points(&triangles).fold(DVec3::INFINITY, |m, p| m.min(p.as_dvec3())),
+            all_points(&triangles).fold(DVec3::NEG_INFINITY, |m, p| m.max(p.as_dvec3())),
+        );
+        let radius = 0.5 * (hi - lo).length();
+        environment_power = PI * radius * radius * env.irradiance_over_sphere();
+        power += environment_power;
+        if power.is_nan() || power.max_element() > super::MAX_POWER {
+            return Err(error(
+                Some((spot, *declared_in)),
+                format!(
+                    "light at infinity: its power (pi r^2 times its radiance over the sphere, \
+                     with the lights before it) reaches {:.3e}: it must stay below {:e}",
+                    power.max_element(),
+                    super::MAX_POWER
+                ),
+            ));
+        }
+        emitters.triangle.push(super::ENVIRONMENT);
+        // The brightest radiance it sends (the film's fixed-point unit follows it).
+        emitters.radiance.push(env.peak_radiance());
+        emitters.area.push(1.0);
+        emitters.position.push(Vec3::ZERO);
+        emitters.profile.push(None);
+        emitters.environment = Some(env.clone());
+    }
+    drop(environment_query);
     if emitters.triangle.is_empty() {
         warnings.push("no object emits light: the image will be black".to_string());
     }
-    build_distribution(&mut emitters);
+    build_distribution(&mut emitters, environment_power);
     if emitters.cdf.len() != emitters.triangle.len() {
         return Err(error(
             None,
@@ -293,15 +349,8 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         ));
     }
 
-    let all_points = || {
-        triangles
-            .p0
-            .iter()
-            .chain(&triangles.p1)
-            .chain(&triangles.p2)
-    };
-    let bounds_min = all_points().fold(Vec3::INFINITY, |m, p| m.min(*p));
-    let bounds_max = all_points().fold(Vec3::NEG_INFINITY, |m, p| m.max(*p));
+    let bounds_min = all_points(&triangles).fold(Vec3::INFINITY, |m, p| m.min(*p));
+    let bounds_max = all_points(&triangles).fold(Vec3::NEG_INFINITY, |m, p| m.max(*p));
 
     Ok(PreparedScene {
         source: scene.source.clone(),
@@ -319,16 +368,27 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     })
 }
 
+/// Every triangle corner.
+fn all_points(triangles: &TriangleColumns) -> impl Iterator<Item = &Vec3> {
+    triangles
+        .p0
+        .iter()
+        .chain(&triangles.p1)
+        .chain(&triangles.p2)
+}
+
 /// Fills pmf (proportional to pi * area * luminance), cdf (ending at exactly 1) and the total
 /// power, summing in double precision.
-fn build_distribution(emitters: &mut Emitters) {
+fn build_distribution(emitters: &mut Emitters, environment_power: DVec3) {
     let powers: Vec<DVec3> = emitters
         .radiance
         .iter()
         .zip(&emitters.area)
         .zip(emitters.triangle.iter().zip(&emitters.profile))
         .map(|((l, &area), (&triangle, profile))| {
-            if triangle & super::POINT_LIGHT != 0 {
+            if triangle == super::ENVIRONMENT {
+                environment_power
+            } else if triangle & super::POINT_LIGHT != 0 {
                 profile.map_or(4.0 * PI, |s| s.weighted_solid_angle()) * l.as_dvec3()
             } else {
                 PI * area as f64 * l.as_dvec3()

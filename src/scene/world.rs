@@ -38,6 +38,14 @@ pub struct PointLight {
     pub order: u32,
 }
 
+/// The texture a spot light projects (its `Spot::projection` says how).
+#[derive(Clone, Debug)]
+pub struct SpotTexture(pub super::textures::Texture);
+
+/// The light at infinity (Mitsuba's `constant` or `envmap` emitter).
+#[derive(Clone, Debug)]
+pub struct EnvironmentLight(pub super::environment::Environment);
+
 /// A material entity's textured reflectance (a Mitsuba `diffuse` with a nested texture).
 #[derive(Clone, Debug)]
 pub struct ReflectanceTexture(pub super::textures::Texture);

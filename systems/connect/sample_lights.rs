@@ -112,8 +112,9 @@ fn sample_chunk<const N: usize>(
         }
     };
     // Lambertian paths N at a time; the rest (other kinds, the chunk's tail) one by one. The
-    // lanes sample triangles only: scenes with point lights go one by one.
-    let lanes = !data.scene.emitters.has_point_lights();
+    // lanes sample triangles only: scenes with point lights or a light at infinity go one by
+    // one.
+    let lanes = data.scene.emitters.only_triangles();
     let mut i = 0;
     while lanes && i + N <= c.len() {
         match DiffuseLanes::<N>::at(data, &surfaces, hits.triangle, rays.dir, i) {

@@ -1,5 +1,6 @@
-//! Adds the light of emitters that paths hit, weighted by multiple importance sampling against
-//! the light sampling that could also have found them.
+//! Adds the light of emitters that paths hit, and of the light at infinity to paths that
+//! leave the scene, weighted by multiple importance sampling against the light sampling that
+//! could also have found them.
 
 use crate::accel::Hit;
 use crate::components::Hits;
@@ -32,6 +33,16 @@ crate::system! {
                 for i in 0..p.len() {
                     let triangle = hits.triangle[i];
                     if triangle == MISS {
+                        if let Some(light) = escaped_light(
+                            data,
+                            rays.dir[i],
+                            p.throughput[i],
+                            p.flags[i],
+                            p.bsdf_pdf[i],
+                        ) {
+                            p.radiance[i] += light;
+                            found += 1;
+                        }
                         continue;
                     }
                     let hit = Hit { t: hits.t[i], triangle, b1: hits.b1[i], b2: hits.b2[i] };
@@ -86,6 +97,30 @@ pub fn emitted_light(
         let t = hit.t;
         let light_pdf = emitters.pmf[e as usize] / emitters.area[e as usize] * t * t / cos_light;
         power_heuristic(bsdf_pdf, light_pdf)
+    };
+    Some(throughput * le * weight)
+}
+
+/// What a path of `throughput` that left the scene along unit `dir` receives from the light at
+/// infinity, if the scene has one, MIS-weighted as `emitted_light`; nothing for a path that
+/// ended (its ray's direction is zero). Shared with the megakernel.
+#[inline(always)]
+pub fn escaped_light(
+    data: &SceneData,
+    dir: Vec3,
+    throughput: Vec3,
+    flags: PathFlags,
+    bsdf_pdf: f32,
+) -> Option<Vec3> {
+    let (_, env) = data.scene.emitters.environment()?;
+    if dir == Vec3::ZERO {
+        return None;
+    }
+    let le = env.eval(dir);
+    let weight = if flags.has(PathFlags::SPECULAR) {
+        1.0
+    } else {
+        power_heuristic(bsdf_pdf, data.scene.environment_light_pdf(dir))
     };
     Some(throughput * le * weight)
 }

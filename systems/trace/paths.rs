@@ -16,7 +16,7 @@ use crate::scene::Frustum;
 use crate::scene::SceneData;
 use crate::systems::connect::sample_lights::light_sample;
 use crate::systems::generate::camera_rays::camera_ray;
-use crate::systems::shade::emitted_light::emitted_light;
+use crate::systems::shade::emitted_light::{emitted_light, escaped_light};
 use crate::systems::shade::russian_roulette::roulette;
 use crate::systems::shade::sort_by_material::shading_point;
 use crate::systems::shade::{Surface, scatter};
@@ -158,6 +158,11 @@ fn walk_path(
         // trace_closest
         counts.closest += 1;
         let Some(hit) = trace(origin, dir, f32::INFINITY, false) else {
+            if walk.has_emitters
+                && let Some(light) = escaped_light(data, dir, throughput, flags, bsdf_pdf)
+            {
+                radiance += light;
+            }
             break;
         };
         // add_emitted_light

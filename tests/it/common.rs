@@ -58,14 +58,22 @@ pub fn render_with(
     settings: &stagelight::integrators::RenderSettings,
     spp: u64,
 ) -> Image {
+    render_outcome_with(kind, data, settings, spp).film.image()
+}
+
+/// `render_with`'s whole outcome (its film with exact sums, its counts).
+pub fn render_outcome_with(
+    kind: stagelight::integrators::IntegratorKind,
+    data: Arc<SceneData>,
+    settings: &stagelight::integrators::RenderSettings,
+    spp: u64,
+) -> RenderOutcome {
     let stop = AtomicBool::new(false);
     let control = Control {
         stop: &stop,
         progress: &|_, _| {},
     };
     stagelight::integrators::render(kind, data, settings, Budget::SamplesPerPixel(spp), &control)
-        .film
-        .image()
 }
 
 /// Mean and standard deviation of one channel over pixels.

@@ -15,8 +15,9 @@ use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
-    DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, OneSided, PointLight,
-    ReflectanceTexture, SceneWorld, Shape, SourceSpot, Transform,
+    DeclaredIn, Emission, EnvironmentLight, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo,
+    OneSided, PointLight, ReflectanceTexture, SceneWorld, Shape, SourceSpot, SpotTexture,
+    Transform,
 };
 use crate::scene::{Camera, Crop, Limits, Projection, SceneError};
 
@@ -47,7 +48,7 @@ pub const INTEGRATORS: &str = "path, direct, moment";
 pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
 pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor";
-pub const EMITTERS: &str = "area, point, spot";
+pub const EMITTERS: &str = "area, point, spot, constant, envmap";
 pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
 pub const FILMS: &str = "hdrfilm";
@@ -442,7 +443,20 @@ impl<'a> Builder<'a> {
                         }
                         self.area_emitter(child.object)?;
                     } else if object.kind == "point" || object.kind == "spot" {
-                        let light = self.point_emitter(child.object)?;
+                        let (light, texture) = self.point_emitter(child.object)?;
+                        let spot = object.spot.clone();
+                        let entity = self.world.spawn((
+                            light,
+                            source_spot(&spot),
+                            DeclaredIn(spot.file.to_path_buf()),
+                        ));
+                        if let Some(texture) = texture {
+                            self.world
+                                .insert_one(entity, texture)
+                                .expect("just spawned");
+                        }
+                    } else if object.kind == "constant" || object.kind == "envmap" {
+                        let light = self.environment_emitter(child.object)?;
                         let spot = object.spot.clone();
                         self.world.spawn((
                             light,
@@ -1099,25 +1113,38 @@ impl<'a> Builder<'a> {
     /// placed by `to_world` (one of the two); or a `spot`: the same from to_world's origin
     /// along its +z, within `cutoff_angle` (default 20 degrees), full within `beam_width`
     /// (default 3/4 of the cutoff).
-    fn point_emitter(&mut self, id: usize) -> Result<PointLight, XmlError> {
+    fn point_emitter(&mut self, id: usize) -> Result<(PointLight, Option<SpotTexture>), XmlError> {
         let object = self.object(id);
         let kind = object.kind.as_str();
         let mut params = Params::new(object);
-        if let Some(c) = object.children.first() {
-            return Err(XmlError::at(
-                &c.spot,
-                format!(
-                    "{kind}: a nested texture (a textured intensity or a spot's projected \
-                     texture) is not supported"
-                ),
-            ));
+        let mut projected = None;
+        for c in &object.children {
+            let child = self.object(c.object);
+            if kind != "spot"
+                || child.class != Class::Texture
+                || c.name.as_deref() != Some("texture")
+                || projected.is_some()
+            {
+                return Err(XmlError::at(
+                    &c.spot,
+                    format!(
+                        "{kind}: only a spot's projected texture (named \"texture\") may be \
+                         nested (a textured intensity is not supported)"
+                    ),
+                ));
+            }
+            projected = Some(self.texture(c.object)?);
         }
+        let object = self.object(id);
         let position = if kind == "point" {
             params.point("position")?
         } else {
             None
         };
         let to_world = params.transform("to_world")?;
+        let linear = to_world
+            .as_ref()
+            .map_or(glam::DMat3::IDENTITY, |(m, _)| glam::DMat3::from_mat4(*m));
         let (position, axis) = match (position, to_world) {
             (Some(_), Some((_, spot))) => {
                 return Err(XmlError::at(
@@ -1140,10 +1167,17 @@ impl<'a> Builder<'a> {
                     "spot: to_world flattens its axis",
                 ));
             }
-            Some(
-                crate::scene::lights::Spot::new(axis.as_vec3(), cutoff, beam)
-                    .map_err(|m| XmlError::at(&object.spot, m))?,
-            )
+            let mut spot = crate::scene::lights::Spot::new(axis.as_vec3(), cutoff, beam)
+                .map_err(|m| XmlError::at(&object.spot, m))?;
+            if projected.is_some() {
+                // The texture is looked up in the light's own frame (to_world's inverse).
+                spot.projection = Some(crate::scene::lights::SpotProjection {
+                    to_local: linear.inverse().as_mat3(),
+                    uv_factor: cutoff.to_radians().tan() as f32,
+                    texture: u32::MAX,
+                });
+            }
+            Some(spot)
         } else {
             None
         };
@@ -1164,12 +1198,100 @@ impl<'a> Builder<'a> {
         };
         params.finish()?;
         self.point_lights += 1;
-        Ok(PointLight {
-            position,
-            intensity,
-            spot,
-            order: self.point_lights,
-        })
+        Ok((
+            PointLight {
+                position,
+                intensity,
+                spot,
+                order: self.point_lights,
+            },
+            projected.map(SpotTexture),
+        ))
+    }
+
+    /// A light at infinity: `constant` (radiance, 1 by default) or `envmap` (an
+    /// equirectangular image file, times `scale`, turned by `to_world`).
+    fn environment_emitter(&mut self, id: usize) -> Result<EnvironmentLight, XmlError> {
+        use crate::scene::environment::{Environment, EnvironmentMap, EnvironmentRadiance};
+        let object = self.object(id);
+        let kind = object.kind.as_str();
+        let mut params = Params::new(object);
+        if let Some(c) = object.children.first() {
+            return Err(XmlError::at(
+                &c.spot,
+                format!(
+                    "{kind}: a nested texture is not supported (give its radiance as rgb or spectrum)"
+                ),
+            ));
+        }
+        let to_world = match params.transform("to_world")? {
+            None => glam::DMat3::IDENTITY,
+            Some((m, spot)) => {
+                let linear = glam::DMat3::from_mat4(m);
+                let gram = linear.transpose() * linear;
+                let off = (gram - glam::DMat3::IDENTITY)
+                    .to_cols_array()
+                    .iter()
+                    .fold(0.0f64, |a, v| a.max(v.abs()));
+                if off.is_nan() || off >= 1e-4 {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!(
+                            "{kind}: to_world must only rotate or mirror the map (no scale or \
+                             shear): its directions would not stay unit"
+                        ),
+                    ));
+                }
+                linear
+            }
+        };
+        let radiance = if kind == "constant" {
+            let radiance = match params.color("radiance", Role::Emission)? {
+                Some((c, spot)) => {
+                    if !c.is_finite() || c.min_element() < 0.0 {
+                        return Err(XmlError::at(
+                            &spot,
+                            format!(
+                                "radiance {:?} must be finite and not negative",
+                                c.to_array()
+                            ),
+                        ));
+                    }
+                    c
+                }
+                None => Vec3::ONE,
+            };
+            EnvironmentRadiance::Constant(radiance)
+        } else {
+            params.ignore(&["mis_compensation"]);
+            let (name, spot) = params
+                .string("filename")?
+                .ok_or_else(|| XmlError::at(&object.spot, "envmap needs a filename"))?;
+            let path = self.doc.resolve(name);
+            let scale = match params.float("scale")? {
+                Some((v, spot)) if !(v.is_finite() && v >= 0.0) => {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!("envmap: scale {v} must be finite and not negative"),
+                    ));
+                }
+                Some((v, _)) => v as f32,
+                None => 1.0,
+            };
+            let (width, height, texels) =
+                read_image(&path, false).map_err(|m| XmlError::at(&spot, m))?;
+            let texels = texels.into_iter().map(|t| t * scale).collect();
+            let map = EnvironmentMap::new(width, height, texels)
+                .map_err(|m| XmlError::at(&spot, format!("{}: {m}", path.display())))?;
+            EnvironmentRadiance::Map(std::sync::Arc::new(map))
+        };
+        params.finish()?;
+        let to_world = to_world.as_mat3();
+        Ok(EnvironmentLight(Environment {
+            radiance,
+            to_world,
+            to_local: to_world.transpose(),
+        }))
     }
 
     /// Meshes a shape (a shapegroup's members through an instance) into `out`.
