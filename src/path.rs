@@ -49,7 +49,7 @@ impl Vertex {
         let v = store.get(i);
         let kind = match (depth, v.triangle) {
             (_, CAMERA_VERTEX) => VertexKind::Camera,
-            (0, _) => VertexKind::Light,
+            (0, _) | (_, crate::scene::ENVIRONMENT) => VertexKind::Light,
             _ => VertexKind::Surface,
         };
         Vertex {
@@ -82,7 +82,17 @@ impl Vertex {
     }
 
     pub fn is_on_surface(&self) -> bool {
-        self.kind != VertexKind::Camera && !self.is_point_light()
+        self.kind != VertexKind::Camera && !self.is_point_light() && !self.is_at_infinity()
+    }
+
+    /// Whether this vertex lies on the light at infinity (an environment): a light subpath's
+    /// origin there, or where a camera subpath left the scene. Its `ng` is the direction light
+    /// travels from it into the scene; its position a point beyond the scene along that line.
+    /// Densities there are in solid angle, and the area density of the next vertex along a
+    /// light path is the disk density times the cosine there (`to_area`).
+    #[inline]
+    pub fn is_at_infinity(&self) -> bool {
+        self.triangle == crate::scene::ENVIRONMENT
     }
 
     /// Whether this is a light subpath's vertex on a point light (a delta position: no other
@@ -116,9 +126,21 @@ pub fn remap0(x: f32) -> f32 {
     if x != 0.0 { x } else { 1.0 }
 }
 
-/// The area density at `to` of a direction density `pdf_dir` at `from`.
+/// The area density at `to` of a direction density `pdf_dir` at `from`. A vertex at infinity
+/// keeps densities in solid angle (`to` there: no conversion); from one, `pdf_dir` is its disk
+/// density and only the cosine at `to` converts it (rays from it are parallel).
 #[inline]
 pub fn to_area(pdf_dir: f32, from: &Vertex, to: &Vertex) -> f32 {
+    if to.is_at_infinity() {
+        return pdf_dir;
+    }
+    if from.is_at_infinity() {
+        return if to.is_on_surface() {
+            pdf_dir * to.ng.dot(from.ng).abs()
+        } else {
+            pdf_dir
+        };
+    }
     let d = to.p - from.p;
     let dist2 = d.length_squared();
     if dist2 == 0.0 {
@@ -175,6 +197,16 @@ impl PathContext<'_> {
         }
     }
 
+    /// The scene's light at infinity (asked only of vertices on it).
+    #[inline]
+    fn environment(&self) -> &crate::scene::environment::Environment {
+        self.scene
+            .emitters
+            .environment
+            .as_ref()
+            .expect("a vertex at infinity in a scene with no light at infinity")
+    }
+
     /// The emission profile of a point light's vertex (None for any other vertex).
     #[inline]
     pub fn point_profile(&self, v: &Vertex) -> Option<&lights::PointProfile> {
@@ -192,6 +224,9 @@ impl PathContext<'_> {
         if v.is_point_light() {
             return Some((v.triangle & !crate::scene::POINT_LIGHT) as usize);
         }
+        if v.is_at_infinity() {
+            return self.scene.emitters.environment().map(|(e, _)| e);
+        }
         let e = self.scene.triangles.emitter[v.triangle as usize];
         (e != NO_EMITTER).then_some(e as usize)
     }
@@ -201,6 +236,7 @@ impl PathContext<'_> {
     pub fn emitted(&self, v: &Vertex, w: Vec3) -> Vec3 {
         match self.emitter(v) {
             Some(e) if v.is_point_light() => self.scene.emitters.intensity_towards(e, w),
+            Some(_) if v.is_at_infinity() => self.environment().eval(-v.ng),
             Some(e) if w.dot(v.ng) > 0.0 => self.scene.emitters.radiance[e],
             _ => Vec3::ZERO,
         }
@@ -210,6 +246,10 @@ impl PathContext<'_> {
     /// the point uniformly on it.
     #[inline]
     pub fn pdf_light_origin(&self, v: &Vertex) -> f32 {
+        if v.is_at_infinity() {
+            // In solid angle: the direction it comes from.
+            return self.scene.environment_light_pdf(-v.ng);
+        }
         match self.emitter(v) {
             Some(e) => self.scene.emitters.pmf[e] / self.scene.emitters.area[e],
             None => 0.0,
@@ -220,6 +260,9 @@ impl PathContext<'_> {
     /// distributed about the emitting side).
     #[inline]
     pub fn pdf_light_dir(&self, light: &Vertex, to: &Vertex) -> f32 {
+        if light.is_at_infinity() {
+            return to_area(self.environment().disk_pdf(), light, to);
+        }
         if let Some(profile) = self.point_profile(light) {
             return to_area(
                 lights::pdf_direction(profile, towards(light, to)),
@@ -281,6 +324,13 @@ impl PathContext<'_> {
             VertexKind::Camera => self.camera.pdf_dir(wi),
             VertexKind::Light if v.is_point_light() => {
                 lights::pdf_direction(self.point_profile(v).unwrap_or(&None), wi)
+            }
+            VertexKind::Light if v.is_at_infinity() => {
+                if wi.dot(v.ng) > 0.0 {
+                    self.environment().disk_pdf()
+                } else {
+                    0.0
+                }
             }
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
             VertexKind::Surface if !self.is_connectible(v) => 1.0,
@@ -464,9 +514,11 @@ impl PathContext<'_> {
     /// the pixel it lands in, or `None` outside the image or for no contribution.
     #[inline]
     pub fn connect_to_camera(&self, y: &Vertex, y_wo: Vec3) -> Option<(Vec3, usize)> {
-        if y.is_point_light() {
+        if y.is_point_light() || y.is_at_infinity() {
             // A point light is not seen directly, as in Mitsuba and pbrt: no camera ray hits
-            // it, and (s, t) = (1, 1), the only other strategy, is not counted either.
+            // it, and (s, t) = (1, 1), the only other strategy, is not counted either. The
+            // light at infinity is seen directly by camera rays that leave the scene (0, 2);
+            // from its disk, (1, 1) would need the one parallel ray that meets the pinhole.
             return None;
         }
         let cam = &self.camera;
@@ -501,6 +553,9 @@ impl PathContext<'_> {
     pub fn joint(&self, v: &Vertex, wo: Vec3) -> Option<Joint> {
         let lobe = match v.kind {
             VertexKind::Camera => return None,
+            // Where a camera subpath left the scene (reached from `wo`) it ends: only s = 0
+            // counts there. As a light subpath's origin it joins as any light vertex.
+            VertexKind::Light if v.is_at_infinity() && wo != Vec3::ZERO => return None,
             VertexKind::Light if v.is_point_light() => {
                 Lobe::PointLight((v.triangle & !crate::scene::POINT_LIGHT) as usize)
             }
@@ -556,7 +611,12 @@ impl PathContext<'_> {
         } else {
             w_ns_y.abs()
         };
-        let g = w.dot(z.ns).abs() * cos_y / dist2;
+        // From infinity, radiance arrives without falloff (its density is in solid angle).
+        let g = if y.is_at_infinity() {
+            w.dot(z.ns).abs()
+        } else {
+            w.dot(z.ns).abs() * cos_y / dist2
+        };
         let contribution = z.beta * fz * y.beta * fy * g;
         (contribution != Vec3::ZERO).then_some(contribution)
     }
@@ -644,6 +704,10 @@ impl PathContext<'_> {
         heuristic: MisHeuristic,
         techniques: Techniques,
     ) -> f32 {
+        if merged.is_none() && s == 1 && t == 1 && light[0].is_at_infinity() {
+            // No technique: the light at infinity seen through the pinhole from its disk.
+            return 0.0;
+        }
         let eta = techniques.merge_count;
         let connect = techniques.connect;
         let mut z_rev = [0.0f32; 2]; // for z_{t-1}, z_{t-2}
@@ -738,12 +802,14 @@ impl PathContext<'_> {
         // Fewer camera vertices: (s + 1, t - 1), ... down to t = 1; the merge at camera
         // vertex i before the step past it (not at the emitter: s = 0, i = t - 1).
         let mut ratio = 1.0f32;
+        // A camera ray that sees the light at infinity directly has no (1, 1) alternative.
+        let seen_at_infinity = s == 0 && t == 2 && z.is_at_infinity();
         for i in (1..t).rev() {
             if merging && !camera_delta(i) && !(s == 0 && i + 1 == t) {
                 sum += h(ratio * remap0(camera_rev(i)) * eta);
             }
             ratio *= remap0(camera_rev(i)) / remap0(camera[i].pdf_fwd);
-            if connect && !camera_delta(i) && !camera_delta(i - 1) {
+            if connect && !camera_delta(i) && !camera_delta(i - 1) && !seen_at_infinity {
                 sum += h(ratio * relative(s + t - i, i));
             }
         }

@@ -146,11 +146,13 @@ fn camera_side(
     (eta_h, connect): (f32, bool),
 ) -> f32 {
     let mut near = [Near::default(); 2];
+    // A camera ray that sees the light at infinity directly has no (1, 1) alternative.
+    let seen_at_infinity = t == 2 && camera[1].is_at_infinity();
     near[0] = Near {
         rev: z_rev[0],
         fwd: camera[t - 1].pdf_fwd,
         merge: merge_last,
-        connect: connect && !camera[t - 2].delta,
+        connect: connect && !camera[t - 2].delta && !seen_at_infinity,
     };
     let count = if t >= 3 {
         near[1] = Near {
@@ -201,7 +203,10 @@ impl MergedLight {
         let (y_s, y) = (&light[s], &light[s - 1]);
         let d = y.p - y_s.p;
         let dist2 = d.length_squared();
-        let prev_geometry = if dist2 > 0.0 {
+        // At infinity densities stay in solid angle.
+        let prev_geometry = if y.is_at_infinity() {
+            1.0
+        } else if dist2 > 0.0 {
             y.ng.dot(d).abs() / (dist2 * dist2.sqrt())
         } else {
             0.0
@@ -232,6 +237,10 @@ impl PathContext<'_> {
         techniques: Techniques,
     ) -> f32 {
         debug_assert_eq!(techniques.connection_count, 1.0);
+        if s == 1 && t == 1 && light[0].is_at_infinity() {
+            // As `vcm_weight`: no such technique.
+            return 0.0;
+        }
         let eta_h = h(heuristic, techniques.merge_count);
         let connect = techniques.connect;
         let z = &camera[t - 1];

@@ -544,17 +544,19 @@ pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Resu
 }
 
 /// Refuses lights the integrator does not carry yet: a light at infinity (constant, envmap)
-/// renders under pt only, where paths that leave the scene see it and next-event estimation
-/// samples it; the bidirectional, photon-mapping and Metropolis integrators would need light
-/// paths that start at infinity, which they do not have yet.
+/// renders under pt and the integrators built on BDPT's subpaths (bdpt, vcm, bpm, pssmlt,
+/// mmlt), where camera subpaths that leave the scene end on it and light subpaths start on a
+/// disk across the scene; the photon mappers and path-space mlt do not carry it yet.
 pub fn check_lights(
     kind: IntegratorKind,
     scene: &crate::scene::PreparedScene,
 ) -> Result<(), String> {
-    if kind.as_str() != "pt" && scene.emitters.environment.is_some() {
+    const CARRY_INFINITY: [&str; 6] = ["pt", "bdpt", "vcm", "bpm", "pssmlt", "mmlt"];
+    if scene.emitters.environment.is_some() && !CARRY_INFINITY.contains(&kind.as_str()) {
         return Err(format!(
-            "{kind} cannot render a light at infinity (a constant or envmap emitter) yet: only \
-             pt carries it; render it with pt"
+            "{kind} cannot render a light at infinity (a constant or envmap emitter) yet: {} \
+             carry it",
+            CARRY_INFINITY.join(", ")
         ));
     }
     Ok(())

@@ -17,6 +17,10 @@ pub struct Environment {
     /// World directions to the map's frame, and back (the rotation of Mitsuba's `to_world`).
     pub to_local: Mat3,
     pub to_world: Mat3,
+    /// The scene's bounding sphere (set when the scene is prepared): light paths from the
+    /// environment start on the disk of this radius facing their direction.
+    pub center: Vec3,
+    pub radius: f32,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -185,6 +189,34 @@ impl Environment {
         }
     }
 
+    /// The density of a light path's origin on the disk it starts from (1 / (pi r^2)): it
+    /// plays the role of a direction density at the light, turned into an area density at the
+    /// first surface by the cosine there alone (parallel rays, no distance falloff).
+    #[inline]
+    pub fn disk_pdf(&self) -> f32 {
+        1.0 / (PI * self.radius * self.radius)
+    }
+
+    /// A light path from the environment for `u_dir` (its direction) and `u_disk` (where on
+    /// the disk across the scene it starts): origin, unit direction of travel (into the scene)
+    /// and the solid-angle density of the direction it comes from (0: none).
+    #[inline]
+    pub fn sample_ray(&self, u_dir: Vec2, u_disk: Vec2) -> (Vec3, Vec3, f32) {
+        let (towards_light, pdf) = self.sample(u_dir);
+        let d = crate::sampling::concentric_disk(u_disk);
+        let (dx, dy) = (d.x, d.y);
+        let frame = crate::math::Frame::from_normal(towards_light);
+        let origin = self.center + self.radius * (towards_light + frame.s * dx + frame.t * dy);
+        (origin, -towards_light, pdf)
+    }
+
+    /// A point beyond everything the scene holds, seen from `from` in unit direction `dir`:
+    /// where a vertex on the environment sits for connections and shadow rays.
+    #[inline]
+    pub fn far_point(&self, from: Vec3, dir: Vec3) -> Vec3 {
+        from + dir * (2.0 * self.radius.max((from - self.center).length()))
+    }
+
     /// The largest radiance it sends (per channel).
     pub fn peak_radiance(&self) -> Vec3 {
         match &self.radiance {
@@ -337,6 +369,8 @@ mod tests {
             )),
             to_world: rotation,
             to_local: rotation.transpose(),
+            center: Vec3::ZERO,
+            radius: 1.0,
         }
     }
 

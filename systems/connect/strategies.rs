@@ -315,7 +315,7 @@ pub fn connect_wave(
                                     continue;
                                 }
                                 let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
-                                let v = sampled_light_vertex(scene, sampler, key, t);
+                                let v = sampled_light_vertex(scene, sampler, key, t, z);
                                 sampled = ctx.joint(&v, Vec3::ZERO).map(|j| (v, j));
                                 sampled.as_ref().map(|(v, j)| (v, j))
                             } else {
@@ -414,20 +414,43 @@ fn open_slot(
     cn.t[slot] = t as u16;
 }
 
-/// The light vertex strategy s = 1 joins to camera vertex z_{t-1} (t >= 2): a point sampled on
-/// an emitter with that vertex's numbers. The scene must have an emitter.
+/// The light vertex strategy s = 1 joins to camera vertex z_{t-1} (`z`, t >= 2): a point
+/// sampled on an emitter with that vertex's numbers, or a direction from the light at infinity
+/// (a vertex beyond the scene that way). The scene must have an emitter.
 #[inline]
 pub fn sampled_light_vertex(
     scene: &PreparedScene,
     sampler: &Sampler,
     key: SampleKey,
     t: usize,
+    z: &Vertex,
 ) -> Vertex {
     let dim = camera_vertex_dim(t - 1);
-    let light = scene.sample_emitter(
-        sampler.get(key, dim + DIM_LIGHT_PICK),
-        sampler.get2(key, dim + DIM_LIGHT_POINT),
-    );
+    let u_pick = sampler.get(key, dim + DIM_LIGHT_PICK);
+    if let Some((e, env)) = scene.emitters.environment()
+        && crate::sampling::sample_cdf(&scene.emitters.cdf, u_pick) == e
+    {
+        let (towards_light, pdf_dir) = env.sample(sampler.get2(key, dim + DIM_LIGHT_POINT));
+        let pdf = scene.emitters.pmf[e] * pdf_dir;
+        return Vertex {
+            kind: VertexKind::Light,
+            p: env.far_point(z.p, towards_light),
+            p_error: Vec3::ZERO,
+            ng: -towards_light,
+            ns: -towards_light,
+            triangle: crate::scene::ENVIRONMENT,
+            // Zero where the direction has no density: the joint then brings nothing.
+            beta: if pdf > 0.0 {
+                env.eval(towards_light) / pdf
+            } else {
+                Vec3::ZERO
+            },
+            pdf_fwd: pdf,
+            pdf_rev: 0.0,
+            delta: false,
+        };
+    }
+    let light = scene.sample_emitter(u_pick, sampler.get2(key, dim + DIM_LIGHT_POINT));
     let (e, tri, sp) = (light.emitter, light.triangle, light.point);
     let pdf_origin = light.pdf_area;
     Vertex {

@@ -149,7 +149,7 @@ pub fn weigh_wave(
                     let sampled;
                     let light_side: &[Vertex] = if s == 1 && t >= 2 {
                         let key = numbers.key(sampler, Stream::Connection, wave, pixels, k);
-                        sampled = [sampled_light_vertex(scene, sampler, key, t)];
+                        sampled = [sampled_light_vertex(scene, sampler, key, t, &camera[t - 1])];
                         &sampled
                     } else if let Some((cache, picks)) = cache.filter(|_| through_cache(s, t)) {
                         let sub = cache.group(k).subpath[picks[slot] as usize] as usize;

@@ -66,7 +66,7 @@ crate::system! {
                     let mut sum = Vec3::ZERO;
                     for t in 2..=camera.len() {
                         let z = &camera[t - 1];
-                        if z.beta == Vec3::ZERO || !ctx.is_connectible(z) {
+                        if z.beta == Vec3::ZERO || !ctx.is_connectible(z) || z.is_at_infinity() {
                             continue;
                         }
                         let wo = towards(z, &camera[t - 2]);

@@ -164,6 +164,50 @@ crate::system! {
                     let key = numbers.key(sampler, Stream::Light, wave, pixels, k);
                     // A multiplexed sample with s <= 1 walks no light subpath.
                     let walks = !multiplexed || lengths(k).1 >= 2;
+                    if let Some((e, env)) = emitters.environment()
+                        && crate::sampling::sample_cdf(&emitters.cdf, sampler.get(key, LIGHT_DIM_PICK)) == e
+                    {
+                        // From the light at infinity: a direction, and a point on the disk
+                        // across the scene facing it. The origin's density is in solid angle;
+                        // the disk's plays the direction density's part (see `to_area`).
+                        let (origin, dir, pdf_dir) = env.sample_ray(
+                            sampler.get2(key, LIGHT_DIM_DIRECTION),
+                            sampler.get2(key, LIGHT_DIM_POINT),
+                        );
+                        let pdf_origin = emitters.pmf[e] * pdf_dir;
+                        let le = env.eval(-dir);
+                        let pdf_disk = env.disk_pdf();
+                        let live = pdf_origin > 0.0;
+                        v.set(
+                            i,
+                            PathVertex {
+                                p: origin,
+                                p_error: Vec3::ZERO,
+                                ng: dir,
+                                ns: dir,
+                                triangle: crate::scene::ENVIRONMENT,
+                                beta: if live { le / pdf_origin } else { Vec3::ZERO },
+                                pdf_fwd: pdf_origin,
+                                pdf_rev: 0.0,
+                                delta: false,
+                            },
+                        );
+                        let beta = if live {
+                            le * (1.0 / (pdf_origin * pdf_disk))
+                        } else {
+                            Vec3::ZERO
+                        };
+                        wk.subpath[i] = (cap + k) as u32;
+                        wk.key[i] = key;
+                        wk.beta[i] = beta;
+                        wk.pdf_dir[i] = pdf_disk;
+                        wk.roulette_scale[i] = beta.max_element().max(f32::MIN_POSITIVE);
+                        let walks = walks && live;
+                        wk.alive[i] = walks;
+                        r.origin[i] = origin;
+                        r.dir[i] = if walks { dir } else { Vec3::ZERO };
+                        continue;
+                    }
                     let light = data
                         .scene
                         .sample_emitter(

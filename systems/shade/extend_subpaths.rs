@@ -86,13 +86,37 @@ crate::system! {
                 let base = v.start;
                 let hits = hits.view(wk.start..wk.start + wk.len());
                 for i in 0..wk.len() {
-                    if !wk.alive[i] || hits.triangle[i] == MISS {
-                        wk.alive[i] = false;
+                    if !wk.alive[i] {
                         continue;
                     }
                     let sub = wk.subpath[i] as usize;
                     let j = sub - base;
                     let light = sub >= cap;
+                    if hits.triangle[i] == MISS {
+                        wk.alive[i] = false;
+                        // A camera subpath that leaves the scene ends on the light at
+                        // infinity, if there is one (strategy s = 0 reads it there).
+                        if let Some(env) = scene.emitters.environment.as_ref().filter(|_| !light) {
+                            let prev = Vertex::from_store(&pv.view(), j, d - 1);
+                            let dir = r.dir[i];
+                            let mut here = Vertex {
+                                kind: VertexKind::Light,
+                                p: env.far_point(r.origin[i], dir),
+                                p_error: Vec3::ZERO,
+                                ng: -dir,
+                                ns: -dir,
+                                triangle: crate::scene::ENVIRONMENT,
+                                beta: wk.beta[i],
+                                pdf_fwd: 0.0,
+                                pdf_rev: 0.0,
+                                delta: false,
+                            };
+                            here.pdf_fwd = to_area(wk.pdf_dir[i], &prev, &here);
+                            v.set(j, here.stored());
+                            lens[j] = d as u32 + 1;
+                        }
+                        continue;
+                    }
                     let tri = hits.triangle[i];
                     let sp = surface_point(tris, tri, hits.b1[i], hits.b2[i]);
                     let ns = if sp.ns.dot(sp.ng) < 0.0 {

@@ -1291,6 +1291,9 @@ impl<'a> Builder<'a> {
             radiance,
             to_world,
             to_local: to_world.transpose(),
+            // Set when the scene is prepared.
+            center: Vec3::ZERO,
+            radius: 1.0,
         }))
     }
 
