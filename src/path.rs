@@ -85,14 +85,15 @@ impl Vertex {
         self.kind != VertexKind::Camera && !self.is_point_light() && !self.is_at_infinity()
     }
 
-    /// Whether this vertex lies on the light at infinity (an environment): a light subpath's
-    /// origin there, or where a camera subpath left the scene. Its `ng` is the direction light
+    /// Whether this vertex lies on a light at infinity (the environment, or a directional
+    /// light, which is also a point light: a delta direction): a light subpath's origin there,
+    /// or where a camera subpath left the scene. Its `ng` is the direction light
     /// travels from it into the scene; its position a point beyond the scene along that line.
     /// Densities there are in solid angle, and the area density of the next vertex along a
     /// light path is the disk density times the cosine there (`to_area`).
     #[inline]
     pub fn is_at_infinity(&self) -> bool {
-        self.triangle == crate::scene::ENVIRONMENT
+        crate::scene::is_at_infinity(self.triangle)
     }
 
     /// Whether this is a light subpath's vertex on a point light (a delta position: no other
@@ -210,9 +211,8 @@ impl PathContext<'_> {
     /// The emission profile of a point light's vertex (None for any other vertex).
     #[inline]
     pub fn point_profile(&self, v: &Vertex) -> Option<&lights::PointProfile> {
-        v.is_point_light().then(|| {
-            &self.scene.emitters.profile[(v.triangle & !crate::scene::POINT_LIGHT) as usize]
-        })
+        v.is_point_light()
+            .then(|| &self.scene.emitters.profile[crate::scene::light_index(v.triangle)])
     }
 
     /// The emitter index of the triangle under `v`, if it emits.
@@ -222,7 +222,7 @@ impl PathContext<'_> {
             return None;
         }
         if v.is_point_light() {
-            return Some((v.triangle & !crate::scene::POINT_LIGHT) as usize);
+            return Some(crate::scene::light_index(v.triangle));
         }
         if v.is_at_infinity() {
             return self.scene.emitters.environment().map(|(e, _)| e);
@@ -236,7 +236,7 @@ impl PathContext<'_> {
     pub fn emitted(&self, v: &Vertex, w: Vec3) -> Vec3 {
         match self.emitter(v) {
             Some(e) if v.is_point_light() => self.scene.emitters.intensity_towards(e, w),
-            Some(_) if v.is_at_infinity() => self.environment().eval(-v.ng),
+            Some(_) if v.is_at_infinity() && !v.is_point_light() => self.environment().eval(-v.ng),
             Some(e) if w.dot(v.ng) > 0.0 => self.scene.emitters.radiance[e],
             _ => Vec3::ZERO,
         }
@@ -246,7 +246,7 @@ impl PathContext<'_> {
     /// the point uniformly on it.
     #[inline]
     pub fn pdf_light_origin(&self, v: &Vertex) -> f32 {
-        if v.is_at_infinity() {
+        if v.is_at_infinity() && !v.is_point_light() {
             // In solid angle: the direction it comes from.
             return self.scene.environment_light_pdf(-v.ng);
         }
@@ -261,7 +261,7 @@ impl PathContext<'_> {
     #[inline]
     pub fn pdf_light_dir(&self, light: &Vertex, to: &Vertex) -> f32 {
         if light.is_at_infinity() {
-            return to_area(self.environment().disk_pdf(), light, to);
+            return to_area(self.scene.emitters.disk.pdf(), light, to);
         }
         if let Some(profile) = self.point_profile(light) {
             return to_area(
@@ -289,7 +289,7 @@ impl PathContext<'_> {
             VertexKind::Camera => Vec3::ZERO,
             VertexKind::Light => {
                 if v.is_point_light() {
-                    let e = (v.triangle & !crate::scene::POINT_LIGHT) as usize;
+                    let e = crate::scene::light_index(v.triangle);
                     self.scene.emitters.profile_towards(e, wi)
                 } else if wi.dot(v.ng) > 0.0 {
                     Vec3::ONE
@@ -322,15 +322,16 @@ impl PathContext<'_> {
     pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
         match v.kind {
             VertexKind::Camera => self.camera.pdf_dir(wi),
-            VertexKind::Light if v.is_point_light() => {
-                lights::pdf_direction(self.point_profile(v).unwrap_or(&None), wi)
-            }
+            // Before the point lights: a directional light is one too.
             VertexKind::Light if v.is_at_infinity() => {
                 if wi.dot(v.ng) > 0.0 {
-                    self.environment().disk_pdf()
+                    self.scene.emitters.disk.pdf()
                 } else {
                     0.0
                 }
+            }
+            VertexKind::Light if v.is_point_light() => {
+                lights::pdf_direction(self.point_profile(v).unwrap_or(&None), wi)
             }
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
             VertexKind::Surface if !self.is_connectible(v) => 1.0,
@@ -557,7 +558,7 @@ impl PathContext<'_> {
             // counts there. As a light subpath's origin it joins as any light vertex.
             VertexKind::Light if v.is_at_infinity() && wo != Vec3::ZERO => return None,
             VertexKind::Light if v.is_point_light() => {
-                Lobe::PointLight((v.triangle & !crate::scene::POINT_LIGHT) as usize)
+                Lobe::PointLight(crate::scene::light_index(v.triangle))
             }
             VertexKind::Light => Lobe::Light,
             VertexKind::Surface => match self.material_seen(v, wo) {

@@ -543,8 +543,8 @@ pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Resu
     Ok(())
 }
 
-/// Refuses lights the integrator does not carry yet: a light at infinity (constant, envmap)
-/// renders under pt and the integrators built on BDPT's subpaths (bdpt, vcm, bpm, pssmlt,
+/// Refuses lights the integrator does not carry yet: a light at infinity (constant, envmap,
+/// directional) renders under pt and the integrators built on BDPT's subpaths (bdpt, vcm, bpm, pssmlt,
 /// mmlt), where camera subpaths that leave the scene end on it and light subpaths start on a
 /// disk across the scene; the photon mappers and path-space mlt do not carry it yet.
 pub fn check_lights(
@@ -552,10 +552,15 @@ pub fn check_lights(
     scene: &crate::scene::PreparedScene,
 ) -> Result<(), String> {
     const CARRY_INFINITY: [&str; 6] = ["pt", "bdpt", "vcm", "bpm", "pssmlt", "mmlt"];
-    if scene.emitters.environment.is_some() && !CARRY_INFINITY.contains(&kind.as_str()) {
+    let at_infinity = scene
+        .emitters
+        .triangle
+        .iter()
+        .any(|&t| crate::scene::is_at_infinity(t));
+    if at_infinity && !CARRY_INFINITY.contains(&kind.as_str()) {
         return Err(format!(
-            "{kind} cannot render a light at infinity (a constant or envmap emitter) yet: {} \
-             carry it",
+            "{kind} cannot render a light at infinity (a constant, envmap or directional \
+             emitter) yet: {} carry it",
             CARRY_INFINITY.join(", ")
         ));
     }

@@ -17,10 +17,40 @@ pub struct Environment {
     /// World directions to the map's frame, and back (the rotation of Mitsuba's `to_world`).
     pub to_local: Mat3,
     pub to_world: Mat3,
-    /// The scene's bounding sphere (set when the scene is prepared): light paths from the
-    /// environment start on the disk of this radius facing their direction.
+}
+
+/// Where light paths from a light at infinity start (the environment's, a directional
+/// light's): on a disk as wide as the scene's bounding sphere, facing the direction they come
+/// from, outside the sphere.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SceneDisk {
     pub center: Vec3,
     pub radius: f32,
+}
+
+impl SceneDisk {
+    /// The density of a light path's origin on the disk (1 / (pi r^2)): it plays the role of
+    /// a direction density at the light, turned into an area density at the first surface by
+    /// the cosine there alone (parallel rays, no distance falloff).
+    #[inline]
+    pub fn pdf(&self) -> f32 {
+        1.0 / (PI * self.radius * self.radius)
+    }
+
+    /// The origin for `u` of a light path arriving from unit direction `towards_light`.
+    #[inline]
+    pub fn origin(&self, towards_light: Vec3, u: Vec2) -> Vec3 {
+        let d = crate::sampling::concentric_disk(u);
+        let frame = crate::math::Frame::from_normal(towards_light);
+        self.center + self.radius * (towards_light + frame.s * d.x + frame.t * d.y)
+    }
+
+    /// A point beyond everything the scene holds, seen from `from` in unit direction `dir`:
+    /// where a vertex at infinity sits for connections and shadow rays.
+    #[inline]
+    pub fn far_point(&self, from: Vec3, dir: Vec3) -> Vec3 {
+        from + dir * (2.0 * self.radius.max((from - self.center).length()))
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -189,34 +219,6 @@ impl Environment {
         }
     }
 
-    /// The density of a light path's origin on the disk it starts from (1 / (pi r^2)): it
-    /// plays the role of a direction density at the light, turned into an area density at the
-    /// first surface by the cosine there alone (parallel rays, no distance falloff).
-    #[inline]
-    pub fn disk_pdf(&self) -> f32 {
-        1.0 / (PI * self.radius * self.radius)
-    }
-
-    /// A light path from the environment for `u_dir` (its direction) and `u_disk` (where on
-    /// the disk across the scene it starts): origin, unit direction of travel (into the scene)
-    /// and the solid-angle density of the direction it comes from (0: none).
-    #[inline]
-    pub fn sample_ray(&self, u_dir: Vec2, u_disk: Vec2) -> (Vec3, Vec3, f32) {
-        let (towards_light, pdf) = self.sample(u_dir);
-        let d = crate::sampling::concentric_disk(u_disk);
-        let (dx, dy) = (d.x, d.y);
-        let frame = crate::math::Frame::from_normal(towards_light);
-        let origin = self.center + self.radius * (towards_light + frame.s * dx + frame.t * dy);
-        (origin, -towards_light, pdf)
-    }
-
-    /// A point beyond everything the scene holds, seen from `from` in unit direction `dir`:
-    /// where a vertex on the environment sits for connections and shadow rays.
-    #[inline]
-    pub fn far_point(&self, from: Vec3, dir: Vec3) -> Vec3 {
-        from + dir * (2.0 * self.radius.max((from - self.center).length()))
-    }
-
     /// The largest radiance it sends (per channel).
     pub fn peak_radiance(&self) -> Vec3 {
         match &self.radiance {
@@ -369,8 +371,6 @@ mod tests {
             )),
             to_world: rotation,
             to_local: rotation.transpose(),
-            center: Vec3::ZERO,
-            radius: 1.0,
         }
     }
 

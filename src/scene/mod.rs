@@ -99,7 +99,8 @@ pub struct Emitters {
     /// A triangle's area; 1 for a point light, so that `pmf / area` is its discrete
     /// probability wherever an area density is asked for.
     pub area: Vec<f32>,
-    /// A point light's position (zero for a triangle).
+    /// A point light's position; a directional light's unit direction of travel (zero for a
+    /// triangle).
     pub position: Vec<Vec3>,
     /// A point light's spot cone, if it has one (None for a triangle).
     pub profile: Vec<lights::PointProfile>,
@@ -111,6 +112,8 @@ pub struct Emitters {
     pub total_power: Vec3,
     /// The textures spots project (`lights::SpotProjection::texture` indexes them).
     pub spot_textures: Vec<textures::Texture>,
+    /// Where light paths from lights at infinity start (set where the scene has one).
+    pub disk: environment::SceneDisk,
     /// The light at infinity, if the scene has one: the last emitter, its `triangle`
     /// `ENVIRONMENT`.
     pub environment: Option<environment::Environment>,
@@ -127,6 +130,13 @@ impl Emitters {
     #[inline]
     pub fn is_point(&self, e: usize) -> bool {
         self.triangle[e] & POINT_LIGHT != 0
+    }
+
+    /// Whether emitter `e` is a directional light (its `position` is its direction of travel,
+    /// its `radiance` its irradiance).
+    #[inline]
+    pub fn is_directional(&self, e: usize) -> bool {
+        self.triangle[e] & (POINT_LIGHT | AT_INFINITY) == POINT_LIGHT | AT_INFINITY
     }
 
     /// Whether every emitter is a triangle (no point light, no light at infinity).
@@ -221,9 +231,27 @@ pub struct LightSample {
 /// bits: scenes hold fewer than 2^31 triangles.
 pub const POINT_LIGHT: u32 = 1 << 31;
 
-/// `Emitters::triangle` of the light at infinity (no triangle has this id: scenes hold fewer
-/// than 2^30 triangles).
-pub const ENVIRONMENT: u32 = 1 << 30;
+/// Marks a light at infinity in `Emitters::triangle` (no triangle has this bit: scenes hold
+/// fewer than 2^30 triangles): alone, the environment; with `POINT_LIGHT`, a directional
+/// light (a delta direction, as a point light is a delta position): `POINT_LIGHT | AT_INFINITY
+/// | e`.
+pub const AT_INFINITY: u32 = 1 << 30;
+
+/// `Emitters::triangle` of the environment (constant or envmap).
+pub const ENVIRONMENT: u32 = AT_INFINITY;
+
+/// The emitter index a point or directional light's triangle tag names.
+#[inline]
+pub fn light_index(triangle: u32) -> usize {
+    (triangle & !(POINT_LIGHT | AT_INFINITY)) as usize
+}
+
+/// Whether a vertex's triangle tag is a light at infinity (the camera's and a miss's tag,
+/// all bits set, is not).
+#[inline]
+pub fn is_at_infinity(triangle: u32) -> bool {
+    triangle != u32::MAX && triangle & AT_INFINITY != 0
+}
 
 /// What a one-sided surface is from behind: it reflects nothing.
 pub const BLACK: Material = Material::Diffuse {
@@ -301,6 +329,23 @@ impl PreparedScene {
             return self.sample_environment_from(p, p_error, ng, wo, env_index, env, u_point);
         }
         let sampled = self.sample_emitter(u_pick, u_point);
+        if self.emitters.is_directional(sampled.emitter) {
+            // A delta direction: the irradiance it brings, no falloff, a shadow ray that must
+            // leave the scene.
+            let wi = -self.emitters.position[sampled.emitter];
+            if wi.dot(ng) * wo.dot(ng) <= 0.0 {
+                return None;
+            }
+            return Some(LightSample {
+                wi,
+                pdf: sampled.pdf_area,
+                origin: crate::geometry::offset_ray_origin(p, p_error, ng, wi),
+                dir: wi,
+                t_max: f32::INFINITY,
+                radiance: self.emitters.radiance[sampled.emitter],
+                delta: true,
+            });
+        }
         let light = sampled.point;
         let to_light = light.p - p;
         let dist2 = to_light.length_squared();

@@ -293,36 +293,45 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             ));
         }
     }
+    let mut directional_query = world.query::<(
+        &super::world::DirectionalLight,
+        &SourceSpot,
+        Option<&DeclaredIn>,
+    )>();
+    let mut directionals: Vec<_> = directional_query.iter().collect();
+    directionals.sort_by_key(|d| d.0.order);
     let mut environment_query = world.query::<(
         &super::world::EnvironmentLight,
         &SourceSpot,
         Option<&DeclaredIn>,
     )>();
     let environments: Vec<_> = environment_query.iter().collect();
-    let mut environment_power = DVec3::ZERO;
-    if let [(light, spot, declared_in), rest @ ..] = environments.as_slice() {
-        if !rest.is_empty() {
-            return Err(error(
-                Some((rest[0].1, rest[0].2)),
-                "a scene holds at most one light at infinity (constant or envmap), as in Mitsuba"
-                    .into(),
-            ));
-        }
-        let env = &light.0;
+    if let [_, second, ..] = environments.as_slice() {
+        return Err(error(
+            Some((second.1, second.2)),
+            "a scene holds at most one light at infinity (constant or envmap), as in Mitsuba"
+                .into(),
+        ));
+    }
+    // Lights at infinity start their light paths on a disk as wide as the scene's bounding
+    // sphere, and their power is what they can deliver to the scene: their mean irradiance on
+    // a surface (a quarter of the radiance integrated over the sphere; a quarter of a
+    // directional light's irradiance, a convex body's mean projected area being a quarter of
+    // its area) times the area that receives it: the surfaces' own (one side each) or, where
+    // that is more, the bounding sphere's, which all their light into the scene crosses
+    // (pbrt-v4's pi r^2 bound). The sphere alone made a flat scene's spot light 20 times
+    // rarer than Mitsuba's pick.
+    let mut receiving_area = 0.0;
+    if !directionals.is_empty() || !environments.is_empty() {
         let (lo, hi) = (
             all_points(&triangles).fold(DVec3::INFINITY, |m, p| m.min(p.as_dvec3())),
             all_points(&triangles).fold(DVec3::NEG_INFINITY, |m, p| m.max(p.as_dvec3())),
         );
         let radius = 0.5 * (hi - lo).length();
-        let mut env = env.clone();
-        // Light paths from it start on a disk as wide as the scene's bounding sphere.
-        env.center = (0.5 * (lo + hi)).as_vec3();
-        env.radius = (radius * (1.0 + 1e-4)).max(1e-4) as f32;
-        // Its power: what it can deliver to the scene, the mean irradiance a surface receives
-        // from it (a quarter of its radiance integrated over the sphere) times the area that
-        // receives it: the surfaces' own (one side each) or, where that is more, the bounding
-        // sphere's, which all its light into the scene crosses (pbrt-v4's pi r^2 bound). The
-        // sphere alone made a flat scene's spot light 20 times rarer than Mitsuba's pick.
+        emitters.disk = super::environment::SceneDisk {
+            center: (0.5 * (lo + hi)).as_vec3(),
+            radius: (radius * (1.0 + 1e-4)).max(1e-4) as f32,
+        };
         let surface_area: f64 = (0..triangles.len())
             .map(|i| {
                 let (p0, p1, p2) = (
@@ -333,19 +342,45 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                 0.5 * (p1 - p0).cross(p2 - p0).length()
             })
             .sum();
-        let receiving_area = surface_area.min(4.0 * PI * radius * radius);
-        environment_power = 0.25 * receiving_area * env.irradiance_over_sphere();
-        power += environment_power;
-        if power.is_nan() || power.max_element() > super::MAX_POWER {
+        receiving_area = surface_area.min(4.0 * PI * radius * radius);
+    }
+    let too_bright = |power: DVec3, spot, declared_in| {
+        error(
+            Some((spot, declared_in)),
+            format!(
+                "light at infinity: its power (its mean irradiance times the scene's area, with \
+                 the lights before it) reaches {:.3e}: it must stay below {:e}",
+                power.max_element(),
+                super::MAX_POWER
+            ),
+        )
+    };
+    for (light, spot, declared_in) in directionals {
+        let direction = light.direction.normalize().as_vec3();
+        if !direction.is_finite() {
             return Err(error(
-                Some((spot, *declared_in)),
-                format!(
-                    "light at infinity: its power (its mean irradiance times the scene's area, \
-                     with the lights before it) reaches {:.3e}: it must stay below {:e}",
-                    power.max_element(),
-                    super::MAX_POWER
-                ),
+                Some((spot, declared_in)),
+                "directional light: its direction is zero or not finite".into(),
             ));
+        }
+        let e = emitters.triangle.len() as u32;
+        emitters
+            .triangle
+            .push(super::POINT_LIGHT | super::AT_INFINITY | e);
+        emitters.radiance.push(light.irradiance);
+        emitters.area.push(1.0);
+        emitters.position.push(direction);
+        emitters.profile.push(None);
+        power += 0.25 * receiving_area * light.irradiance.as_dvec3();
+        if power.is_nan() || power.max_element() > super::MAX_POWER {
+            return Err(too_bright(power, spot, declared_in));
+        }
+    }
+    if let [(light, spot, declared_in)] = environments.as_slice() {
+        let env = &light.0;
+        power += 0.25 * receiving_area * env.irradiance_over_sphere();
+        if power.is_nan() || power.max_element() > super::MAX_POWER {
+            return Err(too_bright(power, spot, *declared_in));
         }
         emitters.triangle.push(super::ENVIRONMENT);
         // The brightest radiance it sends (the film's fixed-point unit follows it).
@@ -356,10 +391,11 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         emitters.environment = Some(env.clone());
     }
     drop(environment_query);
+    drop(directional_query);
     if emitters.triangle.is_empty() {
         warnings.push("no object emits light: the image will be black".to_string());
     }
-    build_distribution(&mut emitters, environment_power);
+    build_distribution(&mut emitters, receiving_area);
     if emitters.cdf.len() != emitters.triangle.len() {
         return Err(error(
             None,
@@ -397,7 +433,7 @@ fn all_points(triangles: &TriangleColumns) -> impl Iterator<Item = &Vec3> {
 
 /// Fills pmf (proportional to pi * area * luminance), cdf (ending at exactly 1) and the total
 /// power, summing in double precision.
-fn build_distribution(emitters: &mut Emitters, environment_power: DVec3) {
+fn build_distribution(emitters: &mut Emitters, receiving_area: f64) {
     let powers: Vec<DVec3> = emitters
         .radiance
         .iter()
@@ -405,7 +441,14 @@ fn build_distribution(emitters: &mut Emitters, environment_power: DVec3) {
         .zip(emitters.triangle.iter().zip(&emitters.profile))
         .map(|((l, &area), (&triangle, profile))| {
             if triangle == super::ENVIRONMENT {
-                environment_power
+                let env = emitters
+                    .environment
+                    .as_ref()
+                    .expect("the environment's emitter");
+                0.25 * receiving_area * env.irradiance_over_sphere()
+            } else if super::is_at_infinity(triangle) {
+                // A directional light: `l` is its irradiance.
+                0.25 * receiving_area * l.as_dvec3()
             } else if triangle & super::POINT_LIGHT != 0 {
                 profile.map_or(4.0 * PI, |s| s.weighted_solid_angle()) * l.as_dvec3()
             } else {

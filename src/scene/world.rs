@@ -38,6 +38,16 @@ pub struct PointLight {
     pub order: u32,
 }
 
+/// A directional light (Mitsuba's `directional` emitter): `irradiance` (W/m^2, RGB) arriving
+/// from every point of the scene's far side along `direction` (unit, the way light travels);
+/// `order` among the file's directional lights.
+#[derive(Clone, Copy, Debug)]
+pub struct DirectionalLight {
+    pub direction: glam::DVec3,
+    pub irradiance: Vec3,
+    pub order: u32,
+}
+
 /// The texture a spot light projects (its `Spot::projection` says how).
 #[derive(Clone, Debug)]
 pub struct SpotTexture(pub super::textures::Texture);

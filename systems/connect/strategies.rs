@@ -434,7 +434,7 @@ pub fn sampled_light_vertex(
         let pdf = scene.emitters.pmf[e] * pdf_dir;
         return Vertex {
             kind: VertexKind::Light,
-            p: env.far_point(z.p, towards_light),
+            p: scene.emitters.disk.far_point(z.p, towards_light),
             p_error: Vec3::ZERO,
             ng: -towards_light,
             ns: -towards_light,
@@ -453,6 +453,22 @@ pub fn sampled_light_vertex(
     let light = scene.sample_emitter(u_pick, sampler.get2(key, dim + DIM_LIGHT_POINT));
     let (e, tri, sp) = (light.emitter, light.triangle, light.point);
     let pdf_origin = light.pdf_area;
+    if scene.emitters.is_directional(e) {
+        // Its one direction, from beyond the scene.
+        let travel = scene.emitters.position[e];
+        return Vertex {
+            kind: VertexKind::Light,
+            p: scene.emitters.disk.far_point(z.p, -travel),
+            p_error: Vec3::ZERO,
+            ng: travel,
+            ns: travel,
+            triangle: tri,
+            beta: scene.emitters.radiance[e] / pdf_origin,
+            pdf_fwd: pdf_origin,
+            pdf_rev: 0.0,
+            delta: false,
+        };
+    }
     Vertex {
         kind: VertexKind::Light,
         p: sp.p,

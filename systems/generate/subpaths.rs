@@ -170,13 +170,15 @@ crate::system! {
                         // From the light at infinity: a direction, and a point on the disk
                         // across the scene facing it. The origin's density is in solid angle;
                         // the disk's plays the direction density's part (see `to_area`).
-                        let (origin, dir, pdf_dir) = env.sample_ray(
-                            sampler.get2(key, LIGHT_DIM_DIRECTION),
-                            sampler.get2(key, LIGHT_DIM_POINT),
-                        );
+                        let (towards_light, pdf_dir) =
+                            env.sample(sampler.get2(key, LIGHT_DIM_DIRECTION));
+                        let origin = emitters
+                            .disk
+                            .origin(towards_light, sampler.get2(key, LIGHT_DIM_POINT));
+                        let dir = -towards_light;
                         let pdf_origin = emitters.pmf[e] * pdf_dir;
-                        let le = env.eval(-dir);
-                        let pdf_disk = env.disk_pdf();
+                        let le = env.eval(towards_light);
+                        let pdf_disk = emitters.disk.pdf();
                         let live = pdf_origin > 0.0;
                         v.set(
                             i,
@@ -216,6 +218,39 @@ crate::system! {
                     );
                     let (e, tri, sp) = (light.emitter, light.triangle, light.point);
                     let pdf_origin = light.pdf_area;
+                    if emitters.is_directional(e) {
+                        // Its one direction, from a point on the disk across the scene.
+                        let dir = emitters.position[e];
+                        let origin = emitters
+                            .disk
+                            .origin(-dir, sampler.get2(key, LIGHT_DIM_POINT));
+                        let irradiance = emitters.radiance[e];
+                        let pdf_disk = emitters.disk.pdf();
+                        v.set(
+                            i,
+                            PathVertex {
+                                p: origin,
+                                p_error: Vec3::ZERO,
+                                ng: dir,
+                                ns: dir,
+                                triangle: tri,
+                                beta: irradiance / pdf_origin,
+                                pdf_fwd: pdf_origin,
+                                pdf_rev: 0.0,
+                                delta: false,
+                            },
+                        );
+                        let beta = irradiance * (1.0 / (pdf_origin * pdf_disk));
+                        wk.subpath[i] = (cap + k) as u32;
+                        wk.key[i] = key;
+                        wk.beta[i] = beta;
+                        wk.pdf_dir[i] = pdf_disk;
+                        wk.roulette_scale[i] = beta.max_element().max(f32::MIN_POSITIVE);
+                        wk.alive[i] = walks;
+                        r.origin[i] = origin;
+                        r.dir[i] = if walks { dir } else { Vec3::ZERO };
+                        continue;
+                    }
                     let le = emitters.radiance[e];
                     let u_dir = sampler.get2(key, LIGHT_DIM_DIRECTION);
                     let point_light = emitters.is_point(e);

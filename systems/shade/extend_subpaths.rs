@@ -101,7 +101,7 @@ crate::system! {
                             let dir = r.dir[i];
                             let mut here = Vertex {
                                 kind: VertexKind::Light,
-                                p: env.far_point(r.origin[i], dir),
+                                p: scene.emitters.disk.far_point(r.origin[i], dir),
                                 p_error: Vec3::ZERO,
                                 ng: -dir,
                                 ns: -dir,

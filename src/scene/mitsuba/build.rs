@@ -15,9 +15,9 @@ use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
-    DeclaredIn, Emission, EnvironmentLight, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo,
-    OneSided, PointLight, ReflectanceTexture, SceneWorld, Shape, SourceSpot, SpotTexture,
-    Transform,
+    DeclaredIn, DirectionalLight, Emission, EnvironmentLight, FlipNormals, MaterialInfo,
+    MaterialRef, ObjectInfo, OneSided, PointLight, ReflectanceTexture, SceneWorld, Shape,
+    SourceSpot, SpotTexture, Transform,
 };
 use crate::scene::{Camera, Crop, Limits, Projection, SceneError};
 
@@ -48,7 +48,7 @@ pub const INTEGRATORS: &str = "path, direct, moment";
 pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
 pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor";
-pub const EMITTERS: &str = "area, point, spot, constant, envmap";
+pub const EMITTERS: &str = "area, point, spot, directional, constant, envmap";
 pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
 pub const FILMS: &str = "hdrfilm";
@@ -239,6 +239,16 @@ impl<'a> Params<'a> {
         }
     }
 
+    fn vector(&mut self, name: &str) -> Result<Option<(DVec3, Spot)>, XmlError> {
+        let Some(p) = self.take(name) else {
+            return Ok(None);
+        };
+        match p.value {
+            Value::Vector(v) => Ok(Some((v, p.spot.clone()))),
+            _ => Err(self.wrong_type(p, "vector")),
+        }
+    }
+
     fn transform(&mut self, name: &str) -> Result<Option<(DMat4, Spot)>, XmlError> {
         let Some(p) = self.take(name) else {
             return Ok(None);
@@ -337,6 +347,7 @@ struct Builder<'a> {
     default_material: Option<Entity>,
     default_diffuse: Option<Entity>,
     point_lights: u32,
+    directional_lights: u32,
     /// Textures read so far, by object (shared by every ref, as the image data is).
     textures: HashMap<usize, Texture>,
     objects: u32,
@@ -367,6 +378,7 @@ impl<'a> Builder<'a> {
             default_material: None,
             default_diffuse: None,
             point_lights: 0,
+            directional_lights: 0,
             textures: HashMap::new(),
             objects: 0,
             triangles_so_far: 0,
@@ -455,6 +467,14 @@ impl<'a> Builder<'a> {
                                 .insert_one(entity, texture)
                                 .expect("just spawned");
                         }
+                    } else if object.kind == "directional" {
+                        let light = self.directional_emitter(child.object)?;
+                        let spot = object.spot.clone();
+                        self.world.spawn((
+                            light,
+                            source_spot(&spot),
+                            DeclaredIn(spot.file.to_path_buf()),
+                        ));
                     } else if object.kind == "constant" || object.kind == "envmap" {
                         let light = self.environment_emitter(child.object)?;
                         let spot = object.spot.clone();
@@ -1209,6 +1229,60 @@ impl<'a> Builder<'a> {
         ))
     }
 
+    /// A `directional` light: `irradiance` (1 by default) travelling along `direction` or
+    /// `to_world`'s +z (one or the other, as Mitsuba).
+    fn directional_emitter(&mut self, id: usize) -> Result<DirectionalLight, XmlError> {
+        let object = self.object(id);
+        let mut params = Params::new(object);
+        if let Some(c) = object.children.first() {
+            return Err(XmlError::at(
+                &c.spot,
+                "directional: a nested texture is not supported (give its irradiance as rgb or spectrum)",
+            ));
+        }
+        let direction = params.vector("direction")?;
+        let to_world = params.transform("to_world")?;
+        let (direction, spot) = match (direction, to_world) {
+            (Some(_), Some((_, spot))) => {
+                return Err(XmlError::at(
+                    &spot,
+                    "directional: give either direction or to_world, not both (as Mitsuba)",
+                ));
+            }
+            (Some((d, spot)), None) => (d, spot),
+            (None, Some((m, spot))) => (m.z_axis.truncate(), spot),
+            (None, None) => (DVec3::Z, object.spot.clone()),
+        };
+        if !(direction.length() > 0.0 && direction.is_finite()) {
+            return Err(XmlError::at(
+                &spot,
+                "directional: the direction is zero or not finite",
+            ));
+        }
+        let irradiance = match params.color("irradiance", Role::Emission)? {
+            Some((c, spot)) => {
+                if !c.is_finite() || c.min_element() < 0.0 {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!(
+                            "irradiance {:?} must be finite and not negative",
+                            c.to_array()
+                        ),
+                    ));
+                }
+                c
+            }
+            None => Vec3::ONE,
+        };
+        params.finish()?;
+        self.directional_lights += 1;
+        Ok(DirectionalLight {
+            direction: direction.normalize(),
+            irradiance,
+            order: self.directional_lights,
+        })
+    }
+
     /// A light at infinity: `constant` (radiance, 1 by default) or `envmap` (an
     /// equirectangular image file, times `scale`, turned by `to_world`).
     fn environment_emitter(&mut self, id: usize) -> Result<EnvironmentLight, XmlError> {
@@ -1291,9 +1365,6 @@ impl<'a> Builder<'a> {
             radiance,
             to_world,
             to_local: to_world.transpose(),
-            // Set when the scene is prepared.
-            center: Vec3::ZERO,
-            radius: 1.0,
         }))
     }
 
