@@ -28,7 +28,9 @@ use std::sync::Arc;
 pub struct CameraWalk {
     pub data: Arc<SceneData>,
     pub sampler: Sampler<'static>,
-    /// Maximum number of specular bounces; `u32::MAX` for unlimited.
+    /// Maximum number of bounces of a path (a path tracer's count: the camera ray's first
+    /// hit is depth 0); `u32::MAX` for unlimited. Chains follow surfaces below it and keep
+    /// gather points only below it.
     pub max_depth: u32,
     /// Sample index of the chains `generate_camera_chains` starts (the pass).
     pub sample_index: u64,

@@ -19,6 +19,8 @@ crate::soa! {
         /// Solid-angle density of the last bounce's direction: 0 after the camera or a
         /// specular bounce (whose emission no light sample could find).
         bsdf_pdf: f32,
+        /// Bounces from the camera so far: 0 until the camera ray's first hit scatters (a
+        /// final-gather chain starts one past its visible point's).
         depth: u32,
         alive: bool,
         /// Where the chain ended (`triangle == NO_VISIBLE_POINT`: nowhere to gather).
@@ -52,6 +54,10 @@ crate::soa! {
         beta: Vec3,
         /// Emission the chain met on its way (seen directly or through specular surfaces).
         emitted: Vec3,
+        /// The chain's bounces before it reached the point (0: the camera ray's first hit), so
+        /// a photon gathered here must keep the whole path within the maximum depth
+        /// (`photons::photon_depth_limit`).
+        depth: u32,
     }
 }
 

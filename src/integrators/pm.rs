@@ -80,7 +80,11 @@ impl PmState {
         let cam = data.scene.camera;
         let pixels = cam.width as usize * cam.height as usize;
         let sampler = Sampler::new(settings.sampler, settings.seed, cam.width, cam.height);
-        let mut photon_pass = PhotonPass::new(data.clone(), sampler, settings.max_depth);
+        let mut photon_pass = PhotonPass::new(
+            data.clone(),
+            sampler,
+            crate::photons::deepest_stored_photon(settings.max_depth),
+        );
         photon_pass.tracing.begin_pass(0, settings.photons);
         let caustics = has_caustics(&data);
         PmState {

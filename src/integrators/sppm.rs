@@ -115,7 +115,11 @@ impl ProgressiveState {
         let mut estimates = PixelEstimates::new(pixels);
         estimates.radius.fill(settings.radius_in(&data));
         let sampler = Sampler::new(settings.sampler, settings.seed, cam.width, cam.height);
-        let mut photon_pass = PhotonPass::new(data.clone(), sampler, settings.max_depth);
+        let mut photon_pass = PhotonPass::new(
+            data.clone(),
+            sampler,
+            crate::photons::deepest_stored_photon(settings.max_depth),
+        );
         // Direct light comes from light sampling at the visible points.
         photon_pass.tracing.store_direct = false;
         let mut camera_walk = CameraWalk::new(data.clone(), sampler, settings.max_depth);
@@ -443,7 +447,7 @@ mod bindings {
         }
         gather::visible_point_photons::GatherPhotons {
             read data, visible = camera_walk.visible, tracing = photon_pass.tracing, grid,
-                hit_points = camera_walk.points;
+                hit_points = camera_walk.points, max_depth = settings.max_depth;
             write estimates, gathered;
         }
         shade::order_hit_points::OrderHitPoints {

@@ -309,6 +309,23 @@ pub const VISIBILITY_LIFT: f32 = 0.25;
 /// point lies within this distance of a surface behind it (1e-5 of the diagonal).
 pub const VISIBILITY_MARGIN: f32 = 1e-5;
 
+/// The deepest photon a point `camera_depth` bounces from the camera may gather when paths
+/// have at most `max_depth` bounces (pt's count: emission seen directly is depth 0), or None
+/// when no photon may. A photon stored after `d` bounces lands on the point itself, which is
+/// one more bounce of the path: camera_depth + 1 + d bounces in all.
+#[inline]
+pub fn photon_depth_limit(max_depth: u32, camera_depth: u32) -> Option<u32> {
+    max_depth.checked_sub(camera_depth.checked_add(1)?)
+}
+
+/// The deepest photon worth storing under `max_depth`: one gathered at a point the camera
+/// sees directly (camera depth 0); deeper ones could never count. (With `max_depth` 0 no
+/// photon counts; the cap is then 0.)
+#[inline]
+pub fn deepest_stored_photon(max_depth: u32) -> u32 {
+    photon_depth_limit(max_depth, 0).unwrap_or(0)
+}
+
 /// Where a density estimate is made: a point, its normal on the viewer's side, and the BSDF.
 pub struct GatherPoint<'a> {
     pub p: Vec3,
@@ -321,22 +338,28 @@ pub struct GatherPoint<'a> {
     pub frame: crate::math::Frame,
     pub wo_local: Vec3,
     pub material: crate::bsdf::Material,
+    /// Photons stored after more bounces than this would make the path longer than the
+    /// maximum depth (`photon_depth_limit`).
+    pub max_photon_depth: u32,
     /// The scene's geometry, to test that a photon sees the point.
     pub accel: &'a crate::accel::Accel,
 }
 
 impl<'a> GatherPoint<'a> {
-    /// The gather point of slot `i` of `visible`, if it has one.
+    /// The gather point of slot `i` of `visible`, if it has one and some photon may count
+    /// there within `max_depth` bounces.
     #[inline]
     pub fn of(
         data: &'a SceneData,
         visible: &crate::components::VisiblePoints,
         i: usize,
+        max_depth: u32,
     ) -> Option<GatherPoint<'a>> {
         let tri = visible.triangle[i];
         if tri == crate::components::NO_VISIBLE_POINT {
             return None;
         }
+        let max_photon_depth = photon_depth_limit(max_depth, visible.depth[i])?;
         let scene = &data.scene;
         let frame = crate::math::Frame::from_normal(visible.ns[i]);
         let (p, ng) = (visible.p[i], visible.ng[i]);
@@ -349,16 +372,21 @@ impl<'a> GatherPoint<'a> {
             frame,
             wo_local: frame.to_local(visible.wo[i]),
             material: scene.material_at(tri, p),
+            max_photon_depth,
             accel: &data.accel,
         })
     }
 
-    /// f(wo, wi) times the power of photon `k`, or None when the photon lies on another
-    /// plane, on the other side of the surface, or out of the point's sight (behind a wall
-    /// that crosses the gather disc: without the test, a band as wide as the radius along a
-    /// thin wall gathers the next room's photons).
+    /// f(wo, wi) times the power of photon `k`, or None when the photon is too deep for the
+    /// point (its path would pass the maximum depth), lies on another plane, on the other
+    /// side of the surface, or out of the point's sight (behind a wall that crosses the
+    /// gather disc: without the test, a band as wide as the radius along a thin wall gathers
+    /// the next room's photons).
     #[inline]
     pub fn reflected(&self, photons: &crate::components::Photons, k: usize) -> Option<Vec3> {
+        if photons.depth[k] > self.max_photon_depth {
+            return None;
+        }
         let (wi, side) = (photons.wi[k], photons.ng[k]);
         if side.dot(self.ng) < NORMAL_COSINE || wi.dot(self.ng) <= 0.0 {
             return None;
@@ -434,6 +462,8 @@ pub struct MapQuery<'a> {
     pub max_radius: f32,
     /// 1 / photons emitted.
     pub scale: f32,
+    /// Bounces a path may have (the photons a point gathers are limited by its depth).
+    pub max_depth: u32,
 }
 
 impl MapQuery<'_> {
@@ -459,7 +489,7 @@ impl MapQuery<'_> {
                 let (mut made, mut nonfinite) = (0, 0);
                 for (j, sum) in out.iter_mut().enumerate() {
                     let pixel = c * chunk + j;
-                    let Some(at) = GatherPoint::of(data, points, pixel) else {
+                    let Some(at) = GatherPoint::of(data, points, pixel, self.max_depth) else {
                         continue;
                     };
                     let l = density_estimate(

@@ -30,6 +30,7 @@ crate::system! {
             k: settings.k,
             max_radius: settings.max_radius_in(data),
             scale: 1.0 / maps.emitted.max(1) as f32,
+            max_depth: settings.max_depth,
         };
         let (made, dropped) =
             query.add_estimates(data, visible, |_| true, pass_radiance);

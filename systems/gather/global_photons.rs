@@ -57,6 +57,7 @@ fn gather(
         k: settings.k,
         max_radius: settings.max_radius_in(data),
         scale: 1.0 / maps.emitted.max(1) as f32,
+        max_depth: settings.max_depth,
     };
     let (made, dropped) = query.add_estimates(data, points, keep, pass_radiance);
     *nonfinite += dropped;

@@ -2,7 +2,8 @@
 //! count M and the flux tau_M = beta sum f(wo, wi) power they bring. A photon counts only on
 //! the visible point's side and plane and in its sight (see `photons::GatherPoint::reflected`),
 //! so light does not bleed round corners, through a wall from the photons on its far side,
-//! or under a wall from the next room's floor.
+//! or under a wall from the next room's floor; and only if the path it makes with the camera
+//! chain stays within the maximum depth.
 
 use crate::components::PixelEstimates;
 use crate::components::VisiblePoints;
@@ -26,7 +27,7 @@ pub struct GatherPhotons;
 crate::system! {
     GatherPhotons = "gather_photons";
     read data: Arc<SceneData>, visible: VisiblePoints, tracing: PhotonTracing,
-        grid: Option<HashGrid>, hit_points: usize;
+        grid: Option<HashGrid>, hit_points: usize, max_depth: u32;
     write estimates: PixelEstimates, gathered: usize;
     run {
         let photons = &tracing.photons;
@@ -48,8 +49,8 @@ crate::system! {
                     e.pass_photons[i] = 0;
                     e.pass_flux[i] = Vec3::ZERO;
                     let pixel = e.start + i;
-                    let (Some(grid), Some(at)) = (grid, GatherPoint::of(data, visible, pixel))
-                    else {
+                    let at = GatherPoint::of(data, visible, pixel, *max_depth);
+                    let (Some(grid), Some(at)) = (grid, at) else {
                         continue;
                     };
                     let (mut m, mut flux) = (0u32, Vec3::ZERO);

@@ -1,7 +1,8 @@
 //! PM's final gathering: from each visible point, one direction sampled from its BSDF starts
 //! a chain (slot = pixel) that follows specular bounces to a surface where the global map is
-//! read. Pixels with no visible point, or whose sample carries nothing, start a dead chain,
-//! which the compaction that follows ends with no gather point.
+//! read; the chain's depth counts on from the visible point's. Pixels with no visible point,
+//! or whose sample carries nothing, start a dead chain, which the compaction that follows
+//! ends with no gather point.
 
 use crate::bsdf::{TransportMode, sample_direction};
 use crate::components::CameraChains;
@@ -67,6 +68,9 @@ crate::system! {
                         continue;
                     }
                     c.beta[i] = beta;
+                    // The path goes on from the visible point: its bounces count on from
+                    // there (the depth cap, and the photons the gather point may gather).
+                    c.depth[i] = visible.depth[pixel] + 1;
                     c.alive[i] = true;
                     r.origin[i] = crate::geometry::offset_ray_origin(
                         visible.p[pixel],

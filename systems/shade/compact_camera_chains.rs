@@ -112,6 +112,7 @@ fn visible_point(c: &CameraChains, i: usize) -> VisiblePoint {
         triangle: c.triangle[i],
         beta: c.beta[i],
         emitted: c.emitted[i],
+        depth: c.depth[i],
     }
 }
 

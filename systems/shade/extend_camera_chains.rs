@@ -1,11 +1,11 @@
 //! Camera chains of the photon mappers: at each hit, adds the emission seen, then either
 //! follows a specular surface or a conductor smoother than `photons::FOLLOW_ALPHA` by
 //! sampling it (keeping the glossy ones in `met_glossy`, where the integrator samples light),
-//! or ends on any other surface, which becomes the chain's gather point. Chains that leave the
-//! scene, reach the depth cap or lose the roulette (after `ROULETTE_DEPTH` bounces, by
-//! throughput) end with no gather point. In a ray tree (PPM) a chain at a dielectric follows both branches instead,
-//! the second as a new chain, and at a followed conductor one sampled direction, with no
-//! roulette (see `camera_walk`).
+//! or ends on any other surface, which becomes the chain's gather point unless the chain is
+//! at the depth cap. Chains that leave the scene, reach the depth cap or lose the roulette
+//! (after `ROULETTE_DEPTH` bounces, by throughput) end with no gather point. In a ray tree
+//! (PPM) a chain at a dielectric follows both branches instead, the second as a new chain,
+//! and at a followed conductor one sampled direction, with no roulette (see `camera_walk`).
 
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::CameraChains;
@@ -100,16 +100,21 @@ crate::system! {
                     if ns.dot(ng) < 0.0 {
                         ns = -ns;
                     }
+                    let depth = c.depth[i];
                     if !chains_follow(&material) {
-                        c.p[i] = sp.p;
-                        c.p_error[i] = sp.p_error;
-                        c.ng[i] = ng;
-                        c.ns[i] = ns;
-                        c.wo[i] = wo;
-                        c.triangle[i] = tri;
+                        // At the depth cap every path through the point (light sampled there,
+                        // photons gathered, a final gather) is a bounce too long: no gather
+                        // point, as a path tracer ends there.
+                        if depth < max_depth {
+                            c.p[i] = sp.p;
+                            c.p_error[i] = sp.p_error;
+                            c.ng[i] = ng;
+                            c.ns[i] = ns;
+                            c.wo[i] = wo;
+                            c.triangle[i] = tri;
+                        }
                         continue;
                     }
-                    let depth = c.depth[i];
                     if depth >= max_depth || (tree && depth >= TREE_DEPTH) {
                         continue;
                     }
@@ -179,6 +184,7 @@ crate::system! {
                             triangle: tri,
                             beta: c.beta[i],
                             emitted: Vec3::ZERO,
+                            depth,
                         });
                     }
                     let dim = bounce_dim(depth);

@@ -116,6 +116,21 @@ fn caustic_photons_come_through_glass() {
     assert!(caustic > 100, "only {caustic} caustic photons");
 }
 
+/// A point d bounces from the camera may gather photons of up to max_depth - d - 1 bounces:
+/// the photon lands on the point, one bounce more. Photons deeper than a point the camera sees
+/// directly could take could never count, so they are not stored.
+#[test]
+fn the_photon_depth_limit_counts_the_whole_path() {
+    assert_eq!(photons::photon_depth_limit(3, 0), Some(2));
+    assert_eq!(photons::photon_depth_limit(3, 2), Some(0));
+    assert_eq!(photons::photon_depth_limit(3, 3), None);
+    assert_eq!(photons::photon_depth_limit(0, 0), None);
+    assert_eq!(photons::photon_depth_limit(u32::MAX, u32::MAX), None);
+    assert_eq!(photons::deepest_stored_photon(3), 2);
+    assert_eq!(photons::deepest_stored_photon(0), 0);
+    assert_eq!(photons::deepest_stored_photon(u32::MAX), u32::MAX - 1);
+}
+
 #[test]
 fn stored_photons_do_not_depend_on_threads() {
     let run = |threads: usize| {
