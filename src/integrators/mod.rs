@@ -544,14 +544,17 @@ pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Resu
 }
 
 /// Refuses lights the integrator does not carry yet: a light at infinity (constant, envmap,
-/// directional) renders under pt and the integrators built on BDPT's subpaths (bdpt, vcm, bpm, pssmlt,
-/// mmlt), where camera subpaths that leave the scene end on it and light subpaths start on a
-/// disk across the scene; the photon mappers and path-space mlt do not carry it yet.
+/// directional) renders under pt, the integrators built on BDPT's subpaths (bdpt, vcm, bpm,
+/// pssmlt, mmlt) and the photon mappers (pm, ppm, sppm): camera paths that leave the scene see
+/// the environment, light paths and photons start on a disk across the scene. Path-space mlt,
+/// whose mutations would have to move a vertex at infinity, does not carry it yet.
 pub fn check_lights(
     kind: IntegratorKind,
     scene: &crate::scene::PreparedScene,
 ) -> Result<(), String> {
-    const CARRY_INFINITY: [&str; 6] = ["pt", "bdpt", "vcm", "bpm", "pssmlt", "mmlt"];
+    const CARRY_INFINITY: [&str; 9] = [
+        "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt",
+    ];
     let at_infinity = scene
         .emitters
         .triangle

@@ -43,12 +43,51 @@ crate::system! {
             .for_each(|(w, r)| {
                 for i in 0..w.len() {
                     let key = sampler.key(Stream::Photon, first + (w.start + i) as u64, pass);
+                    if let Some((e, env)) = emitters.environment()
+                        && crate::sampling::sample_cdf(&emitters.cdf, sampler.get(key, DIM_PICK)) == e
+                    {
+                        // From the light at infinity: a direction by its own density, from a
+                        // point on the disk across the scene; radiance over the pick, the
+                        // direction's and the disk's densities.
+                        let (towards_light, pdf_dir) = env.sample(sampler.get2(key, DIM_DIRECTION));
+                        let origin = emitters
+                            .disk
+                            .origin(towards_light, sampler.get2(key, DIM_POINT));
+                        let pdf = emitters.pmf[e] * pdf_dir * emitters.disk.pdf();
+                        let alive = pdf > 0.0;
+                        w.key[i] = key;
+                        w.power[i] = if alive {
+                            env.eval(towards_light) * (1.0 / pdf)
+                        } else {
+                            Vec3::ZERO
+                        };
+                        w.depth[i] = 0;
+                        w.specular_chain[i] = true;
+                        w.alive[i] = alive;
+                        r.origin[i] = origin;
+                        r.dir[i] = if alive { -towards_light } else { Vec3::ZERO };
+                        continue;
+                    }
                     let light = data
                         .scene
                         .sample_emitter(sampler.get(key, DIM_PICK), sampler.get2(key, DIM_POINT));
                     let (e, sp) = (light.emitter, light.point);
                     let u_dir = sampler.get2(key, DIM_DIRECTION);
                     let pdf_point = light.pdf_area;
+                    if emitters.is_directional(e) {
+                        // Its one direction, from a point on the disk across the scene.
+                        let dir = emitters.position[e];
+                        let origin = emitters.disk.origin(-dir, sampler.get2(key, DIM_POINT));
+                        w.key[i] = key;
+                        w.power[i] =
+                            emitters.radiance[e] * (1.0 / (pdf_point * emitters.disk.pdf()));
+                        w.depth[i] = 0;
+                        w.specular_chain[i] = true;
+                        w.alive[i] = true;
+                        r.origin[i] = origin;
+                        r.dir[i] = dir;
+                        continue;
+                    }
                     let (dir, alive, power) = if emitters.is_point(e) {
                         // Intensity over the pick probability and the direction's density.
                         let (dir, pdf_dir) = lights::sample_direction(&emitters.profile[e], u_dir);

@@ -66,6 +66,19 @@ crate::system! {
                     c.triangle[i] = NO_VISIBLE_POINT;
                     let tri = hits.triangle[i];
                     if tri == MISS {
+                        // Leaving the scene: the light at infinity, if any, weighed as an
+                        // emitter the chain hits.
+                        let dir = r.dir[i];
+                        if let Some((_, env)) = scene.emitters.environment()
+                            && dir != Vec3::ZERO
+                        {
+                            let weight = if c.bsdf_pdf[i] > 0.0 {
+                                power_heuristic(c.bsdf_pdf[i], scene.environment_light_pdf(dir))
+                            } else {
+                                1.0
+                            };
+                            c.emitted[i] += c.beta[i] * env.eval(dir) * weight;
+                        }
                         continue;
                     }
                     let sp = surface_point(&scene.triangles, tri, hits.b1[i], hits.b2[i]);

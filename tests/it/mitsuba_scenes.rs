@@ -719,7 +719,10 @@ fn a_constant_light_at_infinity_lights_a_convex_box_exactly() {
     let data = Arc::new(SceneData::new(box_view));
     for kind in IntegratorKind::all() {
         let refused = stagelight::integrators::check_lights(kind, &data.scene);
-        let carried = ["pt", "bdpt", "vcm", "bpm", "pssmlt", "mmlt"].contains(&kind.as_str());
+        let carried = [
+            "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt",
+        ]
+        .contains(&kind.as_str());
         assert_eq!(refused.is_ok(), carried, "{kind}");
         if let Err(message) = refused {
             assert!(message.contains("light at infinity"), "{message}");
@@ -863,7 +866,12 @@ fn a_directional_light_lights_a_floor_exactly() {
     let data = Arc::new(SceneData::new(scene));
     for kind in IntegratorKind::all() {
         if stagelight::integrators::check_lights(kind, &data.scene).is_err() {
-            assert!(!["pt", "bdpt", "vcm", "bpm", "pssmlt", "mmlt"].contains(&kind.as_str()));
+            assert!(
+                ![
+                    "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt"
+                ]
+                .contains(&kind.as_str())
+            );
             continue;
         }
         let images: Vec<_> = (0..4)
@@ -873,7 +881,7 @@ fn a_directional_light_lights_a_floor_exactly() {
                     max_depth: 4,
                     ..RenderSettings::default()
                 };
-                let spp = if kind.as_str() == "pt" { 4 } else { 64 };
+                let spp = if kind.as_str() == "pt" { 4 } else { 16 };
                 crate::common::render_with(kind, data.clone(), &settings, spp)
             })
             .collect();
