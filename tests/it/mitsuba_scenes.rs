@@ -354,7 +354,7 @@ fn broken_files_name_the_file_line_column_and_problem() {
 fn the_binary_exits_1_with_the_message_on_one_line() {
     let dir = temp_dir("mitsuba-broken-cli");
     let path = dir.join("bad.xml");
-    std::fs::write(&path, scene_with("<emitter type=\"directional\"/>")).unwrap();
+    std::fs::write(&path, scene_with("<emitter type=\"projector\"/>")).unwrap();
     let o = stagelight(&[
         "render",
         path.to_str().unwrap(),
@@ -366,7 +366,7 @@ fn the_binary_exits_1_with_the_message_on_one_line() {
     assert_eq!(o.status.code(), Some(1));
     let err = stderr(&o);
     assert!(
-        err.contains("bad.xml:5:1: emitter type \"directional\" is not supported"),
+        err.contains("bad.xml:5:1: emitter type \"projector\" is not supported"),
         "{err}"
     );
     assert!(!dir.join("x.exr").exists());
