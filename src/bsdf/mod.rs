@@ -19,10 +19,13 @@ pub enum Material {
     /// Smooth dielectric: exact unpolarised Fresnel, refraction, total internal reflection.
     /// `ior` is the index inside (the side opposite the geometric normal) over outside.
     Dielectric { ior: f32 },
-    /// GGX microfacet reflector: isotropic `alpha`, separable Smith G1(wi) G1(wo), constant
-    /// Fresnel equal to `reflectance`.
-    Conductor { alpha: f32, reflectance: Vec3 },
+    /// Rough conductor (GGX or Beckmann microfacets, isotropic): a conductor's Fresnel term
+    /// times a reflectance, or the reflectance alone (see `conductor`).
+    Conductor(conductor::Conductor),
 }
+
+// Materials are copied by value into every path vertex and prepared joint: keep them small.
+const _: () = assert!(std::mem::size_of::<Material>() <= 44);
 
 /// The kind of a material: the graph holds one shading system per kind a scene uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -37,7 +40,7 @@ impl Material {
         match self {
             Material::Diffuse { .. } => MaterialKind::Diffuse,
             Material::Dielectric { .. } => MaterialKind::Dielectric,
-            Material::Conductor { .. } => MaterialKind::Conductor,
+            Material::Conductor(_) => MaterialKind::Conductor,
         }
     }
 }
@@ -95,9 +98,7 @@ impl Material {
         match *self {
             Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
             Material::Dielectric { .. } => Vec3::ZERO,
-            Material::Conductor { alpha, reflectance } => {
-                conductor::eval(alpha, reflectance, wo, wi)
-            }
+            Material::Conductor(c) => c.eval(wo, wi),
         }
     }
 
@@ -106,7 +107,7 @@ impl Material {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf(wo, wi),
             Material::Dielectric { .. } => 0.0,
-            Material::Conductor { alpha, .. } => conductor::pdf(alpha, wo, wi),
+            Material::Conductor(c) => c.pdf(wo, wi),
         }
     }
 
@@ -147,9 +148,7 @@ impl Material {
         match *self {
             Material::Diffuse { reflectance } => diffuse::sample(reflectance, wo, u),
             Material::Dielectric { ior } => Some(dielectric::sample(ior, wo, u.x, mode)),
-            Material::Conductor { alpha, reflectance } => {
-                conductor::sample(alpha, reflectance, wo, u)
-            }
+            Material::Conductor(c) => c.sample(wo, u),
         }
     }
 }

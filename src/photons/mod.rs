@@ -241,9 +241,10 @@ impl PhotonMaps {
     }
 }
 
-/// Conductors whose GGX alpha is below this are followed by the photon mappers' camera chains
-/// (sampled, with light sampled there under MIS, as a path tracer does) instead of gathering
-/// photons: on a near-mirror a density estimate needs the photons of a tiny solid angle.
+/// Conductors whose roughness alpha (GGX or Beckmann) is below this are followed by the photon
+/// mappers' camera chains (sampled, with light sampled there under MIS, as a path tracer does)
+/// instead of gathering photons: on a near-mirror a density estimate needs the photons of a
+/// tiny solid angle.
 /// Measured at 20 s on docs/mlt/mirror_box.ron (docs/photons/README.md): on its mirror (alpha
 /// 0.02) following cut SPPM's and PPM's relMSE 23x; on its rough block (alpha 0.3) gathering
 /// was better (SPPM 2.5e-3 against 8.3e-3 following).
@@ -258,7 +259,7 @@ pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     use crate::bsdf::Material;
     match *material {
         Material::Dielectric { .. } => true,
-        Material::Conductor { alpha, .. } => alpha < FOLLOW_ALPHA,
+        Material::Conductor(c) => c.alpha < FOLLOW_ALPHA,
         Material::Diffuse { .. } => false,
     }
 }

@@ -6,6 +6,7 @@ use super::format::{CameraDesc, MaterialDesc, ShapeDesc, TransformDesc};
 use super::shapes::{self, Mesh};
 use super::{Camera, ParsedScene, SceneError};
 use crate::bsdf::Material;
+use crate::bsdf::conductor::Conductor;
 use glam::{DAffine3, DQuat, Vec3};
 use hecs::{Entity, EntityBuilder, World};
 use std::collections::HashMap;
@@ -272,10 +273,9 @@ fn make_material(desc: &MaterialDesc) -> Material {
             reflectance: reflectance.0,
         },
         MaterialDesc::Dielectric { ior } => Material::Dielectric { ior: ior.0 },
-        MaterialDesc::Conductor { alpha, reflectance } => Material::Conductor {
-            alpha: alpha.0,
-            reflectance: reflectance.0,
-        },
+        MaterialDesc::Conductor { alpha, reflectance } => {
+            Material::Conductor(Conductor::ggx(alpha.0, reflectance.0))
+        }
     }
 }
 

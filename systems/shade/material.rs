@@ -1,5 +1,5 @@
 //! Scatters the paths on one material kind: a BSDF sample per path (cosine-weighted at
-//! Lambertian surfaces, visible normals at GGX conductors, Fresnel choice at glass). The graph
+//! Lambertian surfaces, visible normals at conductors, Fresnel choice at glass). The graph
 //! holds one of these per material kind its scene uses, each over its kind's contiguous queue.
 
 use super::surface::scatter_paths;

@@ -3,6 +3,7 @@
 //! `SampleKey` with fixed seeds, so the tests are deterministic.
 
 use glam::{DVec3, Vec2, Vec3};
+use stagelight::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
 use stagelight::bsdf::{Material, TransportMode, conductor, dielectric};
 use stagelight::sampling::SampleKey;
 use std::f64::consts::PI;
@@ -128,7 +129,7 @@ fn chi2_p_value_matches_tables() {
 // samples `sample` refuses (the leftover probability). Cells expected below 5 are pooled.
 
 /// Number of chi-square tests in this file, for the Sidak correction.
-const CHI2_TESTS: usize = 3 + 4 * 3 + 2;
+const CHI2_TESTS: usize = 3 + 2 * (4 * 3 + 2);
 const CHI2_SAMPLES: u64 = 1_000_000;
 const CHI2_BINS: usize = 40;
 
@@ -210,6 +211,12 @@ impl Binning {
             theta_edges,
             phi_edges,
         }
+    }
+
+    /// The same binning with azimuth bins following a Cauchy of width `wphi` instead.
+    fn with_phi_width(mut self, wphi: f64) -> Binning {
+        self.phi_edges = mixture_edges(-PI, PI, 0.0, wphi, 0.9, CHI2_BINS);
+        self
     }
 
     fn cells(&self) -> usize {
@@ -424,15 +431,47 @@ fn chi2_diffuse() {
     }
 }
 
-fn chi2_conductor(alpha: f32, thetas: &[f64], stream0: u64) {
-    let m = Material::Conductor {
+/// Gold as Mitsuba's RGB variants see it (material "Au").
+const GOLD: ComplexIor = ComplexIor {
+    eta: Vec3::new(0.143_035_98, 0.375_307_08, 1.442_045_3),
+    k: Vec3::new(3.982_997, 2.385_556_5, 1.603_359_2),
+};
+
+/// A conductor of `distribution` and `alpha` (gold for Beckmann, Fresnel 1 for GGX: the pdf
+/// does not depend on the Fresnel term, so the chi-square tests cover both).
+fn conductor_of(distribution: Microfacet, alpha: f32) -> Material {
+    Material::Conductor(Conductor {
+        distribution,
         alpha,
         reflectance: Vec3::new(1.0, 0.78, 0.34),
-    };
+        ior: match distribution {
+            Microfacet::Ggx => ComplexIor::PERFECT_MIRROR,
+            Microfacet::Beckmann => GOLD,
+        },
+    })
+}
+
+fn chi2_conductor(distribution: Microfacet, alpha: f32, thetas: &[f64], stream0: u64) {
+    let m = conductor_of(distribution, alpha);
     for (i, &theta) in thetas.iter().enumerate() {
         let wo = dir_deg(theta, 10.0 + 97.0 * i as f64);
         let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
-        let binning = Binning::new(1.0, mirror, Some(2.0 * alpha as f64));
+        let binning = match distribution {
+            Microfacet::Ggx => Binning::new(1.0, mirror, Some(2.0 * alpha as f64)),
+            // Beckmann's Gaussian tails are far lighter than GGX's: narrower bins keep enough
+            // cells populated. Near the horizon the lobe is also narrow across the plane of
+            // incidence (a sideways microfacet tilt turns the reflection by about 2 cos theta
+            // times as much), and the azimuth bins follow.
+            Microfacet::Beckmann => {
+                let binning = Binning::new(1.0, mirror, Some(alpha as f64));
+                let cos = theta.to_radians().cos();
+                if alpha < 0.5 && cos < 0.5 {
+                    binning.with_phi_width(2.0 * alpha as f64 * cos.max(0.01))
+                } else {
+                    binning
+                }
+            }
+        };
         let r = chi2_test(
             &binning,
             stream0 + i as u64,
@@ -440,7 +479,7 @@ fn chi2_conductor(alpha: f32, thetas: &[f64], stream0: u64) {
             &|wi| m.pdf(wo, wi),
         );
         println!(
-            "conductor alpha {alpha} wo theta {theta}: chi2 {:.1} dof {} p {:.4} integral {:.6}",
+            "conductor {distribution:?} alpha {alpha} wo theta {theta}: chi2 {:.1} dof {} p {:.4} integral {:.6}",
             r.chi2, r.dof, r.p_value, r.total_probability
         );
         assert!(r.total_probability <= 1.0 + 1e-4, "{}", r.total_probability);
@@ -451,7 +490,7 @@ fn chi2_conductor(alpha: f32, thetas: &[f64], stream0: u64) {
         );
         assert!(
             r.p_value > sidak_alpha(),
-            "conductor alpha {alpha} theta {theta}: chi2 {} dof {} p = {}",
+            "conductor {distribution:?} alpha {alpha} theta {theta}: chi2 {} dof {} p = {}",
             r.chi2,
             r.dof,
             r.p_value
@@ -461,20 +500,37 @@ fn chi2_conductor(alpha: f32, thetas: &[f64], stream0: u64) {
 
 #[test]
 fn chi2_conductor_rough() {
-    chi2_conductor(1.0, &[0.0, 45.0, 88.0], 100);
-    chi2_conductor(0.5, &[0.0, 45.0, 88.0], 110);
+    chi2_conductor(Microfacet::Ggx, 1.0, &[0.0, 45.0, 88.0], 100);
+    chi2_conductor(Microfacet::Ggx, 0.5, &[0.0, 45.0, 88.0], 110);
 }
 
 #[test]
 fn chi2_conductor_glossy() {
-    chi2_conductor(0.1, &[0.0, 45.0, 88.0], 120);
-    chi2_conductor(0.01, &[0.0, 45.0, 88.0], 130);
+    chi2_conductor(Microfacet::Ggx, 0.1, &[0.0, 45.0, 88.0], 120);
+    chi2_conductor(Microfacet::Ggx, 0.01, &[0.0, 45.0, 88.0], 130);
 }
 
 #[test]
 fn chi2_conductor_near_mirror() {
     // alpha = 1e-4 is nearly a mirror; the Cauchy-spaced bins still resolve it.
-    chi2_conductor(1e-4, &[0.0, 70.0], 140);
+    chi2_conductor(Microfacet::Ggx, 1e-4, &[0.0, 70.0], 140);
+}
+
+#[test]
+fn chi2_beckmann_rough() {
+    chi2_conductor(Microfacet::Beckmann, 1.0, &[0.0, 45.0, 88.0], 200);
+    chi2_conductor(Microfacet::Beckmann, 0.5, &[0.0, 45.0, 88.0], 210);
+}
+
+#[test]
+fn chi2_beckmann_glossy() {
+    chi2_conductor(Microfacet::Beckmann, 0.1, &[0.0, 45.0, 88.0], 220);
+    chi2_conductor(Microfacet::Beckmann, 0.01, &[0.0, 45.0, 88.0], 230);
+}
+
+#[test]
+fn chi2_beckmann_near_mirror() {
+    chi2_conductor(Microfacet::Beckmann, 1e-4, &[0.0, 70.0], 240);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -497,10 +553,9 @@ fn sample_matches_eval_and_pdf() {
         reflectance: Vec3::new(0.7, 0.6, 0.5),
     }];
     for alpha in [1e-4, 1e-3, 0.01, 0.1, 0.5, 1.0] {
-        materials.push(Material::Conductor {
-            alpha,
-            reflectance: Vec3::new(0.9, 0.8, 0.3),
-        });
+        for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+            materials.push(conductor_of(distribution, alpha));
+        }
     }
     for (mi, m) in materials.iter().enumerate() {
         for (wi_idx, &wo0) in test_wos().iter().enumerate() {
@@ -548,64 +603,252 @@ fn sample_matches_eval_and_pdf() {
 fn conductor_tiny_alpha_is_near_mirror() {
     let alpha = 1e-4f32;
     let r = Vec3::new(1.0, 0.78, 0.34);
-    let m = Material::Conductor {
-        alpha,
-        reflectance: r,
-    };
-    for (case, theta) in [0.0, 45.0, 75.0].into_iter().enumerate() {
-        let wo = dir_deg(theta, 20.0);
-        let mirror = Vec3::new(-wo.x, -wo.y, wo.z).as_dvec3();
-        let n = 100_000;
-        let mut angles = Vec::with_capacity(n);
-        for i in 0..n as u64 {
-            let s = m
-                .sample(wo, u2(11, case as u64, i), TransportMode::Radiance)
-                .expect("a near-mirror sample is always above the surface here");
-            let w = s.value * s.wi.z / s.pdf;
-            assert!(is_finite3(s.value) && s.pdf.is_finite() && is_finite3(w));
-            assert!(w.cmple(r * 1.000_01).all());
-            angles.push(s.wi.as_dvec3().angle_between(mirror));
+    for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+        let m = conductor_of(distribution, alpha);
+        for (case, theta) in [0.0, 45.0, 75.0].into_iter().enumerate() {
+            let wo = dir_deg(theta, 20.0);
+            let mirror = Vec3::new(-wo.x, -wo.y, wo.z).as_dvec3();
+            let n = 100_000;
+            let mut angles = Vec::with_capacity(n);
+            for i in 0..n as u64 {
+                let s = m
+                    .sample(wo, u2(11, case as u64, i), TransportMode::Radiance)
+                    .expect("a near-mirror sample is always above the surface here");
+                let w = s.value * s.wi.z / s.pdf;
+                assert!(is_finite3(s.value) && s.pdf.is_finite() && is_finite3(w));
+                assert!(w.cmple(r * 1.000_01).all());
+                angles.push(s.wi.as_dvec3().angle_between(mirror));
+            }
+            angles.sort_by(|a, b| a.partial_cmp(b).unwrap());
+            // GGX's slopes have Cauchy-like tails: P(tan theta_h > x alpha) ~ 1 / (1 + x^2) at
+            // normal incidence, and the reflected direction turns by about twice theta_h;
+            // Beckmann's are Gaussian, narrower still.
+            let median = angles[n / 2];
+            let q99 = angles[n * 99 / 100];
+            let a = alpha as f64;
+            println!("{distribution:?} alpha 1e-4 theta {theta}: median {median:e} q99 {q99:e}");
+            assert!(median < 4.0 * a, "median deviation {median}");
+            assert!(q99 < 40.0 * a, "99% quantile {q99}");
         }
-        angles.sort_by(|a, b| a.partial_cmp(b).unwrap());
-        // GGX's slopes have Cauchy-like tails: P(tan theta_h > x alpha) ~ 1 / (1 + x^2) at
-        // normal incidence, and the reflected direction turns by about twice theta_h.
-        let median = angles[n / 2];
-        let q99 = angles[n * 99 / 100];
-        let a = alpha as f64;
-        println!("alpha 1e-4 theta {theta}: median {median:e} q99 {q99:e}");
-        assert!(median < 4.0 * a, "median deviation {median}");
-        assert!(q99 < 40.0 * a, "99% quantile {q99}");
     }
 }
 
+/// The albedo of every conductor: each sampled weight is R F G1(wi), so at most R; near the
+/// mirror limit at normal incidence nearly R F.
 #[test]
 fn conductor_albedo() {
     let r = Vec3::new(1.0, 0.78, 0.34);
-    for alpha in [1e-4f32, 0.01, 0.1, 0.5, 1.0] {
-        let m = Material::Conductor {
-            alpha,
-            reflectance: r,
-        };
-        for theta in [0.0, 45.0, 80.0, 89.0] {
-            let wo = dir_deg(theta, 0.0);
-            let n = 100_000;
-            let mut sum = Vec3::ZERO.as_dvec3();
-            for i in 0..n {
-                if let Some(s) = m.sample(wo, u2(13, 0, i), TransportMode::Radiance) {
-                    let w = s.value * s.wi.z / s.pdf;
-                    // Each weight is R G1(wi), so bounded by R.
-                    assert!(w.cmple(r * 1.000_01).all(), "weight {w}");
-                    sum += w.as_dvec3();
+    for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+        for ior in [ComplexIor::PERFECT_MIRROR, GOLD] {
+            for alpha in [1e-4f32, 0.01, 0.1, 0.5, 1.0] {
+                let m = Material::Conductor(Conductor {
+                    distribution,
+                    alpha,
+                    reflectance: r,
+                    ior,
+                });
+                for theta in [0.0, 45.0, 80.0, 89.0] {
+                    let wo = dir_deg(theta, 0.0);
+                    let n = 100_000;
+                    let mut sum = Vec3::ZERO.as_dvec3();
+                    for i in 0..n {
+                        if let Some(s) = m.sample(wo, u2(13, 0, i), TransportMode::Radiance) {
+                            let w = s.value * s.wi.z / s.pdf;
+                            assert!(w.cmple(r * 1.000_01).all(), "{m:?}: weight {w}");
+                            sum += w.as_dvec3();
+                        }
+                    }
+                    let albedo = (sum / n as f64).as_vec3();
+                    assert!(albedo.cmple(r * 1.000_01).all(), "{m:?}: albedo {albedo}");
+                    if alpha <= 0.1 && theta == 0.0 {
+                        let rf = r * conductor::fresnel(1.0, ior);
+                        assert!(
+                            albedo.cmpgt(0.95 * rf).all(),
+                            "{m:?}: albedo {albedo}, R F {rf}"
+                        );
+                    }
                 }
             }
+        }
+    }
+}
+
+/// A near-mirror reflects R F(cos theta) of the light from every direction: the Fresnel term
+/// reaches the samples at the angle of incidence (gold's is much lower at normal incidence than
+/// at 75 degrees in blue, and higher in red than blue).
+#[test]
+fn near_mirror_conductor_reflects_its_fresnel_term() {
+    let r = Vec3::new(0.9, 0.8, 0.7);
+    for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+        let m = Material::Conductor(Conductor {
+            distribution,
+            alpha: 1e-4,
+            reflectance: r,
+            ior: GOLD,
+        });
+        for theta in [0.0f64, 45.0, 75.0] {
+            let wo = dir_deg(theta, 30.0);
+            let n = 10_000;
+            let mut sum = Vec3::ZERO.as_dvec3();
+            for i in 0..n {
+                let s = m
+                    .sample(wo, u2(29, theta as u64, i), TransportMode::Radiance)
+                    .expect("a near-mirror sample is above the surface here");
+                sum += (s.value * s.wi.z / s.pdf).as_dvec3();
+            }
             let albedo = (sum / n as f64).as_vec3();
-            assert!(albedo.cmple(r * 1.000_01).all(), "albedo {albedo}");
-            if alpha <= 0.1 && theta == 0.0 {
+            let want = r * conductor::fresnel(theta.to_radians().cos() as f32, GOLD);
+            assert!(
+                ((albedo - want) / want).abs().max_element() < 1e-3,
+                "{distribution:?} theta {theta}: albedo {albedo}, R F {want}"
+            );
+        }
+        let f = |theta: f32| conductor::fresnel(theta.to_radians().cos(), GOLD);
+        // 0.967 and 0.324 at normal incidence, 0.496 in blue at 75 degrees.
+        assert!(f(0.0).x > 0.96 && f(0.0).z < 0.33 && f(75.0).z > 0.49);
+    }
+}
+
+/// f and pdf against Mitsuba 3.9.1's `roughconductor` (scalar_rgb, `BSDF::eval` over the cosine
+/// and `BSDF::pdf`, its si.wi being our wo) for gold (material "Au", Beckmann, alpha 0.3),
+/// copper ("Cu", Beckmann, 0.05) and an rgb eta/k with specular_reflectance (GGX, 0.2). GGX
+/// agrees to f32 precision; Beckmann within Mitsuba's rational approximation of G1 (0.35% per
+/// factor). Mitsuba gives exact zeros where D * cos < 1e-20; we give D's tiny value.
+#[test]
+fn conductor_matches_mitsuba_eval_and_pdf() {
+    let copper = ComplexIor {
+        eta: Vec3::new(0.201_005_47, 0.923_749_5, 1.102_215_4),
+        k: Vec3::new(3.913_262_1, 2.453_045_1, 2.142_089_8),
+    };
+    let beckmann = |alpha, ior| Conductor {
+        distribution: Microfacet::Beckmann,
+        alpha,
+        reflectance: Vec3::ONE,
+        ior,
+    };
+    let ggx = Conductor {
+        distribution: Microfacet::Ggx,
+        alpha: 0.2,
+        reflectance: Vec3::new(0.9, 0.8, 0.7),
+        ior: ComplexIor {
+            eta: Vec3::new(0.2, 0.9, 1.1),
+            k: Vec3::new(3.9, 2.4, 2.1),
+        },
+    };
+    // (conductor, tolerance, [(wo theta, phi), (wi theta, phi), Mitsuba's f, Mitsuba's pdf]).
+    #[allow(clippy::type_complexity)]
+    let cases: [(Conductor, f32, Vec<((f64, f64), (f64, f64), [f32; 3], f32)>); 3] = [
+        (
+            beckmann(0.3, GOLD),
+            0.008,
+            vec![
+                (
+                    (0.0, 0.0),
+                    (10.0, 180.0),
+                    [0.809_405_5, 0.671_526_7, 0.271_389_7],
+                    0.824_584_4,
+                ),
+                (
+                    (30.0, 20.0),
+                    (40.0, 190.0),
+                    [1.161_391_6, 0.963_290_6, 0.394_253_3],
+                    0.920_805_4,
+                ),
+                (
+                    (60.0, 0.0),
+                    (55.0, 170.0),
+                    [2.459_690_4, 2.050_292_8, 0.921_639_7],
+                    1.465_047_4,
+                ),
+                (
+                    (80.0, 45.0),
+                    (70.0, 240.0),
+                    [1.268_608_9, 1.101_708_2, 0.624_191_2],
+                    0.455_772_4,
+                ),
+                (
+                    (45.0, 0.0),
+                    (45.0, 90.0),
+                    [0.014_865_44, 0.012_330_68, 0.005_017_26],
+                    0.010_876_72,
+                ),
+            ],
+        ),
+        (
+            beckmann(0.05, copper),
+            0.008,
+            vec![
+                (
+                    (0.0, 0.0),
+                    (10.0, 180.0),
+                    [1.462_458_7, 0.952_099_1, 0.784_298_7],
+                    1.512_833,
+                ),
+                (
+                    (30.0, 20.0),
+                    (40.0, 190.0),
+                    [0.504_220_4, 0.328_314_6, 0.271_218_1],
+                    0.406_009_4,
+                ),
+                (
+                    (60.0, 0.0),
+                    (55.0, 170.0),
+                    [0.028_798_34, 0.018_954_68, 0.016_004_06],
+                    0.017_443_14,
+                ),
+            ],
+        ),
+        (
+            ggx,
+            1e-4,
+            vec![
+                (
+                    (0.0, 0.0),
+                    (10.0, 180.0),
+                    [1.237_772_2, 0.711_720_4, 0.506_798_6],
+                    1.423_212_3,
+                ),
+                (
+                    (30.0, 20.0),
+                    (40.0, 190.0),
+                    [1.578_875, 0.908_253_5, 0.648_725_3],
+                    1.422_577_5,
+                ),
+                (
+                    (60.0, 0.0),
+                    (55.0, 170.0),
+                    [2.555_191_8, 1.489_189_3, 1.088_612_7],
+                    1.754_120_6,
+                ),
+                (
+                    (80.0, 45.0),
+                    (70.0, 240.0),
+                    [0.645_502, 0.408_278_8, 0.316_398_8],
+                    0.278_766_3,
+                ),
+                (
+                    (45.0, 0.0),
+                    (45.0, 90.0),
+                    [0.041_248_5, 0.023_721_93, 0.016_919_59],
+                    0.034_393_86,
+                ),
+            ],
+        ),
+    ];
+    for (m, tolerance, pairs) in cases {
+        for (wo, wi, f, pdf) in pairs {
+            let (wo, wi) = (dir_deg(wo.0, wo.1), dir_deg(wi.0, wi.1));
+            let (got_f, got_pdf) = (m.eval(wo, wi), m.pdf(wo, wi));
+            for c in 0..3 {
                 assert!(
-                    albedo.cmpgt(0.95 * r).all(),
-                    "alpha {alpha}: albedo {albedo}"
+                    rel_close(got_f[c], f[c], tolerance),
+                    "{m:?} wo {wo} wi {wi}: f {got_f}, Mitsuba's {f:?}"
                 );
             }
+            assert!(
+                rel_close(got_pdf, pdf, tolerance),
+                "{m:?} wo {wo} wi {wi}: pdf {got_pdf}, Mitsuba's {pdf}"
+            );
         }
     }
 }
@@ -637,14 +880,12 @@ fn reciprocity_diffuse_and_conductor() {
         Material::Diffuse {
             reflectance: Vec3::new(0.5, 0.4, 0.3),
         },
-        Material::Conductor {
-            alpha: 0.05,
-            reflectance: Vec3::new(0.9, 0.8, 0.3),
-        },
-        Material::Conductor {
-            alpha: 0.7,
-            reflectance: Vec3::new(0.9, 0.8, 0.3),
-        },
+        conductor_of(Microfacet::Ggx, 0.05),
+        conductor_of(Microfacet::Ggx, 0.7),
+        // Beckmann's D is exactly 0 beyond tan theta_h = 9.3 alpha: 0.05 would leave too few
+        // random pairs with a value.
+        conductor_of(Microfacet::Beckmann, 0.2),
+        conductor_of(Microfacet::Beckmann, 0.7),
     ];
     for m in materials {
         let mut nonzero = 0;
@@ -970,11 +1211,10 @@ fn stability_all_materials() {
     for ior in [1.0f32, 1.5, 2.4, 1.0 / 1.5] {
         check_material_finite(Material::Dielectric { ior });
     }
-    for alpha in [0.0f32, 1e-6, 1e-4, 1e-3, 0.01, 0.3, 1.0] {
-        check_material_finite(Material::Conductor {
-            alpha,
-            reflectance: Vec3::new(1.0, 0.78, 0.34),
-        });
+    for alpha in [0.0f32, 1e-6, 1e-4, 1e-3, 0.01, 0.3, 1.0, 1e4] {
+        for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+            check_material_finite(conductor_of(distribution, alpha));
+        }
     }
     // Near-mirror pairs at tiny alpha stay finite: the peak of D at grazing angles.
     for z in [1.0f32, 0.5, 1e-3, 1e-6] {
@@ -982,12 +1222,19 @@ fn stability_all_materials() {
         let wo = Vec3::new(r, 0.0, z);
         let wi = Vec3::new(-r, 0.0, z);
         for alpha in [1e-4f32, 1e-3, 1.0] {
-            let f = conductor::eval(alpha, Vec3::ONE, wo, wi);
-            let p = conductor::pdf(alpha, wo, wi);
-            assert!(
-                f.is_finite() && p.is_finite() && p > 0.0,
-                "alpha {alpha} z {z}"
-            );
+            for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+                let m = Conductor {
+                    distribution,
+                    alpha,
+                    reflectance: Vec3::ONE,
+                    ior: GOLD,
+                };
+                let (f, p) = (m.eval(wo, wi), m.pdf(wo, wi));
+                assert!(
+                    f.is_finite() && p.is_finite() && p > 0.0,
+                    "{distribution:?} alpha {alpha} z {z}"
+                );
+            }
         }
     }
 }

@@ -8,6 +8,7 @@
 
 use glam::Vec3;
 use stagelight::bsdf::Material;
+use stagelight::bsdf::conductor::Conductor;
 use stagelight::scene::{self, FLAT, NO_EMITTER, PreparedScene};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
@@ -33,10 +34,7 @@ fn expected_material(scene: &str, name: &str) -> (Material, Option<Vec3>) {
         ("door_ajar", "table") => (diffuse(0.4, 0.25, 0.15), None),
         ("door_ajar", "glass") => (Material::Dielectric { ior: 1.5 }, None),
         ("door_ajar", "metal") => (
-            Material::Conductor {
-                alpha: 0.1,
-                reflectance: Vec3::new(1.0, 0.78, 0.34),
-            },
+            Material::Conductor(Conductor::ggx(0.1, Vec3::new(1.0, 0.78, 0.34))),
             None,
         ),
         ("door_ajar", "light") => (black, Some(Vec3::new(400.0, 360.0, 300.0))),

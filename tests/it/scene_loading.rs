@@ -3,6 +3,7 @@
 
 use crate::common::scene_path;
 use glam::Vec3;
+use stagelight::bsdf::conductor::Conductor;
 use stagelight::bsdf::{Material, MaterialKind};
 use stagelight::scene::{self, FLAT, NO_EMITTER, PreparedScene};
 use std::collections::BTreeSet;
@@ -184,10 +185,10 @@ fn door_ajar() {
             MaterialKind::Conductor
         ])
     );
-    assert!(s.materials.contains(&Material::Conductor {
-        alpha: 0.1,
-        reflectance: Vec3::new(1.0, 0.78, 0.34)
-    }));
+    assert!(s.materials.contains(&Material::Conductor(Conductor::ggx(
+        0.1,
+        Vec3::new(1.0, 0.78, 0.34)
+    ))));
     for &t in &s.emitters.triangle {
         assert_vec_near(normal(&s, t as usize), -Vec3::Y, 1e-6);
     }

@@ -11,6 +11,7 @@ use super::document::{
     Child, Class, Defines, Document, Object, Property, Spectrum, Spot, Value, XmlError,
 };
 use crate::bsdf::Material;
+use crate::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
 use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
@@ -152,6 +153,9 @@ struct Params<'a> {
 enum Role {
     Reflectance,
     Emission,
+    /// Not emitted, but not bounded by 1 either (a conductor's eta and k): D65-weighted like
+    /// a reflectance, clipped at 0 only (Mitsuba's `get_unbounded_texture`).
+    Unbounded,
 }
 
 impl<'a> Params<'a> {
@@ -269,12 +273,13 @@ impl<'a> Params<'a> {
             Value::Float(v) => Vec3::splat(*v as f32),
             Value::Integer(v) => Vec3::splat(*v as f32),
             Value::Spectrum(Spectrum::Constant(v)) => match role {
-                Role::Reflectance => Vec3::splat(*v as f32),
+                Role::Reflectance | Role::Unbounded => Vec3::splat(*v as f32),
                 Role::Emission => super::spectrum::uniform_emission_rgb(*v),
             },
             Value::Spectrum(Spectrum::Pairs(pairs)) => match role {
                 Role::Reflectance => super::spectrum::reflectance_rgb(pairs),
                 Role::Emission => super::spectrum::emission_rgb(pairs),
+                Role::Unbounded => super::spectrum::unbounded_rgb(pairs),
             },
             _ => return Err(self.wrong_type(p, "color (rgb, spectrum or float)")),
         };
@@ -901,82 +906,27 @@ impl<'a> Builder<'a> {
             }
             "conductor" | "roughconductor" => {
                 no_children(object)?;
-                let rough = object.kind == "roughconductor";
-                let material_name = params.string("material")?;
-                let eta = params.take("eta");
-                let k = params.take("k");
-                if let Some(p) = eta.or(k) {
-                    return Err(XmlError::at(
-                        &p.spot,
-                        "conductor: eta and k are not supported yet (only material \"none\": a Fresnel factor of 1)",
-                    ));
-                }
-                match material_name {
-                    Some(("none", _)) => {}
-                    Some((name, spot)) => {
-                        return Err(XmlError::at(
-                            &spot,
-                            format!(
-                                "conductor material \"{}\" is not supported yet (only \"none\": a Fresnel factor of 1)",
-                                super::super::echo(name)
-                            ),
-                        ));
-                    }
-                    None => {
-                        return Err(XmlError::at(
-                            &object.spot,
-                            "conductor without material uses Mitsuba's default, Cu (copper), whose \
-                             Fresnel stagelight does not model yet: give material \"none\"",
-                        ));
-                    }
-                }
+                let ior = conductor_ior(&mut params, object)?;
                 let reflectance = params
                     .color("specular_reflectance", Role::Reflectance)?
                     .map(|(c, _)| c)
                     .unwrap_or(Vec3::ONE);
-                let alpha = if rough {
-                    match params.string("distribution")? {
-                        Some(("ggx", _)) => {}
-                        Some((other, spot)) => {
-                            return Err(XmlError::at(
-                                &spot,
-                                format!(
-                                    "roughconductor distribution \"{}\" is not supported yet (only ggx)",
-                                    super::super::echo(other)
-                                ),
-                            ));
-                        }
-                        None => {
-                            return Err(XmlError::at(
-                                &object.spot,
-                                "roughconductor without distribution uses Mitsuba's default, \
-                                 beckmann, which stagelight does not model yet: give \
-                                 <string name=\"distribution\" value=\"ggx\"/>",
-                            ));
-                        }
-                    }
-                    if let Some(p) = params.take("alpha_u").or(params.take("alpha_v")) {
-                        return Err(XmlError::at(
-                            &p.spot,
-                            "roughconductor: anisotropic alpha is not supported yet",
-                        ));
-                    }
-                    let (alpha, spot) =
-                        params.float("alpha")?.unwrap_or((0.1, object.spot.clone()));
-                    if !(alpha > 0.0 && alpha <= 1e4) {
-                        return Err(XmlError::at(
-                            &spot,
-                            format!("alpha {alpha} must lie in (0, 1e4]"),
-                        ));
-                    }
-                    alpha as f32
+                let (distribution, alpha) = if object.kind == "roughconductor" {
+                    // Visible normals or not changes only noise (Mitsuba's default: visible).
+                    params.boolean("sample_visible")?;
+                    (microfacet(&mut params)?, roughness(&mut params, object)?)
                 } else {
-                    // A smooth mirror, as the narrowest GGX lobe the conductor evaluates
-                    // accurately (see bsdf::conductor::ALPHA_MIN).
-                    crate::bsdf::conductor::ALPHA_MIN
+                    // A smooth mirror, as the narrowest lobe the conductor evaluates accurately
+                    // (see bsdf::conductor::ALPHA_MIN).
+                    (Microfacet::Ggx, crate::bsdf::conductor::ALPHA_MIN)
                 };
                 params.finish()?;
-                Material::Conductor { alpha, reflectance }
+                Material::Conductor(Conductor {
+                    distribution,
+                    alpha,
+                    reflectance,
+                    ior,
+                })
             }
             _ => return Err(unsupported(object, BSDFS)),
         };
@@ -1853,6 +1803,121 @@ fn source_spot(spot: &Spot) -> SourceSpot {
         line: spot.line as usize,
         column: spot.column as usize,
     }
+}
+
+/// A conductor's complex index of refraction as Mitsuba 3 reads it (conductor.cpp,
+/// roughconductor.cpp): `material` names one of its measured presets (resources/data/ior), or
+/// is "none" (the default: eta 0 and k 1, a Fresnel factor of exactly 1), in which case `eta`
+/// and `k` may be given (floats, rgb or spectra, unbounded); a preset with `eta` or `k` is an
+/// error, as in Mitsuba.
+fn conductor_ior(params: &mut Params, object: &Object) -> Result<ComplexIor, XmlError> {
+    let material = params.string("material")?;
+    let eta = params.color("eta", Role::Unbounded)?;
+    let k = params.color("k", Role::Unbounded)?;
+    let plugin = super::super::echo(&object.kind);
+    if let Some((name, spot)) = material.filter(|(name, _)| *name != "none") {
+        if let Some((_, given)) = eta.as_ref().or(k.as_ref()) {
+            return Err(XmlError::at(
+                given,
+                format!(
+                    "{plugin}: give either eta and k or material \"{}\", not both",
+                    super::super::echo(name)
+                ),
+            ));
+        }
+        let (eta, k) = super::spectrum::conductor_eta_k(name).ok_or_else(|| {
+            XmlError::at(
+                &spot,
+                format!(
+                    "{plugin} material \"{}\" is not one of Mitsuba's (known: none, {})",
+                    super::super::echo(name),
+                    super::spectrum::CONDUCTOR_NAMES.join(", ")
+                ),
+            )
+        })?;
+        return Ok(ComplexIor { eta, k });
+    }
+    let mut ior = ComplexIor::PERFECT_MIRROR;
+    for (given, value, name) in [(eta, &mut ior.eta, "eta"), (k, &mut ior.k, "k")] {
+        let Some((v, spot)) = given else { continue };
+        // A generous bound (measured metals lie below 100) that keeps the Fresnel formula's
+        // fourth powers far inside f32's range.
+        if !(v.cmpge(Vec3::ZERO).all() && v.cmple(Vec3::splat(1e4)).all()) {
+            return Err(XmlError::at(
+                &spot,
+                format!(
+                    "{plugin}: {name} ({}, {}, {}) must lie in [0, 1e4] in every channel",
+                    v.x, v.y, v.z
+                ),
+            ));
+        }
+        *value = v;
+    }
+    Ok(ior)
+}
+
+/// A roughconductor's `distribution`: beckmann (Mitsuba's default) or ggx, in any case, as
+/// Mitsuba lowercases the name.
+fn microfacet(params: &mut Params) -> Result<Microfacet, XmlError> {
+    let Some((name, spot)) = params.string("distribution")? else {
+        return Ok(Microfacet::Beckmann);
+    };
+    match name.to_lowercase().as_str() {
+        "beckmann" => Ok(Microfacet::Beckmann),
+        "ggx" => Ok(Microfacet::Ggx),
+        _ => Err(XmlError::at(
+            &spot,
+            format!(
+                "roughconductor distribution \"{}\" is not supported (supported: beckmann, ggx)",
+                super::super::echo(name)
+            ),
+        )),
+    }
+}
+
+/// A roughconductor's `alpha` (default 0.1, as Mitsuba's). Anisotropic `alpha_u` and `alpha_v`
+/// are read when equal (that is the isotropic lobe); different ones are refused: they need a
+/// tangent frame that follows the surface's uv parametrisation, which stagelight's shading
+/// frames do not carry.
+fn roughness(params: &mut Params, object: &Object) -> Result<f32, XmlError> {
+    let alpha = params.float("alpha")?;
+    let alpha_u = params.float("alpha_u")?;
+    let alpha_v = params.float("alpha_v")?;
+    let (alpha, spot) = match (alpha, alpha_u, alpha_v) {
+        (alpha, None, None) => alpha.unwrap_or((0.1, object.spot.clone())),
+        (Some(_), Some((_, spot)), _) | (Some(_), None, Some((_, spot))) => {
+            return Err(XmlError::at(
+                &spot,
+                "roughconductor: give either alpha or alpha_u and alpha_v, not both",
+            ));
+        }
+        (None, Some((_, spot)), None) | (None, None, Some((_, spot))) => {
+            return Err(XmlError::at(
+                &spot,
+                "roughconductor: alpha_u and alpha_v must be given together",
+            ));
+        }
+        (None, Some((u, spot)), Some((v, _))) => {
+            if u != v {
+                return Err(XmlError::at(
+                    &spot,
+                    format!(
+                        "roughconductor: anisotropic roughness (alpha_u {u}, alpha_v {v}) is not \
+                         supported yet: it needs shading frames that follow the surface's uv \
+                         parametrisation (give equal values, or alpha)"
+                    ),
+                ));
+            }
+            (u, spot)
+        }
+    };
+    if !(alpha > 0.0 && alpha <= 1e4) {
+        return Err(XmlError::at(
+            &spot,
+            format!("alpha {alpha} must lie in (0, 1e4]"),
+        ));
+    }
+    Ok(alpha as f32)
 }
 
 /// An index of refraction: a number or one of Mitsuba's named materials.

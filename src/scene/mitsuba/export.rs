@@ -5,10 +5,11 @@
 //! (transformed, mirrored or flipped windings resolved, normals transformed and normalised), so
 //! reading the file back gives the RON scene's triangles bit for bit. Materials map as
 //! SCENES.md's Mitsuba renders do: Diffuse is `twosided(diffuse)`, Dielectric a `dielectric`
-//! with ext_ior 1, Conductor a ggx `roughconductor` of material "none"; lights are one-sided
-//! `area` emitters; the film has the box filter.
+//! with ext_ior 1, Conductor a `roughconductor` (material "none" for a Fresnel factor of 1, rgb
+//! eta and k otherwise); lights are one-sided `area` emitters; the film has the box filter.
 
 use crate::bsdf::Material;
+use crate::bsdf::conductor::{ComplexIor, Microfacet};
 use crate::scene::Camera;
 use crate::scene::world::{
     Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape, Transform,
@@ -147,13 +148,30 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
              <float name=\"ext_ior\" value=\"1\"/>\n    </bsdf>",
             float(ior)
         ),
-        Material::Conductor { alpha, reflectance } => format!(
-            "    <bsdf type=\"roughconductor\" id=\"{id}\">\n        <string name=\"material\" value=\"none\"/>\n        \
-             <string name=\"distribution\" value=\"ggx\"/>\n        <float name=\"alpha\" value=\"{}\"/>\n        \
-             <rgb name=\"specular_reflectance\" value=\"{}\"/>\n    </bsdf>",
-            float(alpha),
-            rgb(reflectance)
-        ),
+        Material::Conductor(c) => {
+            // The Fresnel factor 1 as Mitsuba's material "none"; any other index as rgb, which
+            // Mitsuba's RGB variants take as it is (an unbounded texture).
+            let ior = if c.ior == ComplexIor::PERFECT_MIRROR {
+                "<string name=\"material\" value=\"none\"/>".to_string()
+            } else {
+                format!(
+                    "<rgb name=\"eta\" value=\"{}\"/>\n        <rgb name=\"k\" value=\"{}\"/>",
+                    rgb(c.ior.eta),
+                    rgb(c.ior.k)
+                )
+            };
+            let distribution = match c.distribution {
+                Microfacet::Ggx => "ggx",
+                Microfacet::Beckmann => "beckmann",
+            };
+            format!(
+                "    <bsdf type=\"roughconductor\" id=\"{id}\">\n        {ior}\n        \
+                 <string name=\"distribution\" value=\"{distribution}\"/>\n        <float name=\"alpha\" value=\"{}\"/>\n        \
+                 <rgb name=\"specular_reflectance\" value=\"{}\"/>\n    </bsdf>",
+                float(c.alpha),
+                rgb(c.reflectance)
+            )
+        }
     }
 }
 
@@ -224,4 +242,46 @@ fn write_ply_f64(out: &mut impl Write, mesh: &crate::scene::shapes::Mesh) -> std
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bsdf::conductor::Conductor;
+
+    /// A conductor written by `bsdf_xml` reads back as itself, bit for bit: the Fresnel factor
+    /// 1 as material "none", any other index as rgb eta and k, both distributions.
+    #[test]
+    fn conductors_export_and_read_back_exactly() {
+        let gold = ComplexIor {
+            eta: Vec3::new(0.143_035_98, 0.375_307_08, 1.442_045_3),
+            k: Vec3::new(3.982_997, 2.385_556_5, 1.603_359_2),
+        };
+        for conductor in [
+            Conductor::ggx(0.1, Vec3::new(1.0, 0.78, 0.34)),
+            Conductor {
+                distribution: Microfacet::Beckmann,
+                alpha: 0.3,
+                reflectance: Vec3::new(0.9, 0.8, 0.7),
+                ior: gold,
+            },
+        ] {
+            let material = Material::Conductor(conductor);
+            let text = format!(
+                "<scene version=\"3.0.0\">\n<sensor type=\"perspective\"><film type=\"hdrfilm\"><rfilter type=\"box\"/></film></sensor>\n{}\n\
+                 <shape type=\"rectangle\"><ref id=\"m\"/></shape>\n\
+                 <shape type=\"rectangle\"><transform name=\"to_world\"><translate z=\"2\"/></transform>\
+                 <emitter type=\"area\"><rgb name=\"radiance\" value=\"1\"/></emitter></shape>\n</scene>\n",
+                bsdf_xml(&material, "m")
+            );
+            let (scene, _) = crate::scene::load_mitsuba_from_str(
+                Path::new("export-test.xml"),
+                &text,
+                &[],
+                &crate::scene::Limits::of_this_machine(),
+            )
+            .unwrap_or_else(|e| panic!("{text}\n{e}"));
+            assert!(scene.materials.contains(&material), "{text}");
+        }
+    }
 }
