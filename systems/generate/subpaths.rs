@@ -164,20 +164,30 @@ crate::system! {
                     let key = numbers.key(sampler, Stream::Light, wave, pixels, k);
                     // A multiplexed sample with s <= 1 walks no light subpath.
                     let walks = !multiplexed || lengths(k).1 >= 2;
-                    if let Some((e, env)) = emitters.environment()
-                        && crate::sampling::sample_cdf(&emitters.cdf, sampler.get(key, LIGHT_DIM_PICK)) == e
-                    {
-                        // From the light at infinity: a direction, and a point on the disk
-                        // across the scene facing it. The origin's density is in solid angle;
-                        // the disk's plays the direction density's part (see `to_area`).
-                        let (towards_light, pdf_dir) =
-                            env.sample(sampler.get2(key, LIGHT_DIM_DIRECTION));
+                    // A light at infinity (the environment, or a directional light): a
+                    // direction and a point on the disk across the scene facing it. The
+                    // origin's density is in solid angle; the disk's plays the direction
+                    // density's part (see `to_area`).
+                    let picked =
+                        crate::sampling::sample_cdf(&emitters.cdf, sampler.get(key, LIGHT_DIM_PICK));
+                    let from_infinity = match emitters.environment() {
+                        Some((e, env)) if e == picked => {
+                            let (towards_light, pdf_dir) =
+                                env.sample(sampler.get2(key, LIGHT_DIM_DIRECTION));
+                            Some((towards_light, env.eval(towards_light), emitters.pmf[e] * pdf_dir))
+                        }
+                        _ if emitters.is_directional(picked) => Some((
+                            -emitters.position[picked],
+                            emitters.radiance[picked],
+                            emitters.pmf[picked],
+                        )),
+                        _ => None,
+                    };
+                    if let Some((towards_light, le, pdf_origin)) = from_infinity {
                         let origin = emitters
                             .disk
                             .origin(towards_light, sampler.get2(key, LIGHT_DIM_POINT));
                         let dir = -towards_light;
-                        let pdf_origin = emitters.pmf[e] * pdf_dir;
-                        let le = env.eval(towards_light);
                         let pdf_disk = emitters.disk.pdf();
                         let live = pdf_origin > 0.0;
                         v.set(
@@ -187,7 +197,7 @@ crate::system! {
                                 p_error: Vec3::ZERO,
                                 ng: dir,
                                 ns: dir,
-                                triangle: crate::scene::ENVIRONMENT,
+                                triangle: emitters.triangle[picked],
                                 beta: if live { le / pdf_origin } else { Vec3::ZERO },
                                 pdf_fwd: pdf_origin,
                                 pdf_rev: 0.0,
@@ -218,39 +228,6 @@ crate::system! {
                     );
                     let (e, tri, sp) = (light.emitter, light.triangle, light.point);
                     let pdf_origin = light.pdf_area;
-                    if emitters.is_directional(e) {
-                        // Its one direction, from a point on the disk across the scene.
-                        let dir = emitters.position[e];
-                        let origin = emitters
-                            .disk
-                            .origin(-dir, sampler.get2(key, LIGHT_DIM_POINT));
-                        let irradiance = emitters.radiance[e];
-                        let pdf_disk = emitters.disk.pdf();
-                        v.set(
-                            i,
-                            PathVertex {
-                                p: origin,
-                                p_error: Vec3::ZERO,
-                                ng: dir,
-                                ns: dir,
-                                triangle: tri,
-                                beta: irradiance / pdf_origin,
-                                pdf_fwd: pdf_origin,
-                                pdf_rev: 0.0,
-                                delta: false,
-                            },
-                        );
-                        let beta = irradiance * (1.0 / (pdf_origin * pdf_disk));
-                        wk.subpath[i] = (cap + k) as u32;
-                        wk.key[i] = key;
-                        wk.beta[i] = beta;
-                        wk.pdf_dir[i] = pdf_disk;
-                        wk.roulette_scale[i] = beta.max_element().max(f32::MIN_POSITIVE);
-                        wk.alive[i] = walks;
-                        r.origin[i] = origin;
-                        r.dir[i] = if walks { dir } else { Vec3::ZERO };
-                        continue;
-                    }
                     let le = emitters.radiance[e];
                     let u_dir = sampler.get2(key, LIGHT_DIM_DIRECTION);
                     let point_light = emitters.is_point(e);
