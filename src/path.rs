@@ -186,7 +186,7 @@ impl PathContext<'_> {
     /// `PreparedScene::material_seen`).
     #[inline]
     pub fn material_seen(&self, v: &Vertex, wo: Vec3) -> Material {
-        self.scene.material_seen(v.triangle, v.p, wo, v.ng)
+        self.scene.material_seen(v.triangle, v.p, wo, v.ng, v.ns)
     }
 
     /// Whether a strategy may join a subpath at this vertex: not at a delta surface.

@@ -355,7 +355,7 @@ pub fn scene_fingerprint(data: &SceneData) -> u64 {
         s.materials,
         s.emitters,
         s.black_behind,
-        s.reflectance_texture,
+        s.varying,
         s.textures,
         s.triangle_uvs
     );

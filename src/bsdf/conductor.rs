@@ -52,23 +52,72 @@ impl ComplexIor {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Conductor {
     pub distribution: Microfacet,
-    /// Isotropic roughness (the slopes' scale); below ALPHA_MIN it is taken as ALPHA_MIN.
-    pub alpha: f32,
+    /// Roughness (the slopes' scale) along `axis`; below ALPHA_MIN it is taken as ALPHA_MIN.
+    pub alpha_u: f32,
+    /// Roughness across `axis`: equal to `alpha_u` for an isotropic lobe.
+    pub alpha_v: f32,
+    /// The direction of `alpha_u` in the shading frame's tangent plane, (cos, sin) of its
+    /// angle from the frame's first tangent: Mitsuba's uv tangent (dp/du) as the frame in
+    /// which eval and sample run sees it. Exactly (1, 0) unless the lobe is anisotropic, and
+    /// then the directions are turned by it (see `PreparedScene::material_at`).
+    pub axis: Vec2,
     /// A factor on the Fresnel term (Mitsuba's `specular_reflectance`).
     pub reflectance: Vec3,
     pub ior: ComplexIor,
 }
 
 impl Conductor {
+    /// An isotropic lobe of roughness `alpha`.
+    pub fn isotropic(
+        distribution: Microfacet,
+        alpha: f32,
+        reflectance: Vec3,
+        ior: ComplexIor,
+    ) -> Conductor {
+        Conductor {
+            distribution,
+            alpha_u: alpha,
+            alpha_v: alpha,
+            axis: Vec2::X,
+            reflectance,
+            ior,
+        }
+    }
+
     /// A GGX lobe whose Fresnel factor is 1, scaled by `reflectance`: the RON format's
     /// `Conductor`, and Mitsuba's `roughconductor` of material "none" with distribution ggx.
     pub fn ggx(alpha: f32, reflectance: Vec3) -> Conductor {
-        Conductor {
-            distribution: Microfacet::Ggx,
+        Conductor::isotropic(
+            Microfacet::Ggx,
             alpha,
             reflectance,
-            ior: ComplexIor::PERFECT_MIRROR,
+            ComplexIor::PERFECT_MIRROR,
+        )
+    }
+
+    /// The larger of the two roughnesses (what decides whether the lobe is nearly a mirror).
+    pub fn max_alpha(&self) -> f32 {
+        self.alpha_u.max(self.alpha_v)
+    }
+
+    /// `w` in the frame whose first tangent is `axis` (identity for isotropic lobes).
+    #[inline]
+    fn onto_axis(&self, w: Vec3) -> Vec3 {
+        if self.axis == Vec2::X {
+            return w;
         }
+        let (c, s) = (self.axis.x, self.axis.y);
+        Vec3::new(c * w.x + s * w.y, c * w.y - s * w.x, w.z)
+    }
+
+    /// The inverse of `onto_axis`.
+    #[inline]
+    fn off_axis(&self, w: Vec3) -> Vec3 {
+        if self.axis == Vec2::X {
+            return w;
+        }
+        let (c, s) = (self.axis.x, self.axis.y);
+        Vec3::new(c * w.x - s * w.y, s * w.x + c * w.y, w.z)
     }
 
     /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
@@ -84,26 +133,20 @@ impl Conductor {
     /// (f, pdf) for a reflection pair; zero unless both lie strictly above the surface.
     #[inline]
     fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
+        let (wo, wi) = (self.onto_axis(wo), self.onto_axis(wi));
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return (Vec3::ZERO, 0.0);
         }
         let h = wo + wi;
         // Both above the surface: h.z > 0 and |h| >= h.z, so normalising is safe.
         let h = h / h.length();
-        let alpha = clamp_alpha(self.alpha);
+        let a = Alphas::of(self);
         let (d, go, gi) = match self.distribution {
-            Microfacet::Ggx => {
-                let a2 = alpha * alpha;
-                (
-                    ggx_ndf(a2, h),
-                    ggx_g1_over_cos(a2, wo),
-                    ggx_g1_over_cos(a2, wi),
-                )
-            }
+            Microfacet::Ggx => (a.ggx_ndf(h), a.ggx_g1_over_cos(wo), a.ggx_g1_over_cos(wi)),
             Microfacet::Beckmann => (
-                beckmann_ndf(alpha, h),
-                beckmann_g1_over_cos(alpha, wo),
-                beckmann_g1_over_cos(alpha, wi),
+                a.beckmann_ndf(h),
+                a.beckmann_g1_over_cos(wo),
+                a.beckmann_g1_over_cos(wi),
             ),
         };
         // The pdf's (wo.h) factors cancel: D_wo(h) / (4 wo.h) = G1(wo) D(h) / (4 wo.z).
@@ -123,16 +166,17 @@ impl Conductor {
         if wo.z <= 0.0 {
             return None;
         }
-        let alpha = clamp_alpha(self.alpha);
+        let on_axis = self.onto_axis(wo);
+        let a = Alphas::of(self);
         let h = match self.distribution {
-            Microfacet::Ggx => ggx_visible_normal(alpha, wo, u),
-            Microfacet::Beckmann => beckmann_visible_normal(alpha, wo, u),
+            Microfacet::Ggx => a.ggx_visible_normal(on_axis, u),
+            Microfacet::Beckmann => a.beckmann_visible_normal(on_axis, u),
         };
-        let wi = 2.0 * wo.dot(h) * h - wo;
+        let wi = 2.0 * on_axis.dot(h) * h - on_axis;
         if wi.z <= 0.0 {
             return None; // reflected below the surface: masked
         }
-        let wi = wi.normalize();
+        let wi = self.off_axis(wi.normalize());
         // Value and pdf from the same code as eval/pdf so that MIS sees identical densities.
         let (value, pdf) = self.eval_pdf(wo, wi);
         if !(pdf > 0.0 && pdf.is_finite()) {
@@ -202,101 +246,145 @@ fn fresnel_channel(cos_i: f32, eta: f32, k: f32) -> f32 {
     0.5 * (r_s + r_p)
 }
 
-/// GGX normal distribution for a unit half-vector `m` with m.z > 0. The denominator uses
-/// m.x^2 + m.y^2 for sin^2 rather than 1 - m.z^2, which cancels to 0 for tiny alpha.
-#[inline]
-fn ggx_ndf(a2: f32, m: Vec3) -> f32 {
-    let d = a2 * m.z * m.z + m.x * m.x + m.y * m.y;
-    a2 * FRAC_1_PI / (d * d)
-}
-
-/// Smith G1(w) / w.z for the GGX distribution, w.z > 0:
-/// G1 = 2 / (1 + sqrt(1 + alpha^2 tan^2)), so G1 / cos = 2 / (cos + sqrt(cos^2 + alpha^2 sin^2)),
-/// which is bounded by 2/alpha even at cos = 0.
-#[inline]
-fn ggx_g1_over_cos(a2: f32, w: Vec3) -> f32 {
-    let c2 = w.z * w.z;
-    let s2 = w.x * w.x + w.y * w.y;
-    2.0 / (w.z + (c2 + a2 * s2).sqrt())
-}
-
-/// Beckmann normal distribution exp(-tan^2 / alpha^2) / (pi alpha^2 cos^4) for a unit
-/// half-vector `m` with m.z > 0, tan^2 written as (m.x^2 + m.y^2) / m.z^2 (see `ggx_ndf`).
-#[inline]
-fn beckmann_ndf(alpha: f32, m: Vec3) -> f32 {
-    let a2 = alpha * alpha;
-    let c2 = m.z * m.z;
-    let exponent = (m.x * m.x + m.y * m.y) / (a2 * c2);
-    // exp(-87) ~ 1e-38: beyond, D is 0 (and a c2 underflowing to 0 would give 0 / 0).
-    if exponent >= 87.0 {
-        return 0.0;
-    }
-    (-exponent).exp() * FRAC_1_PI / (a2 * c2 * c2)
+/// A lobe's two roughnesses, clamped (see `clamp_alpha`), in the frame of its axis. With
+/// alpha_u = alpha_v every formula below performs the isotropic lobe's operations exactly,
+/// so isotropic materials render as they did before anisotropy existed.
+#[derive(Clone, Copy, Debug)]
+struct Alphas {
+    u: f32,
+    v: f32,
 }
 
 /// 1 / sqrt(pi).
 const FRAC_1_SQRT_PI: f32 = 0.564_189_6;
 
-/// Smith G1(w) / w.z for the Beckmann distribution, w.z > 0. With a = cos / (alpha sin),
-/// Lambda = (erf(a) - 1) / 2 + exp(-a^2) / (2 a sqrt(pi)) and G1 = 1 / (1 + Lambda), so
-/// G1 / cos = 2 / (cos (1 + erf(a)) + alpha sin exp(-a^2) / sqrt(pi)): bounded by
-/// 2 sqrt(pi) / alpha at cos = 0, and 1 / cos at normal incidence (a infinite).
-#[inline]
-fn beckmann_g1_over_cos(alpha: f32, w: Vec3) -> f32 {
-    let sin = (w.x * w.x + w.y * w.y).sqrt();
-    let a = w.z / (alpha * sin);
-    2.0 / (w.z * (1.0 + libm::erff(a)) + alpha * sin * (-a * a).exp() * FRAC_1_SQRT_PI)
-}
+impl Alphas {
+    #[inline]
+    fn of(c: &Conductor) -> Alphas {
+        Alphas {
+            u: clamp_alpha(c.alpha_u),
+            v: clamp_alpha(c.alpha_v),
+        }
+    }
 
-/// A half-vector from the GGX distribution of normals visible from `wo` (wo.z > 0), following
-/// Heitz 2018: stretch to the alpha = 1 configuration, sample the projected hemisphere, unstretch.
-fn ggx_visible_normal(alpha: f32, wo: Vec3, u: Vec2) -> Vec3 {
-    let v = Vec3::new(alpha * wo.x, alpha * wo.y, wo.z).normalize();
-    // Basis around v; at normal incidence any tangent will do.
-    let len2 = v.x * v.x + v.y * v.y;
-    let t1 = if len2 > 0.0 {
-        Vec3::new(-v.y, v.x, 0.0) / len2.sqrt()
-    } else {
-        Vec3::X
-    };
-    let t2 = v.cross(t1);
-    // Uniform disk point, its second coordinate squeezed onto the visible part of the
-    // hemisphere's projection.
-    let r = u.x.sqrt();
-    let phi = 2.0 * PI * u.y;
-    let p1 = r * phi.cos();
-    let mut p2 = r * phi.sin();
-    let s = 0.5 * (1.0 + v.z);
-    p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
-    let nz = (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
-    let n = p1 * t1 + p2 * t2 + nz * v;
-    Vec3::new(alpha * n.x, alpha * n.y, n.z.max(0.0)).normalize_or(Vec3::Z)
-}
+    /// The roughness in `w`'s azimuth times sin(theta): alpha sin for an isotropic lobe,
+    /// sqrt(alpha_u^2 w.x^2 + alpha_v^2 w.y^2) in general.
+    #[inline]
+    fn projected(&self, w: Vec3) -> f32 {
+        if self.u == self.v {
+            self.u * (w.x * w.x + w.y * w.y).sqrt()
+        } else {
+            self.projected2(w).sqrt()
+        }
+    }
 
-/// A half-vector from the Beckmann distribution of normals visible from `wo` (wo.z > 0), as
-/// Heitz and d'Eon 2014 (and Mitsuba's `MicrofacetDistribution::sample`): stretch wo to the
-/// alpha = 1 configuration, draw the slopes visible from there, rotate them to wo's azimuth
-/// and unstretch. In double precision, so the slopes' CDF is inverted to far below f32's
-/// resolution and the sampled density is the pdf's.
-fn beckmann_visible_normal(alpha: f32, wo: Vec3, u: Vec2) -> Vec3 {
-    let v = DVec3::new(
-        alpha as f64 * wo.x as f64,
-        alpha as f64 * wo.y as f64,
-        wo.z as f64,
-    )
-    .normalize();
-    let sin_theta = (v.x * v.x + v.y * v.y).sqrt();
-    let (cos_phi, sin_phi) = if sin_theta > 0.0 {
-        (v.x / sin_theta, v.y / sin_theta)
-    } else {
-        (1.0, 0.0)
-    };
-    let tan_theta = sin_theta / v.z;
-    let slope_x = invert_visible_slope_cdf(tan_theta, u.x as f64);
-    let slope_y = invert_visible_slope_cdf(0.0, u.y as f64);
-    let x = (cos_phi * slope_x - sin_phi * slope_y) * alpha as f64;
-    let y = (sin_phi * slope_x + cos_phi * slope_y) * alpha as f64;
-    DVec3::new(-x, -y, 1.0).normalize().as_vec3()
+    /// `projected` squared.
+    #[inline]
+    fn projected2(&self, w: Vec3) -> f32 {
+        if self.u == self.v {
+            self.u * self.u * (w.x * w.x + w.y * w.y)
+        } else {
+            self.u * self.u * w.x * w.x + self.v * self.v * w.y * w.y
+        }
+    }
+
+    /// GGX normal distribution 1 / (pi au av (x^2/au^2 + y^2/av^2 + z^2)^2) for a unit
+    /// half-vector `m` with m.z > 0, written as au av / (pi d^2) with d = au av z^2 +
+    /// (av/au) x^2 + (au/av) y^2: x^2 + y^2 stands for sin^2 rather than 1 - m.z^2, which
+    /// cancels to 0 for tiny alpha.
+    #[inline]
+    fn ggx_ndf(&self, m: Vec3) -> f32 {
+        let a2 = self.u * self.v;
+        let d = a2 * m.z * m.z + (self.v / self.u) * m.x * m.x + (self.u / self.v) * m.y * m.y;
+        a2 * FRAC_1_PI / (d * d)
+    }
+
+    /// Smith G1(w) / w.z for the GGX distribution, w.z > 0:
+    /// G1 = 2 / (1 + sqrt(1 + alpha^2 tan^2)), so G1 / cos = 2 / (cos + sqrt(cos^2 + alpha^2
+    /// sin^2)) with alpha the roughness in w's azimuth: bounded by 2/alpha even at cos = 0.
+    #[inline]
+    fn ggx_g1_over_cos(&self, w: Vec3) -> f32 {
+        let c2 = w.z * w.z;
+        2.0 / (w.z + (c2 + self.projected2(w)).sqrt())
+    }
+
+    /// Beckmann normal distribution exp(-(x^2/au^2 + y^2/av^2) / z^2) / (pi au av z^4) for a
+    /// unit half-vector `m` with m.z > 0 (x^2 + y^2 for sin^2, see `ggx_ndf`).
+    #[inline]
+    fn beckmann_ndf(&self, m: Vec3) -> f32 {
+        let a2 = self.u * self.v;
+        let c2 = m.z * m.z;
+        let exponent = ((self.v / self.u) * m.x * m.x + (self.u / self.v) * m.y * m.y) / (a2 * c2);
+        // exp(-87) ~ 1e-38: beyond, D is 0 (and a c2 underflowing to 0 would give 0 / 0).
+        if exponent >= 87.0 {
+            return 0.0;
+        }
+        (-exponent).exp() * FRAC_1_PI / (a2 * c2 * c2)
+    }
+
+    /// Smith G1(w) / w.z for the Beckmann distribution, w.z > 0. With r = alpha sin (alpha in
+    /// w's azimuth) and a = cos / r, Lambda = (erf(a) - 1) / 2 + exp(-a^2) / (2 a sqrt(pi))
+    /// and G1 = 1 / (1 + Lambda), so G1 / cos = 2 / (cos (1 + erf(a)) + r exp(-a^2) /
+    /// sqrt(pi)): bounded by 2 sqrt(pi) / alpha at cos = 0, and 1 / cos at normal incidence
+    /// (a infinite).
+    #[inline]
+    fn beckmann_g1_over_cos(&self, w: Vec3) -> f32 {
+        let r = self.projected(w);
+        let a = w.z / r;
+        2.0 / (w.z * (1.0 + libm::erff(a)) + r * (-a * a).exp() * FRAC_1_SQRT_PI)
+    }
+
+    /// A half-vector from the GGX distribution of normals visible from `wo` (wo.z > 0),
+    /// following Heitz 2018: stretch to the alpha = 1 configuration, sample the projected
+    /// hemisphere, unstretch.
+    fn ggx_visible_normal(&self, wo: Vec3, u: Vec2) -> Vec3 {
+        let v = Vec3::new(self.u * wo.x, self.v * wo.y, wo.z).normalize();
+        // Basis around v; at normal incidence any tangent will do.
+        let len2 = v.x * v.x + v.y * v.y;
+        let t1 = if len2 > 0.0 {
+            Vec3::new(-v.y, v.x, 0.0) / len2.sqrt()
+        } else {
+            Vec3::X
+        };
+        let t2 = v.cross(t1);
+        // Uniform disk point, its second coordinate squeezed onto the visible part of the
+        // hemisphere's projection.
+        let r = u.x.sqrt();
+        let phi = 2.0 * PI * u.y;
+        let p1 = r * phi.cos();
+        let mut p2 = r * phi.sin();
+        let s = 0.5 * (1.0 + v.z);
+        p2 = (1.0 - s) * (1.0 - p1 * p1).max(0.0).sqrt() + s * p2;
+        let nz = (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
+        let n = p1 * t1 + p2 * t2 + nz * v;
+        Vec3::new(self.u * n.x, self.v * n.y, n.z.max(0.0)).normalize_or(Vec3::Z)
+    }
+
+    /// A half-vector from the Beckmann distribution of normals visible from `wo` (wo.z > 0),
+    /// as Heitz and d'Eon 2014 (and Mitsuba's `MicrofacetDistribution::sample`): stretch wo to
+    /// the alpha = 1 configuration, draw the slopes visible from there, rotate them to wo's
+    /// azimuth and unstretch. In double precision, so the slopes' CDF is inverted to far below
+    /// f32's resolution and the sampled density is the pdf's.
+    fn beckmann_visible_normal(&self, wo: Vec3, u: Vec2) -> Vec3 {
+        let v = DVec3::new(
+            self.u as f64 * wo.x as f64,
+            self.v as f64 * wo.y as f64,
+            wo.z as f64,
+        )
+        .normalize();
+        let sin_theta = (v.x * v.x + v.y * v.y).sqrt();
+        let (cos_phi, sin_phi) = if sin_theta > 0.0 {
+            (v.x / sin_theta, v.y / sin_theta)
+        } else {
+            (1.0, 0.0)
+        };
+        let tan_theta = sin_theta / v.z;
+        let slope_x = invert_visible_slope_cdf(tan_theta, u.x as f64);
+        let slope_y = invert_visible_slope_cdf(0.0, u.y as f64);
+        let x = (cos_phi * slope_x - sin_phi * slope_y) * self.u as f64;
+        let y = (sin_phi * slope_x + cos_phi * slope_y) * self.v as f64;
+        DVec3::new(-x, -y, 1.0).normalize().as_vec3()
+    }
 }
 
 /// sqrt(pi).
@@ -467,7 +555,7 @@ mod tests {
             for i in 0..90 {
                 let t = (i as f32).to_radians();
                 let w = Vec3::new(t.sin(), 0.0, t.cos());
-                let ours = beckmann_g1_over_cos(alpha, w) * w.z;
+                let ours = Alphas { u: alpha, v: alpha }.beckmann_g1_over_cos(w) * w.z;
                 let theirs = mitsuba_beckmann_g1(alpha, w);
                 assert!(
                     (ours - theirs).abs() <= 0.0036 * ours + 1e-6,
@@ -486,7 +574,8 @@ mod tests {
             for i in 0..n {
                 let t = (i as f64 + 0.5) / n as f64 * std::f64::consts::FRAC_PI_2;
                 let m = Vec3::new(t.sin() as f32, 0.0, t.cos() as f32);
-                sum += beckmann_ndf(alpha as f32, m) as f64 * t.cos() * t.sin();
+                let a = alpha as f32;
+                sum += Alphas { u: a, v: a }.beckmann_ndf(m) as f64 * t.cos() * t.sin();
             }
             let integral =
                 sum * std::f64::consts::FRAC_PI_2 / n as f64 * 2.0 * std::f64::consts::PI;

@@ -19,13 +19,14 @@ pub enum Material {
     /// Smooth dielectric: exact unpolarised Fresnel, refraction, total internal reflection.
     /// `ior` is the index inside (the side opposite the geometric normal) over outside.
     Dielectric { ior: f32 },
-    /// Rough conductor (GGX or Beckmann microfacets, isotropic): a conductor's Fresnel term
+    /// Rough conductor (GGX or Beckmann microfacets, possibly anisotropic): a conductor's Fresnel term
     /// times a reflectance, or the reflectance alone (see `conductor`).
     Conductor(conductor::Conductor),
 }
 
-// Materials are copied by value into every path vertex and prepared joint: keep them small.
-const _: () = assert!(std::mem::size_of::<Material>() <= 44);
+// Materials are copied by value into every shading point and visible point: keep them small
+// (the anisotropic conductor, with its Fresnel indices, two roughnesses and axis, is the largest).
+const _: () = assert!(std::mem::size_of::<Material>() <= 56);
 
 /// The kind of a material: the graph holds one shading system per kind a scene uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]

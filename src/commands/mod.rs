@@ -239,7 +239,6 @@ pub fn check_render_memory(
 ) -> Result<()> {
     // Every render is checked here before it starts: the camera's needs too.
     crate::integrators::check_camera(kind, &data.scene.camera)
-        .and_then(|()| crate::integrators::check_lights(kind, &data.scene))
         .map_err(|e| anyhow::anyhow!("{}: {e}", data.scene.source.display()))?;
     // PM's estimate takes the k nearest of the stored photons.
     if kind.as_str() == "pm" && settings.photons.k as u64 > settings.photons.photons {

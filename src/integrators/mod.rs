@@ -543,33 +543,6 @@ pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Resu
     Ok(())
 }
 
-/// Refuses lights the integrator does not carry yet: a light at infinity (constant, envmap,
-/// directional) renders under pt, the integrators built on BDPT's subpaths (bdpt, vcm, bpm,
-/// pssmlt, mmlt) and the photon mappers (pm, ppm, sppm): camera paths that leave the scene see
-/// the environment, light paths and photons start on a disk across the scene. Path-space mlt,
-/// whose mutations would have to move a vertex at infinity, does not carry it yet.
-pub fn check_lights(
-    kind: IntegratorKind,
-    scene: &crate::scene::PreparedScene,
-) -> Result<(), String> {
-    const CARRY_INFINITY: [&str; 9] = [
-        "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt",
-    ];
-    let at_infinity = scene
-        .emitters
-        .triangle
-        .iter()
-        .any(|&t| crate::scene::is_at_infinity(t));
-    if at_infinity && !CARRY_INFINITY.contains(&kind.as_str()) {
-        return Err(format!(
-            "{kind} cannot render a light at infinity (a constant, envmap or directional \
-             emitter) yet: {} carry it",
-            CARRY_INFINITY.join(", ")
-        ));
-    }
-    Ok(())
-}
-
 /// Renders a scene with an integrator from nothing.
 pub fn render(
     kind: IntegratorKind,

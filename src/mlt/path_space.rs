@@ -60,9 +60,16 @@ pub struct PathSpace<'a> {
     pub data: &'a SceneData,
 }
 
-/// The unit direction from `a` to `b`.
+/// The unit direction from `a` to `b`; a vertex at infinity is a direction (its `ng`, the way
+/// its light travels), whatever its far point.
 #[inline]
 pub fn dir(a: &Vertex, b: &Vertex) -> Vec3 {
+    if a.is_at_infinity() {
+        return a.ng;
+    }
+    if b.is_at_infinity() {
+        return -b.ng;
+    }
     (b.p - a.p).normalize_or_zero()
 }
 
@@ -97,6 +104,7 @@ impl<'a> PathSpace<'a> {
     pub fn is_specular(&self, v: &Vertex) -> bool {
         v.kind != VertexKind::Camera
             && !v.is_point_light()
+            && !v.is_at_infinity()
             && matches!(self.ctx.material(v), Material::Dielectric { .. })
     }
 
@@ -104,7 +112,7 @@ impl<'a> PathSpace<'a> {
     /// vertices BDPT stores carry the geometric normal as shading normal; a path vertex
     /// carries the surface's own, whatever role it plays).
     pub fn reshade(&self, v: &Vertex) -> Vertex {
-        if v.kind == VertexKind::Camera || v.is_point_light() {
+        if v.kind == VertexKind::Camera || v.is_point_light() || v.is_at_infinity() {
             return *v;
         }
         let tris = &self.data.scene.triangles;
@@ -162,6 +170,14 @@ impl<'a> PathSpace<'a> {
         }
         for i in 0..n - 1 {
             let (a, b) = (&path[i], &path[i + 1]);
+            if a.is_at_infinity() {
+                // Light from a direction: its density is in solid angle there, and the cosine
+                // at b is b's own (`scatter_weight`): no factor on this edge.
+                continue;
+            }
+            if b.is_at_infinity() {
+                return None; // only the light end of a path lies at infinity
+            }
             let d = b.p - a.p;
             let dist2 = d.length_squared();
             if dist2 == 0.0 {
@@ -306,18 +322,103 @@ impl<'a> PathSpace<'a> {
         })
     }
 
-    /// Whether nothing lies between `a` and `b`.
-    pub fn visible(&self, a: &Vertex, b: &Vertex) -> bool {
-        let (origin, d, t_max) = spawn_ray_to(a.p, a.p_error, a.ng, b.p, b.p_error, b.ng);
-        !self.accel.any_hit(origin, d, t_max)
+    /// The first surface along `dir` from `from`, or where the ray leaves the scene, the
+    /// environment's vertex that way (a path's light end; `None` without an environment).
+    pub fn trace_or_sky(&self, from: &Vertex, dir: Vec3) -> Option<Vertex> {
+        if let Some(hit) = self.trace(from, dir) {
+            return Some(hit);
+        }
+        self.data.scene.emitters.environment()?;
+        Some(self.at_infinity(-dir, crate::scene::ENVIRONMENT, from.p))
     }
 
-    /// A point on an emitter (by power, uniform on it).
+    /// A light vertex at infinity whose light travels along `travel` (unit), tagged
+    /// `triangle`, its far point beyond the scene from `seen_from`.
+    fn at_infinity(&self, travel: Vec3, triangle: u32, seen_from: Vec3) -> Vertex {
+        Vertex {
+            kind: VertexKind::Light,
+            p: self.data.scene.emitters.disk.far_point(seen_from, -travel),
+            p_error: Vec3::ZERO,
+            ng: travel,
+            ns: travel,
+            triangle,
+            beta: Vec3::ZERO,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+        }
+    }
+
+    /// The first surface a light path from `v` (at infinity) meets, leaving the disk across
+    /// the scene at the point for `u`; the solid-angle-like density of that choice is the
+    /// disk's (`PathContext::pdf_light_dir`).
+    pub fn trace_from_infinity(&self, v: &Vertex, u: Vec2) -> Option<Vertex> {
+        let origin = self.data.scene.emitters.disk.origin(-v.ng, u);
+        let hit = self.accel.closest_hit(origin, v.ng, f32::INFINITY)?;
+        let sp = surface_point(&self.data.scene.triangles, hit.triangle, hit.b1, hit.b2);
+        let ns = if sp.ns.dot(sp.ng) < 0.0 {
+            -sp.ns
+        } else {
+            sp.ns
+        };
+        Some(Vertex {
+            kind: VertexKind::Surface,
+            p: sp.p,
+            p_error: sp.p_error,
+            ng: sp.ng,
+            ns,
+            triangle: hit.triangle,
+            beta: Vec3::ZERO,
+            pdf_fwd: 0.0,
+            pdf_rev: 0.0,
+            delta: false,
+        })
+    }
+
+    /// Whether nothing lies between `a` and `b` (to the end of the scene where one of them
+    /// lies at infinity).
+    pub fn visible(&self, a: &Vertex, b: &Vertex) -> bool {
+        let (near, far) = match (a.is_at_infinity(), b.is_at_infinity()) {
+            (true, _) => (b, a),
+            (_, true) => (a, b),
+            _ => {
+                let (origin, d, t_max) = spawn_ray_to(a.p, a.p_error, a.ng, b.p, b.p_error, b.ng);
+                return !self.accel.any_hit(origin, d, t_max);
+            }
+        };
+        let d = -far.ng;
+        let origin = match near.kind {
+            VertexKind::Camera => near.p,
+            _ => offset_ray_origin(near.p, near.p_error, near.ng, d),
+        };
+        !self.accel.any_hit(origin, d, f32::INFINITY)
+    }
+
+    /// A light vertex by power: a point uniform on an emitter, a point light, or a direction
+    /// at infinity (the environment's by its distribution, a directional light's own), as
+    /// BDPT's s = 1 strategy draws it from the same numbers.
     pub fn sample_light_origin(&self, u_pick: f32, u_point: Vec2) -> Option<Vertex> {
-        if self.data.scene.emitters.triangle.is_empty() {
+        let scene = &self.data.scene;
+        if scene.emitters.triangle.is_empty() {
             return None;
         }
+        if let Some((e, env)) = scene.emitters.environment()
+            && crate::sampling::sample_cdf(&scene.emitters.cdf, u_pick) == e
+        {
+            let (towards_light, pdf) = env.sample(u_point);
+            return (pdf > 0.0).then(|| {
+                self.at_infinity(
+                    -towards_light,
+                    crate::scene::ENVIRONMENT,
+                    scene.emitters.disk.center,
+                )
+            });
+        }
         let e = self.data.scene.sample_emitter(u_pick, u_point);
+        if scene.emitters.is_directional(e.emitter) {
+            let travel = scene.emitters.position[e.emitter];
+            return Some(self.at_infinity(travel, e.triangle, scene.emitters.disk.center));
+        }
         let sp = e.point;
         let ns = if sp.ns.dot(sp.ng) < 0.0 {
             -sp.ns
@@ -355,6 +456,8 @@ impl<'a> PathSpace<'a> {
                 let w = cam.direction(raster);
                 Some((w, cam.pdf_dir(w)))
             }
+            // Its paths leave a disk, not a point: `trace_from_infinity`.
+            VertexKind::Light if v.is_at_infinity() => None,
             VertexKind::Light if v.is_point_light() => {
                 let profile = self.ctx.point_profile(v).unwrap_or(&None);
                 let (w, pdf) = crate::scene::lights::sample_direction(profile, u);

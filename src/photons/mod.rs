@@ -259,7 +259,7 @@ pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     use crate::bsdf::Material;
     match *material {
         Material::Dielectric { .. } => true,
-        Material::Conductor(c) => c.alpha < FOLLOW_ALPHA,
+        Material::Conductor(c) => c.max_alpha() < FOLLOW_ALPHA,
         Material::Diffuse { .. } => false,
     }
 }
@@ -372,7 +372,7 @@ impl<'a> GatherPoint<'a> {
             ng,
             frame,
             wo_local: frame.to_local(visible.wo[i]),
-            material: scene.material_at(tri, p),
+            material: scene.material_at(tri, p, visible.ns[i]),
             max_photon_depth,
             accel: &data.accel,
         })

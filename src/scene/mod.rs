@@ -177,6 +177,16 @@ impl Emitters {
     }
 }
 
+/// What a material reads at each shading point (see `PreparedScene::material_at`): indices
+/// into `PreparedScene::textures`, and whether its lobe turns with the uv tangent.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Varying {
+    pub reflectance: Option<u32>,
+    pub alpha_u: Option<u32>,
+    pub alpha_v: Option<u32>,
+    pub anisotropic: bool,
+}
+
 /// The render data of a scene: what systems read while rendering. No hecs queries happen
 /// after this is built.
 #[derive(Clone, Debug)]
@@ -187,11 +197,12 @@ pub struct PreparedScene {
     pub materials: Vec<Material>,
     /// Per material: black when seen from behind its geometric normal (see `material_seen`).
     pub black_behind: Vec<bool>,
-    /// Per material: the index into `textures` of its reflectance, if textured (a Diffuse's).
-    pub reflectance_texture: Vec<Option<u32>>,
+    /// Per material: what it reads at each shading point (textures, the uv tangent), or
+    /// `None` for a material that is the same everywhere (see `material_at`).
+    pub varying: Vec<Option<Varying>>,
     pub textures: Vec<textures::Texture>,
     /// Per triangle, the uvs of its corners (Mitsuba's (0, 0), (1, 0), (0, 1) where the mesh has
-    /// none); empty when no material is textured.
+    /// none); empty when no material varies over its surface.
     pub triangle_uvs: Vec<[glam::Vec2; 3]>,
     pub emitters: Emitters,
     pub bounds_min: Vec3,
@@ -261,27 +272,85 @@ pub const BLACK: Material = Material::Diffuse {
 impl PreparedScene {
     /// The material of triangle `tri` as a ray arriving from `wo` (unit, pointing away from the
     /// surface) sees it: a one-sided material seen from behind its geometric normal `ng` (not
-    /// flipped to any side) is `BLACK`, as Mitsuba's `diffuse` outside a `twosided`.
+    /// flipped to any side) is `BLACK`, as Mitsuba's `diffuse` outside a `twosided`. `ns` as
+    /// in `material_at`.
     #[inline(always)]
-    pub fn material_seen(&self, tri: u32, p: Vec3, wo: Vec3, ng: Vec3) -> Material {
+    pub fn material_seen(&self, tri: u32, p: Vec3, wo: Vec3, ng: Vec3, ns: Vec3) -> Material {
         if self.seen_from_behind(tri, wo, ng) {
             BLACK
         } else {
-            self.material_at(tri, p)
+            self.material_at(tri, p, ns)
         }
     }
 
-    /// The material of triangle `tri` at point `p` on it, its textures looked up there.
+    /// The kind of triangle `tri`'s material (whatever its textures).
+    #[inline]
+    pub fn kind_of(&self, tri: u32) -> crate::bsdf::MaterialKind {
+        self.materials[self.triangles.material[tri as usize] as usize].kind()
+    }
+
+    /// The material of triangle `tri` at point `p` on it, its textures looked up there. `ns` is
+    /// the normal of the shading frame the caller evaluates the material in
+    /// (`Frame::from_normal(ns)`): an anisotropic lobe's axis is given in that frame.
     #[inline(always)]
-    pub fn material_at(&self, tri: u32, p: Vec3) -> Material {
+    pub fn material_at(&self, tri: u32, p: Vec3, ns: Vec3) -> Material {
         let m = self.triangles.material[tri as usize] as usize;
-        let mut material = self.materials[m];
-        if let Some(t) = self.reflectance_texture[m]
-            && let Material::Diffuse { reflectance } = &mut material
-        {
-            *reflectance = self.textures[t as usize].eval(self.uv_at(tri, p));
+        match &self.varying[m] {
+            None => self.materials[m],
+            Some(varying) => self.vary(self.materials[m], varying, tri, p, ns),
+        }
+    }
+
+    /// `material` with what it reads at point `p` of triangle `tri` read there.
+    #[inline]
+    fn vary(&self, mut material: Material, v: &Varying, tri: u32, p: Vec3, ns: Vec3) -> Material {
+        let uv = self.uv_at(tri, p);
+        let texture = |t: u32| &self.textures[t as usize];
+        match &mut material {
+            Material::Diffuse { reflectance } => {
+                if let Some(t) = v.reflectance {
+                    *reflectance = texture(t).eval(uv);
+                }
+            }
+            Material::Conductor(c) => {
+                if let Some(t) = v.reflectance {
+                    c.reflectance = texture(t).eval(uv);
+                }
+                if let Some(t) = v.alpha_u {
+                    c.alpha_u = texture(t).eval_1(uv);
+                }
+                if let Some(t) = v.alpha_v {
+                    c.alpha_v = texture(t).eval_1(uv);
+                }
+                if v.anisotropic && c.alpha_u != c.alpha_v {
+                    c.axis = self.uv_axis(tri, ns);
+                }
+            }
+            Material::Dielectric { .. } => {}
         }
         material
+    }
+
+    /// The direction in which u grows on triangle `tri` (Mitsuba's dp/du, the first tangent of
+    /// its shading frames) as (cos, sin) of its angle in `Frame::from_normal(ns)`'s tangent
+    /// plane. Where the uvs are degenerate Mitsuba takes the first tangent of its
+    /// `coordinate_system` of the geometric normal, which is `Frame::from_normal`'s.
+    fn uv_axis(&self, tri: u32, ns: Vec3) -> glam::Vec2 {
+        let t = &self.triangles;
+        let i = tri as usize;
+        let (dp0, dp1) = (t.p1[i] - t.p0[i], t.p2[i] - t.p0[i]);
+        let [uv0, uv1, uv2] = self.triangle_uvs[i];
+        let (duv0, duv1) = (uv1 - uv0, uv2 - uv0);
+        let det = duv0.x * duv1.y - duv0.y * duv1.x;
+        let dp_du = if det != 0.0 {
+            (duv1.y * dp0 - duv0.y * dp1) / det
+        } else {
+            crate::math::Frame::from_normal(t.normal[i]).s
+        };
+        let frame = crate::math::Frame::from_normal(ns);
+        glam::Vec2::new(dp_du.dot(frame.s), dp_du.dot(frame.t))
+            .try_normalize()
+            .unwrap_or(glam::Vec2::X)
     }
 
     /// The surface uv at point `p` of triangle `tri` (from its barycentric coordinates).

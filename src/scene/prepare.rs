@@ -56,22 +56,50 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         &MaterialInfo,
         &Material,
         Option<&super::world::OneSided>,
-        Option<&super::world::ReflectanceTexture>,
+        Option<&super::world::SurfaceVarying>,
     )>();
     let mut declared: Vec<_> = material_query.iter().collect();
     declared.sort_by_key(|m| m.1.order);
     let used: HashSet<Entity> = objects.iter().map(|o| o.4.0).collect();
     let mut materials = Vec::new();
     let mut black_behind = Vec::new();
-    let mut reflectance_texture = Vec::new();
+    let mut varying = Vec::new();
     let mut textures = Vec::new();
     let mut material_index = HashMap::new(); // entity -> index into `materials`
     let mut warnings = scene.warnings.clone();
-    for &(entity, info, material, one_sided, texture) in &declared {
+    for &(entity, info, material, one_sided, varies) in &declared {
         if used.contains(&entity) {
-            reflectance_texture.push(texture.map(|t| {
-                textures.push(t.0.clone());
-                textures.len() as u32 - 1
+            varying.push(varies.and_then(|v| {
+                let mut add = |t: &Option<super::textures::Texture>| {
+                    t.as_ref().map(|t| {
+                        textures.push(t.clone());
+                        textures.len() as u32 - 1
+                    })
+                };
+                let reflectance = add(&v.reflectance);
+                let alpha_u = add(&v.alpha_u);
+                // An isotropic alpha's one texture serves both roughnesses.
+                let alpha_v = if v.alpha_v.is_some() && v.alpha_v == v.alpha_u {
+                    alpha_u
+                } else {
+                    add(&v.alpha_v)
+                };
+                // Anisotropic where the two roughnesses can differ: different textures, or one
+                // texture and one value, or two different values.
+                let anisotropic = match material {
+                    Material::Conductor(c) => {
+                        v.anisotropic
+                            && (alpha_u != alpha_v || (alpha_u.is_none() && c.alpha_u != c.alpha_v))
+                    }
+                    _ => false,
+                };
+                let varies = reflectance.is_some() || alpha_u.is_some() || anisotropic;
+                varies.then_some(super::Varying {
+                    reflectance,
+                    alpha_u,
+                    alpha_v,
+                    anisotropic,
+                })
             }));
             material_index.insert(entity, materials.len() as u32);
             materials.push(*material);
@@ -187,7 +215,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             triangles.p2.push(p2);
             triangles.normal.push(e1.cross(e2).normalize().as_vec3());
             triangles.material.push(material);
-            if !textures.is_empty() {
+            if varying.iter().any(Option::is_some) {
                 triangle_uvs.push(uvs);
             }
 
@@ -412,7 +440,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         triangles,
         materials,
         black_behind,
-        reflectance_texture,
+        varying,
         textures,
         triangle_uvs,
         emitters,

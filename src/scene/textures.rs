@@ -135,6 +135,34 @@ impl Texture {
     }
 }
 
+impl Texture {
+    /// The texture read as one value, as Mitsuba's `eval_1` reads it (a roughness): an image's
+    /// luminance, and a checkerboard's `color0` where the cells' parities differ, the other
+    /// way round from `eval` (Mitsuba's checkerboard.cpp has it so).
+    #[inline]
+    pub fn eval_1(&self, uv: Vec2) -> f32 {
+        let uv = self.to_uv.apply(uv);
+        match &self.pattern {
+            Pattern::Bitmap(b) => mitsuba_luminance(b.eval(uv)),
+            Pattern::Checkerboard { color0, color1 } => {
+                let f = uv - uv.floor();
+                mitsuba_luminance(if (f.x > 0.5) != (f.y > 0.5) {
+                    *color0
+                } else {
+                    *color1
+                })
+            }
+        }
+    }
+}
+
+/// Mitsuba's `luminance` of linear sRGB (its coefficients, which differ from
+/// `math::luminance`'s in the fourth digit): what a one-value read of a colour texture gives.
+#[inline]
+fn mitsuba_luminance(c: Vec3) -> f32 {
+    c.x * 0.212_671 + c.y * 0.715_160 + c.z * 0.072_169
+}
+
 /// The sRGB transfer function's inverse (8-bit images hold sRGB-encoded values).
 fn srgb_to_linear(c: f32) -> f32 {
     if c <= 0.04045 {

@@ -57,9 +57,20 @@ pub struct SpotTexture(pub super::textures::Texture);
 #[derive(Clone, Debug)]
 pub struct EnvironmentLight(pub super::environment::Environment);
 
-/// A material entity's textured reflectance (a Mitsuba `diffuse` with a nested texture).
-#[derive(Clone, Debug)]
-pub struct ReflectanceTexture(pub super::textures::Texture);
+/// What a material entity reads at each shading point rather than holds: its textured
+/// parameters (a Mitsuba `diffuse` or `roughconductor` with nested textures) and whether its
+/// lobe is anisotropic, and so turns with the surface's uv tangent.
+#[derive(Clone, Debug, Default)]
+pub struct SurfaceVarying {
+    /// A diffuse's reflectance, a conductor's specular_reflectance.
+    pub reflectance: Option<super::textures::Texture>,
+    /// A conductor's alpha_u (its alpha when isotropic) and alpha_v, read as Mitsuba's
+    /// `eval_1` reads a texture.
+    pub alpha_u: Option<super::textures::Texture>,
+    pub alpha_v: Option<super::textures::Texture>,
+    /// The lobe follows the uv tangent (Mitsuba's dp/du): an anisotropic conductor.
+    pub anisotropic: bool,
+}
 
 /// Marks a material entity that reflects only on the side its geometric normal faces (a
 /// Mitsuba `diffuse` not wrapped in `twosided`): seen from behind it is black.

@@ -70,7 +70,7 @@ crate::system! {
                     ) else {
                         continue;
                     };
-                    let material = scene.material_at(tri, at.p[k]);
+                    let material = scene.material_at(tri, at.p[k], at.ns[k]);
                     let frame = Frame::from_normal(at.ns[k]);
                     let (wo_local, wi_local) = (frame.to_local(wo), frame.to_local(light.wi));
                     let f = material.eval(wo_local, wi_local);

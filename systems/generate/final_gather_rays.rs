@@ -47,7 +47,7 @@ crate::system! {
                     }
                     let key = sampler.key(Stream::FinalGather, pixel as u64, pass);
                     c.key[i] = key;
-                    let material = scene.material_at(tri, visible.p[pixel]);
+                    let material = scene.material_at(tri, visible.p[pixel], visible.ns[pixel]);
                     let (ng, wo) = (visible.ng[pixel], visible.wo[pixel]);
                     let frame = Frame::from_normal(visible.ns[pixel]);
                     let wo_local = frame.to_local(wo);

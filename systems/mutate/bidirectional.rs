@@ -115,7 +115,7 @@ pub fn transition(
     if c.deleted == 0 || c.deleted > n || c.added == 0 {
         return 0.0;
     }
-    if c.l + c.deleted as isize == 0 && x[0].is_point_light() {
+    if c.l + c.deleted as isize == 0 && (x[0].is_point_light() || x[0].is_at_infinity()) {
         return 0.0; // as `propose` refuses it
     }
     let positions = n - c.deleted + 1;
@@ -147,8 +147,9 @@ pub fn propose(
     let positions = n - deleted + 1;
     let l = ((u.get() * positions as f32) as usize).min(positions - 1) as isize - 1;
     let m = (l + deleted as isize) as usize;
-    if m == 0 && x[0].is_point_light() {
-        // The camera side would keep the point light as a surface to scatter from.
+    if m == 0 && (x[0].is_point_light() || x[0].is_at_infinity()) {
+        // The camera side would keep the point light (or a light at infinity) as a surface
+        // to scatter from.
         return None;
     }
     let kept = n - deleted + 1;
@@ -169,6 +170,11 @@ pub fn propose(
                 sampled *= f64::from(ps.ctx.pdf_light_origin(&v));
                 v
             }
+            Some(v) if v.is_at_infinity() => {
+                let next = ps.trace_from_infinity(v, u.get2())?;
+                sampled *= f64::from(ps.ctx.pdf_light_dir(v, &next));
+                next
+            }
             Some(v) => {
                 let wo = light
                     .len()
@@ -187,14 +193,19 @@ pub fn propose(
     for v in camera.iter_mut().skip(1) {
         v.kind = VertexKind::Surface;
     }
-    for _ in 0..t {
+    for k in 0..t {
         let v = *camera.last().expect("the camera is kept");
         let wo = camera
             .len()
             .checked_sub(2)
             .map_or(glam::Vec3::ZERO, |i| dir(&v, &camera[i]));
         let (w, pdf) = ps.sample_direction(&v, wo, u.get2(), TransportMode::Radiance)?;
-        let next = ps.trace(&v, w)?;
+        // The new light vertex, when the camera side makes it, may be the environment.
+        let next = if l == -1 && s == 0 && k + 1 == t {
+            ps.trace_or_sky(&v, w)?
+        } else {
+            ps.trace(&v, w)?
+        };
         sampled *= f64::from(to_area(pdf, &v, &next));
         camera.push(next);
     }

@@ -23,7 +23,9 @@ pub fn suitable(ps: &PathSpace, x: &[Vertex]) -> Option<usize> {
     while b >= 1 && ps.is_specular(&x[b]) {
         b -= 1;
     }
-    (b < n - 3 && !ps.is_specular(&x[b])).then_some(b)
+    // A light at infinity is a direction, not a point to turn a direction about: the
+    // bidirectional mutation moves such paths.
+    (b < n - 3 && !ps.is_specular(&x[b]) && !x[b].is_at_infinity()).then_some(b)
 }
 
 /// Area density of vertices b+1 ..= n-2 per unit solid angle at x_b.

@@ -67,7 +67,11 @@ pub fn retrace_camera_chain(
     let mut y = x.to_vec();
     let mut w = cam.direction(raster);
     for i in (c..n - 1).rev() {
-        let hit = ps.trace(&y[i + 1], w)?;
+        let hit = if i == 0 {
+            ps.trace_or_sky(&y[i + 1], w)?
+        } else {
+            ps.trace(&y[i + 1], w)?
+        };
         if i > c {
             if !ps.is_specular(&hit) {
                 return None;

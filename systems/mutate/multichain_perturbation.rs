@@ -44,7 +44,11 @@ pub fn propose(
         );
         let mut j = i - 1;
         loop {
-            let hit = ps.trace(&y[j + 1], w)?;
+            let hit = if j == 0 {
+                ps.trace_or_sky(&y[j + 1], w)?
+            } else {
+                ps.trace(&y[j + 1], w)?
+            };
             if ps.is_specular(&x[j]) {
                 if !ps.is_specular(&hit) || j == 0 {
                     return None;

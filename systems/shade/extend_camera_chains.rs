@@ -7,7 +7,7 @@
 //! (PPM) a chain at a dielectric follows both branches instead, the second as a new chain,
 //! and at a followed conductor one sampled direction, with no roulette (see `camera_walk`).
 
-use crate::bsdf::{Material, TransportMode, sample_direction};
+use crate::bsdf::{Material, MaterialKind, TransportMode, sample_direction};
 use crate::components::CameraChains;
 use crate::components::Hits;
 use crate::components::Rays;
@@ -103,9 +103,8 @@ crate::system! {
                         // visible point, the chain ends.
                         continue;
                     }
-                    let material = scene.material_at(tri, sp.p);
                     let (mut ng, mut ns) = (sp.ng, sp.ns);
-                    if wo.dot(ng) < 0.0 && matches!(material, Material::Diffuse { .. }) {
+                    if wo.dot(ng) < 0.0 && scene.kind_of(tri) == MaterialKind::Diffuse {
                         // Lambertian surfaces reflect on both sides: gather on wo's side.
                         ng = -ng;
                         ns = -ns;
@@ -113,6 +112,9 @@ crate::system! {
                     if ns.dot(ng) < 0.0 {
                         ns = -ns;
                     }
+                    // Read after the normals settle: an anisotropic lobe's axis is given in
+                    // the frame of `ns`.
+                    let material = scene.material_at(tri, sp.p, ns);
                     let depth = c.depth[i];
                     if !chains_follow(&material) {
                         // At the depth cap every path through the point (light sampled there,

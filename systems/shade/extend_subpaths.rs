@@ -219,7 +219,7 @@ fn scatter(
     light: bool,
 ) -> Option<Scattered> {
     let wo = (prev.p - here.p).normalize_or_zero();
-    let material = scene.material_seen(here.triangle, here.p, wo, here.ng);
+    let material = scene.material_seen(here.triangle, here.p, wo, here.ng, here.ns);
     let (frame, ng) = local_frame(&material, here, wo);
     let wo_local = frame.to_local(wo);
     let (dim, mode) = if light {

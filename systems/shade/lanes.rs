@@ -164,7 +164,13 @@ impl<const N: usize> DiffuseLanes<N> {
         let mut reflectance = [Vec3::ZERO; N];
         for (l, r) in reflectance.iter_mut().enumerate() {
             let k = i + l;
-            match scene.material_seen(triangles[k], surfaces.p[k], -dirs[k], surfaces.ng[k]) {
+            match scene.material_seen(
+                triangles[k],
+                surfaces.p[k],
+                -dirs[k],
+                surfaces.ng[k],
+                surfaces.ns[k],
+            ) {
                 crate::bsdf::Material::Diffuse { reflectance } => *r = reflectance,
                 _ => return None,
             }

@@ -57,7 +57,9 @@ impl Surface {
     #[inline(always)]
     pub fn new(data: &SceneData, triangle: u32, point: &SurfacePoint, dir: Vec3) -> Surface {
         let wo = -dir;
-        let material = data.scene.material_seen(triangle, point.p, wo, point.ng);
+        let material = data
+            .scene
+            .material_seen(triangle, point.p, wo, point.ng, point.ns);
         let mut ng = point.ng;
         let mut ns = point.ns;
         // Lambertian surfaces reflect on both sides: shade from the side the ray came from.

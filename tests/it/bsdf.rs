@@ -440,19 +440,49 @@ const GOLD: ComplexIor = ComplexIor {
 /// A conductor of `distribution` and `alpha` (gold for Beckmann, Fresnel 1 for GGX: the pdf
 /// does not depend on the Fresnel term, so the chi-square tests cover both).
 fn conductor_of(distribution: Microfacet, alpha: f32) -> Material {
-    Material::Conductor(Conductor {
+    Material::Conductor(Conductor::isotropic(
         distribution,
         alpha,
-        reflectance: Vec3::new(1.0, 0.78, 0.34),
-        ior: match distribution {
+        Vec3::new(1.0, 0.78, 0.34),
+        match distribution {
             Microfacet::Ggx => ComplexIor::PERFECT_MIRROR,
             Microfacet::Beckmann => GOLD,
         },
-    })
+    ))
+}
+
+/// An anisotropic conductor: alpha_u along a tangent turned `degrees` from the frame's first.
+fn anisotropic_of(distribution: Microfacet, alpha_u: f32, alpha_v: f32, degrees: f32) -> Material {
+    let Material::Conductor(mut c) = conductor_of(distribution, alpha_u) else {
+        unreachable!()
+    };
+    c.alpha_v = alpha_v;
+    let a = degrees.to_radians();
+    c.axis = Vec2::new(a.cos(), a.sin());
+    Material::Conductor(c)
+}
+
+/// The anisotropic conductors the consistency tests below run on as well as isotropic ones.
+fn anisotropic_conductors() -> Vec<Material> {
+    let mut v = Vec::new();
+    for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+        v.push(anisotropic_of(distribution, 0.05, 0.5, 0.0));
+        v.push(anisotropic_of(distribution, 0.4, 0.1, 30.0));
+        v.push(anisotropic_of(distribution, 1e-4, 0.3, -110.0));
+    }
+    v
 }
 
 fn chi2_conductor(distribution: Microfacet, alpha: f32, thetas: &[f64], stream0: u64) {
-    let m = conductor_of(distribution, alpha);
+    chi2_conductor_lobe(conductor_of(distribution, alpha), alpha, thetas, stream0);
+}
+
+/// `chi2_conductor` for any conductor `m`, binned for roughness `alpha` (its narrowest).
+fn chi2_conductor_lobe(m: Material, alpha: f32, thetas: &[f64], stream0: u64) {
+    let Material::Conductor(c) = m else {
+        unreachable!()
+    };
+    let distribution = c.distribution;
     for (i, &theta) in thetas.iter().enumerate() {
         let wo = dir_deg(theta, 10.0 + 97.0 * i as f64);
         let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
@@ -479,7 +509,7 @@ fn chi2_conductor(distribution: Microfacet, alpha: f32, thetas: &[f64], stream0:
             &|wi| m.pdf(wo, wi),
         );
         println!(
-            "conductor {distribution:?} alpha {alpha} wo theta {theta}: chi2 {:.1} dof {} p {:.4} integral {:.6}",
+            "conductor {m:?} wo theta {theta}: chi2 {:.1} dof {} p {:.4} integral {:.6}",
             r.chi2, r.dof, r.p_value, r.total_probability
         );
         assert!(r.total_probability <= 1.0 + 1e-4, "{}", r.total_probability);
@@ -490,7 +520,7 @@ fn chi2_conductor(distribution: Microfacet, alpha: f32, thetas: &[f64], stream0:
         );
         assert!(
             r.p_value > sidak_alpha(),
-            "conductor {distribution:?} alpha {alpha} theta {theta}: chi2 {} dof {} p = {}",
+            "conductor {m:?} theta {theta}: chi2 {} dof {} p = {}",
             r.chi2,
             r.dof,
             r.p_value
@@ -529,6 +559,34 @@ fn chi2_beckmann_glossy() {
 }
 
 #[test]
+fn chi2_conductor_anisotropic() {
+    chi2_conductor_lobe(
+        anisotropic_of(Microfacet::Ggx, 0.1, 0.5, 0.0),
+        0.1,
+        &[0.0, 45.0, 88.0],
+        300,
+    );
+    chi2_conductor_lobe(
+        anisotropic_of(Microfacet::Ggx, 0.6, 0.15, 30.0),
+        0.15,
+        &[30.0, 70.0],
+        310,
+    );
+    chi2_conductor_lobe(
+        anisotropic_of(Microfacet::Beckmann, 0.1, 0.4, 0.0),
+        0.1,
+        &[0.0, 45.0, 88.0],
+        320,
+    );
+    chi2_conductor_lobe(
+        anisotropic_of(Microfacet::Beckmann, 0.5, 0.2, -60.0),
+        0.2,
+        &[30.0, 70.0],
+        330,
+    );
+}
+
+#[test]
 fn chi2_beckmann_near_mirror() {
     chi2_conductor(Microfacet::Beckmann, 1e-4, &[0.0, 70.0], 240);
 }
@@ -557,6 +615,7 @@ fn sample_matches_eval_and_pdf() {
             materials.push(conductor_of(distribution, alpha));
         }
     }
+    materials.extend(anisotropic_conductors());
     for (mi, m) in materials.iter().enumerate() {
         for (wi_idx, &wo0) in test_wos().iter().enumerate() {
             // Diffuse reflects on both sides: test below the surface too.
@@ -641,12 +700,7 @@ fn conductor_albedo() {
     for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
         for ior in [ComplexIor::PERFECT_MIRROR, GOLD] {
             for alpha in [1e-4f32, 0.01, 0.1, 0.5, 1.0] {
-                let m = Material::Conductor(Conductor {
-                    distribution,
-                    alpha,
-                    reflectance: r,
-                    ior,
-                });
+                let m = Material::Conductor(Conductor::isotropic(distribution, alpha, r, ior));
                 for theta in [0.0, 45.0, 80.0, 89.0] {
                     let wo = dir_deg(theta, 0.0);
                     let n = 100_000;
@@ -680,12 +734,7 @@ fn conductor_albedo() {
 fn near_mirror_conductor_reflects_its_fresnel_term() {
     let r = Vec3::new(0.9, 0.8, 0.7);
     for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
-        let m = Material::Conductor(Conductor {
-            distribution,
-            alpha: 1e-4,
-            reflectance: r,
-            ior: GOLD,
-        });
+        let m = Material::Conductor(Conductor::isotropic(distribution, 1e-4, r, GOLD));
         for theta in [0.0f64, 45.0, 75.0] {
             let wo = dir_deg(theta, 30.0);
             let n = 10_000;
@@ -709,6 +758,168 @@ fn near_mirror_conductor_reflects_its_fresnel_term() {
     }
 }
 
+/// Anisotropic f and pdf against Mitsuba 3.9.1's `roughconductor` (scalar_rgb, `BSDF::eval`
+/// over the cosine and `BSDF::pdf`, alpha_u along the frame's first tangent, si.wi our wo):
+/// gold with GGX (alpha_u 0.1, alpha_v 0.4) and copper with Beckmann (0.3, 0.05). Pairs where
+/// Mitsuba's value is exactly 0 or below 1e-8 (its rational G1 there) are left out.
+#[test]
+fn anisotropic_conductor_matches_mitsuba_eval_and_pdf() {
+    let copper = ComplexIor {
+        eta: Vec3::new(0.201_005_47, 0.923_749_5, 1.102_215_4),
+        k: Vec3::new(3.913_262_1, 2.453_045_1, 2.142_089_8),
+    };
+    let mut ggx = Conductor::isotropic(Microfacet::Ggx, 0.1, Vec3::ONE, GOLD);
+    ggx.alpha_v = 0.4;
+    let mut beckmann = Conductor::isotropic(Microfacet::Beckmann, 0.3, Vec3::ONE, copper);
+    beckmann.alpha_v = 0.05;
+    #[allow(clippy::type_complexity)]
+    let cases: [(Conductor, f32, Vec<((f64, f64), (f64, f64), [f32; 3], f32)>); 2] = [
+        (
+            ggx,
+            1e-4,
+            vec![
+                (
+                    (0.0, 0.0),
+                    (10.0, 180.0),
+                    [0.636_137_8, 0.527_774_5, 0.213_293_95],
+                    0.648_117_8,
+                ),
+                (
+                    (30.0, 20.0),
+                    (40.0, 190.0),
+                    [0.731_485_8, 0.606_714_7, 0.248_314_77],
+                    0.581_434_8,
+                ),
+                (
+                    (60.0, 0.0),
+                    (55.0, 170.0),
+                    [3.424_423_3, 2.854_452_9, 1.283_122_7],
+                    2.054_658_2,
+                ),
+                (
+                    (80.0, 45.0),
+                    (70.0, 240.0),
+                    [0.066_897_06, 0.058_095_95, 0.032_915_23],
+                    0.028_478_244,
+                ),
+                (
+                    (45.0, 0.0),
+                    (45.0, 90.0),
+                    [0.010_938_934, 0.009_073_695, 0.003_692_021_8],
+                    0.008_312_062,
+                ),
+                (
+                    (50.0, 90.0),
+                    (48.0, 275.0),
+                    [2.619_396_7, 2.174_735_3, 0.927_159_9],
+                    1.901_835_7,
+                ),
+            ],
+        ),
+        (
+            beckmann,
+            0.008,
+            vec![
+                (
+                    (0.0, 0.0),
+                    (10.0, 180.0),
+                    [4.782_764_4, 3.113_705_4, 2.564_937_8],
+                    4.947_506_4,
+                ),
+                (
+                    (30.0, 20.0),
+                    (40.0, 190.0),
+                    [4.099_677, 2.669_435_5, 2.205_199_7],
+                    3.301_150_3,
+                ),
+                (
+                    (60.0, 0.0),
+                    (55.0, 170.0),
+                    [0.015_733_415, 0.010_355_524, 0.008_743_508],
+                    0.009_529_725,
+                ),
+                (
+                    (50.0, 90.0),
+                    (48.0, 275.0),
+                    [9.826_771, 6.417_414, 5.351_125_5],
+                    6.926_434,
+                ),
+            ],
+        ),
+    ];
+    for (m, tolerance, pairs) in cases {
+        for (wo, wi, f, pdf) in pairs {
+            let (wo, wi) = (dir_deg(wo.0, wo.1), dir_deg(wi.0, wi.1));
+            let (got_f, got_pdf) = (m.eval(wo, wi), m.pdf(wo, wi));
+            for c in 0..3 {
+                assert!(
+                    rel_close(got_f[c], f[c], tolerance),
+                    "{m:?} wo {wo} wi {wi}: f {got_f}, Mitsuba's {f:?}"
+                );
+            }
+            assert!(
+                rel_close(got_pdf, pdf, tolerance),
+                "{m:?} wo {wo} wi {wi}: pdf {got_pdf}, Mitsuba's {pdf}"
+            );
+        }
+    }
+}
+
+/// A lobe whose axis is turned by phi is the unturned lobe seen from directions turned by
+/// -phi: eval, pdf and the sampled directions all turn with the axis.
+#[test]
+fn anisotropic_conductor_turns_with_its_axis() {
+    for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+        let Material::Conductor(straight) = anisotropic_of(distribution, 0.08, 0.5, 0.0) else {
+            unreachable!()
+        };
+        for degrees in [30.0f32, 90.0, -135.0] {
+            let mut turned = straight;
+            let a = degrees.to_radians();
+            turned.axis = Vec2::new(a.cos(), a.sin());
+            let unturn = |w: Vec3| {
+                let (c, s) = (a.cos(), a.sin());
+                Vec3::new(c * w.x + s * w.y, c * w.y - s * w.x, w.z)
+            };
+            for (i, wo) in test_wos().into_iter().enumerate() {
+                for j in 0..200 {
+                    let u = u2(23, i as u64, j);
+                    let Some(s) = turned.sample(wo, u) else {
+                        continue;
+                    };
+                    let (f, p) = (
+                        straight.eval(unturn(wo), unturn(s.wi)),
+                        straight.pdf(unturn(wo), unturn(s.wi)),
+                    );
+                    for c in 0..3 {
+                        assert!(
+                            rel_close(s.value[c], f[c], 1e-3),
+                            "{degrees}: {} vs {f}",
+                            s.value
+                        );
+                    }
+                    assert!(rel_close(s.pdf, p, 1e-3), "{degrees}: {} vs {p}", s.pdf);
+                }
+            }
+        }
+        // At 90 degrees the roughnesses trade places.
+        let mut turned = straight;
+        turned.axis = Vec2::Y;
+        let mut swapped = straight;
+        (swapped.alpha_u, swapped.alpha_v) = (straight.alpha_v, straight.alpha_u);
+        for (wo, wi) in [
+            (dir_deg(40.0, 10.0), dir_deg(35.0, 200.0)),
+            (dir_deg(70.0, 80.0), dir_deg(20.0, 250.0)),
+        ] {
+            let (a, b) = (turned.eval(wo, wi), swapped.eval(wo, wi));
+            assert!(
+                (a - b).abs().max_element() <= 1e-5 * b.max_element(),
+                "{a} vs {b}"
+            );
+        }
+    }
+}
+
 /// f and pdf against Mitsuba 3.9.1's `roughconductor` (scalar_rgb, `BSDF::eval` over the cosine
 /// and `BSDF::pdf`, its si.wi being our wo) for gold (material "Au", Beckmann, alpha 0.3),
 /// copper ("Cu", Beckmann, 0.05) and an rgb eta/k with specular_reflectance (GGX, 0.2). GGX
@@ -720,21 +931,16 @@ fn conductor_matches_mitsuba_eval_and_pdf() {
         eta: Vec3::new(0.201_005_47, 0.923_749_5, 1.102_215_4),
         k: Vec3::new(3.913_262_1, 2.453_045_1, 2.142_089_8),
     };
-    let beckmann = |alpha, ior| Conductor {
-        distribution: Microfacet::Beckmann,
-        alpha,
-        reflectance: Vec3::ONE,
-        ior,
-    };
-    let ggx = Conductor {
-        distribution: Microfacet::Ggx,
-        alpha: 0.2,
-        reflectance: Vec3::new(0.9, 0.8, 0.7),
-        ior: ComplexIor {
+    let beckmann = |alpha, ior| Conductor::isotropic(Microfacet::Beckmann, alpha, Vec3::ONE, ior);
+    let ggx = Conductor::isotropic(
+        Microfacet::Ggx,
+        0.2,
+        Vec3::new(0.9, 0.8, 0.7),
+        ComplexIor {
             eta: Vec3::new(0.2, 0.9, 1.1),
             k: Vec3::new(3.9, 2.4, 2.1),
         },
-    };
+    );
     // (conductor, tolerance, [(wo theta, phi), (wi theta, phi), Mitsuba's f, Mitsuba's pdf]).
     #[allow(clippy::type_complexity)]
     let cases: [(Conductor, f32, Vec<((f64, f64), (f64, f64), [f32; 3], f32)>); 3] = [
@@ -886,6 +1092,8 @@ fn reciprocity_diffuse_and_conductor() {
         // random pairs with a value.
         conductor_of(Microfacet::Beckmann, 0.2),
         conductor_of(Microfacet::Beckmann, 0.7),
+        anisotropic_of(Microfacet::Ggx, 0.05, 0.5, 20.0),
+        anisotropic_of(Microfacet::Beckmann, 0.6, 0.2, -75.0),
     ];
     for m in materials {
         let mut nonzero = 0;
@@ -1214,6 +1422,10 @@ fn stability_all_materials() {
     for alpha in [0.0f32, 1e-6, 1e-4, 1e-3, 0.01, 0.3, 1.0, 1e4] {
         for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
             check_material_finite(conductor_of(distribution, alpha));
+            // The other roughness at its extremes, the axis off the frame's.
+            for other in [1e-4f32, 1.0] {
+                check_material_finite(anisotropic_of(distribution, alpha, other, 33.0));
+            }
         }
     }
     // Near-mirror pairs at tiny alpha stay finite: the peak of D at grazing angles.
@@ -1223,12 +1435,7 @@ fn stability_all_materials() {
         let wi = Vec3::new(-r, 0.0, z);
         for alpha in [1e-4f32, 1e-3, 1.0] {
             for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
-                let m = Conductor {
-                    distribution,
-                    alpha,
-                    reflectance: Vec3::ONE,
-                    ior: GOLD,
-                };
+                let m = Conductor::isotropic(distribution, alpha, Vec3::ONE, GOLD);
                 let (f, p) = (m.eval(wo, wi), m.pdf(wo, wi));
                 assert!(
                     f.is_finite() && p.is_finite() && p > 0.0,

@@ -509,7 +509,7 @@ fn mirror_box() -> stagelight::scene::PreparedScene {
 fn is_conductor(data: &SceneData, tri: u32, alpha: f32) -> bool {
     let scene = &data.scene;
     let material = scene.materials[scene.triangles.material[tri as usize] as usize];
-    matches!(material, stagelight::bsdf::Material::Conductor(c) if c.alpha == alpha)
+    matches!(material, stagelight::bsdf::Material::Conductor(c) if c.alpha_u == alpha)
 }
 
 /// The pixels whose centre's camera ray meets the conductor of GGX `alpha` first.

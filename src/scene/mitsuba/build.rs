@@ -8,7 +8,7 @@
 //! that change only noise or nothing (`IGNORED_*` below) are read and ignored on purpose.
 
 use super::document::{
-    Child, Class, Defines, Document, Object, Property, Spectrum, Spot, Value, XmlError,
+    Child, Class, Defines, Document, Object, ObjectId, Property, Spectrum, Spot, Value, XmlError,
 };
 use crate::bsdf::Material;
 use crate::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
@@ -17,8 +17,8 @@ use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
     DeclaredIn, DirectionalLight, Emission, EnvironmentLight, FlipNormals, MaterialInfo,
-    MaterialRef, ObjectInfo, OneSided, PointLight, ReflectanceTexture, SceneWorld, Shape,
-    SourceSpot, SpotTexture, Transform,
+    MaterialRef, ObjectInfo, OneSided, PointLight, SceneWorld, Shape, SourceSpot, SpotTexture,
+    SurfaceVarying, Transform,
 };
 use crate::scene::{Camera, Crop, Limits, Projection, SceneError};
 
@@ -811,7 +811,7 @@ impl<'a> Builder<'a> {
         }
         let object = self.object(id);
         let (material, sides) = self.material_of(object)?;
-        let texture = self.reflectance_texture_of(object)?;
+        let varying = self.varying_of(object)?;
         let name = match &object.id {
             Some(id) => id.clone(),
             None => format!("{} at line {}", object.kind, object.spot.line),
@@ -826,9 +826,9 @@ impl<'a> Builder<'a> {
                 .insert_one(entity, OneSided)
                 .expect("just spawned");
         }
-        if let Some(texture) = texture {
+        if let Some(varying) = varying {
             self.world
-                .insert_one(entity, ReflectanceTexture(texture))
+                .insert_one(entity, varying)
                 .expect("just spawned");
         }
         self.materials.insert(id, entity);
@@ -905,28 +905,36 @@ impl<'a> Builder<'a> {
                 Material::Dielectric { ior: ratio }
             }
             "conductor" | "roughconductor" => {
-                no_children(object)?;
+                let textured = self.conductor_textures(object)?;
                 let ior = conductor_ior(&mut params, object)?;
                 let reflectance = params
                     .color("specular_reflectance", Role::Reflectance)?
                     .map(|(c, _)| c)
                     .unwrap_or(Vec3::ONE);
-                let (distribution, alpha) = if object.kind == "roughconductor" {
+                let mut conductor = if object.kind == "roughconductor" {
                     // Visible normals or not changes only noise (Mitsuba's default: visible).
                     params.boolean("sample_visible")?;
-                    (microfacet(&mut params)?, roughness(&mut params, object)?)
+                    let distribution = microfacet(&mut params)?;
+                    let (alpha_u, alpha_v) = roughness(&mut params, object, &textured)?;
+                    let mut c = Conductor::isotropic(distribution, alpha_u, reflectance, ior);
+                    c.alpha_v = alpha_v;
+                    c
                 } else {
                     // A smooth mirror, as the narrowest lobe the conductor evaluates accurately
                     // (see bsdf::conductor::ALPHA_MIN).
-                    (Microfacet::Ggx, crate::bsdf::conductor::ALPHA_MIN)
+                    Conductor::isotropic(
+                        Microfacet::Ggx,
+                        crate::bsdf::conductor::ALPHA_MIN,
+                        reflectance,
+                        ior,
+                    )
                 };
+                if textured.iter().any(|t| t.0 == "specular_reflectance") {
+                    // The texture stands in for it at every shading point.
+                    conductor.reflectance = Vec3::ONE;
+                }
                 params.finish()?;
-                Material::Conductor(Conductor {
-                    distribution,
-                    alpha,
-                    reflectance,
-                    ior,
-                })
+                Material::Conductor(conductor)
             }
             _ => return Err(unsupported(object, BSDFS)),
         };
@@ -934,20 +942,99 @@ impl<'a> Builder<'a> {
         Ok((material, Sides::One))
     }
 
-    /// The texture of a (twosided) diffuse's reflectance, if it has one.
-    fn reflectance_texture_of(&mut self, object: &Object) -> Result<Option<Texture>, XmlError> {
-        let diffuse = match object.kind.as_str() {
-            "diffuse" => object,
+    /// A conductor's nested textures, by parameter name: specular_reflectance, and for a
+    /// roughconductor alpha, alpha_u and alpha_v; anything else nested is an error.
+    fn conductor_textures(
+        &self,
+        object: &Object,
+    ) -> Result<Vec<(&'static str, ObjectId)>, XmlError> {
+        let names: &[&'static str] = if object.kind == "roughconductor" {
+            &["specular_reflectance", "alpha", "alpha_u", "alpha_v"]
+        } else {
+            &["specular_reflectance"]
+        };
+        let mut textured = Vec::new();
+        for c in &object.children {
+            let child = self.object(c.object);
+            match c.name.as_deref() {
+                Some(name) if child.class == Class::Texture && names.contains(&name) => {
+                    if textured.iter().any(|(n, _)| *n == name) {
+                        return Err(XmlError::at(
+                            &c.spot,
+                            format!("{}: {name} is given twice", object.kind),
+                        ));
+                    }
+                    let name = names.iter().find(|n| **n == name).expect("contained");
+                    textured.push((*name, c.object));
+                }
+                _ => {
+                    return Err(XmlError::at(
+                        &c.spot,
+                        format!(
+                            "{}: a nested <{}>{} is not supported here (textures are read for {})",
+                            object.kind,
+                            child.class.tag(),
+                            c.name
+                                .as_deref()
+                                .map(|n| format!(" named \"{}\"", super::super::echo(n)))
+                                .unwrap_or_default(),
+                            names.join(", ")
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(textured)
+    }
+
+    /// What a material reads at each shading point: a (twosided) diffuse's reflectance
+    /// texture, a conductor's textured parameters and whether its lobe is anisotropic; `None`
+    /// for a material that is the same everywhere.
+    fn varying_of(&mut self, object: &Object) -> Result<Option<SurfaceVarying>, XmlError> {
+        let inner = match object.kind.as_str() {
             "twosided" => match object.children.first() {
                 Some(c) => self.object(c.object),
                 None => return Ok(None),
             },
-            _ => return Ok(None),
+            _ => object,
         };
-        match diffuse.children.first() {
-            Some(c) => self.texture(c.object).map(Some),
-            None => Ok(None),
+        let mut varying = SurfaceVarying::default();
+        match inner.kind.as_str() {
+            "diffuse" => {
+                if let Some(c) = inner.children.first() {
+                    varying.reflectance = Some(self.texture(c.object)?);
+                }
+            }
+            "conductor" | "roughconductor" => {
+                let inner = inner.clone();
+                for (name, id) in self.conductor_textures(&inner)? {
+                    let texture = Some(self.texture(id)?);
+                    match name {
+                        "specular_reflectance" => varying.reflectance = texture,
+                        "alpha" => {
+                            varying.alpha_u = texture.clone();
+                            varying.alpha_v = texture;
+                        }
+                        "alpha_u" => varying.alpha_u = texture,
+                        _ => varying.alpha_v = texture,
+                    }
+                }
+                // alpha_u and alpha_v given apart (as values or textures) may differ: the
+                // lobe may turn with the uv tangent (`prepare` keeps the mark only where they
+                // can differ).
+                varying.anisotropic = inner
+                    .children
+                    .iter()
+                    .any(|c| c.name.as_deref() == Some("alpha_u"))
+                    || inner.properties.iter().any(|p| p.name == "alpha_u");
+            }
+            _ => {}
         }
+        let varies = varying.reflectance.is_some()
+            || varying.alpha_u.is_some()
+            || varying.alpha_v.is_some()
+            || varying.anisotropic;
+        Ok(varies.then_some(varying))
     }
 
     /// A `bitmap` or `checkerboard` texture.
@@ -1875,16 +1962,43 @@ fn microfacet(params: &mut Params) -> Result<Microfacet, XmlError> {
     }
 }
 
-/// A roughconductor's `alpha` (default 0.1, as Mitsuba's). Anisotropic `alpha_u` and `alpha_v`
-/// are read when equal (that is the isotropic lobe); different ones are refused: they need a
-/// tangent frame that follows the surface's uv parametrisation, which stagelight's shading
-/// frames do not carry.
-fn roughness(params: &mut Params, object: &Object) -> Result<f32, XmlError> {
-    let alpha = params.float("alpha")?;
-    let alpha_u = params.float("alpha_u")?;
-    let alpha_v = params.float("alpha_v")?;
-    let (alpha, spot) = match (alpha, alpha_u, alpha_v) {
-        (alpha, None, None) => alpha.unwrap_or((0.1, object.spot.clone())),
+/// A roughconductor's roughness (alpha_u, alpha_v): `alpha` (default 0.1, as Mitsuba's) for
+/// both, or `alpha_u` and `alpha_v` apart (anisotropic: alpha_u along the uv tangent), each a
+/// value or a texture (`textured` names those given as textures; their values here are
+/// placeholders that the textures replace at every shading point).
+fn roughness(
+    params: &mut Params,
+    object: &Object,
+    textured: &[(&str, ObjectId)],
+) -> Result<(f32, f32), XmlError> {
+    let mut read = |name: &str| -> Result<Option<(f64, Spot)>, XmlError> {
+        let value = params.float(name)?;
+        match textured.iter().find(|t| t.0 == name) {
+            Some(&(_, id)) => {
+                let spot = object
+                    .children
+                    .iter()
+                    .find(|c| c.object == id)
+                    .map_or_else(|| object.spot.clone(), |c| c.spot.clone());
+                if value.is_some() {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!("roughconductor: {name} is given twice"),
+                    ));
+                }
+                Ok(Some((0.1, spot)))
+            }
+            None => Ok(value),
+        }
+    };
+    let alpha = read("alpha")?;
+    let alpha_u = read("alpha_u")?;
+    let alpha_v = read("alpha_v")?;
+    let (u, v) = match (alpha, alpha_u, alpha_v) {
+        (alpha, None, None) => {
+            let a = alpha.unwrap_or((0.1, object.spot.clone()));
+            (a.clone(), a)
+        }
         (Some(_), Some((_, spot)), _) | (Some(_), None, Some((_, spot))) => {
             return Err(XmlError::at(
                 &spot,
@@ -1897,27 +2011,17 @@ fn roughness(params: &mut Params, object: &Object) -> Result<f32, XmlError> {
                 "roughconductor: alpha_u and alpha_v must be given together",
             ));
         }
-        (None, Some((u, spot)), Some((v, _))) => {
-            if u != v {
-                return Err(XmlError::at(
-                    &spot,
-                    format!(
-                        "roughconductor: anisotropic roughness (alpha_u {u}, alpha_v {v}) is not \
-                         supported yet: it needs shading frames that follow the surface's uv \
-                         parametrisation (give equal values, or alpha)"
-                    ),
-                ));
-            }
-            (u, spot)
-        }
+        (None, Some(u), Some(v)) => (u, v),
     };
-    if !(alpha > 0.0 && alpha <= 1e4) {
-        return Err(XmlError::at(
-            &spot,
-            format!("alpha {alpha} must lie in (0, 1e4]"),
-        ));
+    for (alpha, spot) in [&u, &v] {
+        if !(*alpha > 0.0 && *alpha <= 1e4) {
+            return Err(XmlError::at(
+                spot,
+                format!("alpha {alpha} must lie in (0, 1e4]"),
+            ));
+        }
     }
-    Ok(alpha as f32)
+    Ok((u.0 as f32, v.0 as f32))
 }
 
 /// An index of refraction: a number or one of Mitsuba's named materials.

@@ -164,11 +164,19 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
                 Microfacet::Ggx => "ggx",
                 Microfacet::Beckmann => "beckmann",
             };
+            let alpha = if c.alpha_u == c.alpha_v {
+                format!("<float name=\"alpha\" value=\"{}\"/>", float(c.alpha_u))
+            } else {
+                format!(
+                    "<float name=\"alpha_u\" value=\"{}\"/>\n        <float name=\"alpha_v\" value=\"{}\"/>",
+                    float(c.alpha_u),
+                    float(c.alpha_v)
+                )
+            };
             format!(
                 "    <bsdf type=\"roughconductor\" id=\"{id}\">\n        {ior}\n        \
-                 <string name=\"distribution\" value=\"{distribution}\"/>\n        <float name=\"alpha\" value=\"{}\"/>\n        \
+                 <string name=\"distribution\" value=\"{distribution}\"/>\n        {alpha}\n        \
                  <rgb name=\"specular_reflectance\" value=\"{}\"/>\n    </bsdf>",
-                float(c.alpha),
                 rgb(c.reflectance)
             )
         }
@@ -259,12 +267,7 @@ mod tests {
         };
         for conductor in [
             Conductor::ggx(0.1, Vec3::new(1.0, 0.78, 0.34)),
-            Conductor {
-                distribution: Microfacet::Beckmann,
-                alpha: 0.3,
-                reflectance: Vec3::new(0.9, 0.8, 0.7),
-                ior: gold,
-            },
+            Conductor::isotropic(Microfacet::Beckmann, 0.3, Vec3::new(0.9, 0.8, 0.7), gold),
         ] {
             let material = Material::Conductor(conductor);
             let text = format!(
