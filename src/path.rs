@@ -159,7 +159,7 @@ pub fn to_area(pdf_dir: f32, from: &Vertex, to: &Vertex) -> f32 {
 #[inline]
 pub fn local_frame(material: &Material, v: &Vertex, wo: Vec3) -> (Frame, Vec3) {
     let (mut ng, mut ns) = (v.ng, v.ns);
-    if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
+    if material.kind().is_two_sided() && wo.dot(ng) < 0.0 {
         ng = -ng;
         ns = -ns;
     }
@@ -194,7 +194,7 @@ impl PathContext<'_> {
     pub fn is_connectible(&self, v: &Vertex) -> bool {
         match v.kind {
             VertexKind::Camera | VertexKind::Light => true,
-            VertexKind::Surface => !matches!(self.material(v), Material::Dielectric { .. }),
+            VertexKind::Surface => !self.material(v).kind().is_delta(),
         }
     }
 

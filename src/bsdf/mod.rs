@@ -8,6 +8,8 @@
 pub mod conductor;
 pub mod dielectric;
 pub mod diffuse;
+pub mod microfacet;
+pub mod plastic;
 
 use glam::{Vec2, Vec3};
 
@@ -22,19 +24,75 @@ pub enum Material {
     /// Rough conductor (GGX or Beckmann microfacets, possibly anisotropic): a conductor's Fresnel term
     /// times a reflectance, or the reflectance alone (see `conductor`).
     Conductor(conductor::Conductor),
+    /// Rough plastic: a rough dielectric coat over a Lambertian base (see `plastic`).
+    RoughPlastic(plastic::RoughPlastic),
 }
 
 // Materials are copied by value into every shading point and visible point: keep them small
 // (the anisotropic conductor, with its Fresnel indices, two roughnesses and axis, is the largest).
 const _: () = assert!(std::mem::size_of::<Material>() <= 56);
 
-/// The kind of a material: the graph holds one shading system per kind a scene uses.
+/// The kind of a material: the graph holds one shading system per kind a scene uses, and
+/// `sort_by_material` one queue per kind, in this order: the kinds with a non-delta lobe
+/// first, so light sampling runs over one contiguous range of slots. What each kind is (delta
+/// or not, reflecting on both sides or not, its system's name) is said here once.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum MaterialKind {
     Diffuse = 0,
-    Dielectric = 1,
-    Conductor = 2,
+    Conductor = 1,
+    RoughPlastic = 2,
+    Dielectric = 3,
 }
+
+impl MaterialKind {
+    /// Every kind, in queue order.
+    pub const ALL: [MaterialKind; 4] = [
+        MaterialKind::Diffuse,
+        MaterialKind::Conductor,
+        MaterialKind::RoughPlastic,
+        MaterialKind::Dielectric,
+    ];
+    pub const COUNT: usize = MaterialKind::ALL.len();
+
+    /// Whether every lobe is a Dirac delta: light sampling and connections cannot reach it.
+    pub const fn is_delta(self) -> bool {
+        match self {
+            MaterialKind::Diffuse | MaterialKind::Conductor | MaterialKind::RoughPlastic => false,
+            MaterialKind::Dielectric => true,
+        }
+    }
+
+    /// Whether it reflects alike on both sides of a surface: the engine turns the normals to
+    /// the side a ray arrives from (the others are black from behind, or transmit).
+    pub const fn is_two_sided(self) -> bool {
+        match self {
+            MaterialKind::Diffuse => true,
+            MaterialKind::Conductor | MaterialKind::RoughPlastic | MaterialKind::Dielectric => {
+                false
+            }
+        }
+    }
+
+    /// The name of the shading system of this kind.
+    pub const fn shading_system(self) -> &'static str {
+        match self {
+            MaterialKind::Diffuse => "shade_diffuse",
+            MaterialKind::Conductor => "shade_conductor",
+            MaterialKind::RoughPlastic => "shade_rough_plastic",
+            MaterialKind::Dielectric => "shade_dielectric",
+        }
+    }
+}
+
+// `ALL` lists the kinds in their queue order, the non-delta ones first.
+const _: () = {
+    let mut i = 0;
+    while i < MaterialKind::COUNT {
+        assert!(MaterialKind::ALL[i] as usize == i);
+        assert!(i == 0 || MaterialKind::ALL[i].is_delta() || !MaterialKind::ALL[i - 1].is_delta());
+        i += 1;
+    }
+};
 
 impl Material {
     pub fn kind(&self) -> MaterialKind {
@@ -42,6 +100,7 @@ impl Material {
             Material::Diffuse { .. } => MaterialKind::Diffuse,
             Material::Dielectric { .. } => MaterialKind::Dielectric,
             Material::Conductor(_) => MaterialKind::Conductor,
+            Material::RoughPlastic(_) => MaterialKind::RoughPlastic,
         }
     }
 }
@@ -100,6 +159,7 @@ impl Material {
             Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
             Material::Dielectric { .. } => Vec3::ZERO,
             Material::Conductor(c) => c.eval(wo, wi),
+            Material::RoughPlastic(p) => p.eval(wo, wi),
         }
     }
 
@@ -109,6 +169,7 @@ impl Material {
             Material::Diffuse { .. } => diffuse::pdf(wo, wi),
             Material::Dielectric { .. } => 0.0,
             Material::Conductor(c) => c.pdf(wo, wi),
+            Material::RoughPlastic(p) => p.pdf(wo, wi),
         }
     }
 
@@ -122,7 +183,7 @@ impl Material {
                 diffuse::eval_cos(reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
             }
             Material::Dielectric { .. } => Vec3::ZERO,
-            _ => {
+            Material::Conductor(_) | Material::RoughPlastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.eval(frame.to_local(wo), frame.to_local(wi))
             }
@@ -135,7 +196,7 @@ impl Material {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf_cos(wo.dot(ns), wi.dot(ns)),
             Material::Dielectric { .. } => 0.0,
-            _ => {
+            Material::Conductor(_) | Material::RoughPlastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.pdf(frame.to_local(wo), frame.to_local(wi))
             }
@@ -150,6 +211,7 @@ impl Material {
             Material::Diffuse { reflectance } => diffuse::sample(reflectance, wo, u),
             Material::Dielectric { ior } => Some(dielectric::sample(ior, wo, u.x, mode)),
             Material::Conductor(c) => c.sample(wo, u),
+            Material::RoughPlastic(p) => p.sample(wo, u),
         }
     }
 }

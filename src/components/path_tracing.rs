@@ -52,31 +52,43 @@ impl PtSettings {
     }
 }
 
-/// Slots of each material kind after `sort_by_material`: non-delta kinds first, so light
-/// sampling runs over one contiguous range.
+/// Slots of each material kind after `sort_by_material`, in `MaterialKind` order: non-delta
+/// kinds first, so light sampling runs over one contiguous range.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct MaterialRanges {
-    pub diffuse: Range<usize>,
-    pub conductor: Range<usize>,
-    pub dielectric: Range<usize>,
+    ends: [usize; MaterialKind::COUNT],
 }
 
 impl MaterialRanges {
-    pub fn of(&self, kind: MaterialKind) -> Range<usize> {
-        match kind {
-            MaterialKind::Diffuse => self.diffuse.clone(),
-            MaterialKind::Conductor => self.conductor.clone(),
-            MaterialKind::Dielectric => self.dielectric.clone(),
+    /// The ranges of queues holding `counts[kind]` slots each, one after the other.
+    pub fn from_counts(counts: &[usize]) -> MaterialRanges {
+        let mut ends = [0; MaterialKind::COUNT];
+        let mut end = 0;
+        for (e, c) in ends.iter_mut().zip(counts) {
+            end += c;
+            *e = end;
         }
+        MaterialRanges { ends }
     }
+
+    pub fn of(&self, kind: MaterialKind) -> Range<usize> {
+        let k = kind as usize;
+        let start = if k == 0 { 0 } else { self.ends[k - 1] };
+        start..self.ends[k]
+    }
+
     /// Slots whose material can be reached by light sampling.
     pub fn non_delta(&self) -> Range<usize> {
-        self.diffuse.start..self.conductor.end
+        let last = MaterialKind::ALL
+            .iter()
+            .rfind(|k| !k.is_delta())
+            .expect("a non-delta kind");
+        0..self.of(*last).end
     }
 }
 
-/// The three material queues and the dropped paths of `sort_by_material`.
-pub const QUEUES: usize = 4;
+/// The material queues and the dropped paths of `sort_by_material`.
+pub const QUEUES: usize = MaterialKind::COUNT + 1;
 
 #[derive(Default)]
 pub struct Scratch {

@@ -30,7 +30,6 @@
 //! of any length (`crate::mlt::path_chains`: fixed slots per chain, the rest of a long path in
 //! the chain's overflow list).
 
-use crate::bsdf::MaterialKind;
 use crate::film::Film;
 use crate::integrators::driver::{IntegratorState, PassState};
 use crate::integrators::mlt::{self, MltSettings, MltState};
@@ -133,11 +132,7 @@ const DIRECT_DOMAIN: u64 = 0x6469_7265_6374_5f6c;
 
 /// The graph for a scene: the perturbations that can apply to its paths.
 pub fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState> {
-    let specular = data
-        .scene
-        .materials
-        .iter()
-        .any(|m| m.kind() == MaterialKind::Dielectric);
+    let specular = data.scene.materials.iter().any(|m| m.kind().is_delta());
     let set = &settings.mutations;
     let mut step: Vec<Node<PathMltState>> = vec![Node::system(path_mutation::ChooseMutations)];
     if set.has(MutationKind::Bidirectional) {

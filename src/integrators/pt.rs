@@ -143,10 +143,7 @@ pub fn recording_graph(data: &SceneData) -> Graph<PtState> {
 fn graph_of(data: &SceneData, record: bool) -> Graph<PtState> {
     let kinds = used_kinds(data);
     let has_emitters = !data.scene.emitters.triangle.is_empty();
-    let light_sampling = has_emitters
-        && kinds
-            .iter()
-            .any(|k| matches!(k, MaterialKind::Diffuse | MaterialKind::Conductor));
+    let light_sampling = has_emitters && kinds.iter().any(|k| !k.is_delta());
 
     let mut bounce: Vec<Node<PtState>> = vec![Node::system(trace::closest::TraceClosest)];
     if record {

@@ -105,7 +105,7 @@ impl<'a> PathSpace<'a> {
         v.kind != VertexKind::Camera
             && !v.is_point_light()
             && !v.is_at_infinity()
-            && matches!(self.ctx.material(v), Material::Dielectric { .. })
+            && self.ctx.material(v).kind().is_delta()
     }
 
     /// The surface vertex of a point on triangle `triangle` given its position (the light

@@ -260,7 +260,7 @@ pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     match *material {
         Material::Dielectric { .. } => true,
         Material::Conductor(c) => c.max_alpha() < FOLLOW_ALPHA,
-        Material::Diffuse { .. } => false,
+        Material::Diffuse { .. } | Material::RoughPlastic(_) => false,
     }
 }
 
@@ -271,8 +271,7 @@ pub fn scene_has_followed(data: &SceneData) -> bool {
 
 /// Whether a scene has a glossy surface camera chains follow (where they sample light).
 pub fn scene_has_followed_glossy(data: &SceneData) -> bool {
-    used_materials(data)
-        .any(|m| !matches!(m, crate::bsdf::Material::Dielectric { .. }) && chains_follow(m))
+    used_materials(data).any(|m| !m.kind().is_delta() && chains_follow(m))
 }
 
 /// The materials some triangle of the scene uses.

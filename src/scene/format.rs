@@ -51,6 +51,14 @@ pub enum MaterialDesc {
         alpha: Alpha,
         reflectance: Reflectance,
     },
+    /// Mitsuba's `roughplastic` on its defaults but `diffuse` and `alpha` (Beckmann,
+    /// polypropylene's index 1.49 unless `ior` says otherwise, specular 1, linear).
+    RoughPlastic {
+        diffuse: Reflectance,
+        alpha: Alpha,
+        #[serde(default)]
+        ior: Option<Ior>,
+    },
 }
 
 #[derive(Clone, Debug, Deserialize)]

@@ -326,6 +326,11 @@ impl PreparedScene {
                     c.axis = self.uv_axis(tri, ns);
                 }
             }
+            Material::RoughPlastic(plastic) => {
+                if let Some(t) = v.reflectance {
+                    plastic.diffuse = texture(t).eval(uv);
+                }
+            }
             Material::Dielectric { .. } => {}
         }
         material

@@ -105,7 +105,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             materials.push(*material);
             // Conductors are black from behind by their own maths; only the Lambertian lobe,
             // which the engine mirrors to the side a ray comes from, needs the mark.
-            black_behind.push(one_sided.is_some() && matches!(material, Material::Diffuse { .. }));
+            black_behind.push(one_sided.is_some() && material.kind().is_two_sided());
         } else {
             warnings.push(format!(
                 "material \"{}\" is not used",

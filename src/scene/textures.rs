@@ -156,6 +156,27 @@ impl Texture {
     }
 }
 
+impl Texture {
+    /// The texture's mean as Mitsuba's `mean()` gives it (what a plastic's sampling weight
+    /// reads): an image's mean texel luminance, a checkerboard's mean of its two colours'
+    /// channel means.
+    pub fn mean(&self) -> f32 {
+        match &self.pattern {
+            Pattern::Bitmap(b) => {
+                let sum: f64 = b
+                    .texels
+                    .iter()
+                    .map(|t| f64::from(mitsuba_luminance(*t)))
+                    .sum();
+                (sum / b.texels.len().max(1) as f64) as f32
+            }
+            Pattern::Checkerboard { color0, color1 } => {
+                0.5 * (color0.element_sum() + color1.element_sum()) / 3.0
+            }
+        }
+    }
+}
+
 /// Mitsuba's `luminance` of linear sRGB (its coefficients, which differ from
 /// `math::luminance`'s in the fourth digit): what a one-value read of a colour texture gives.
 #[inline]

@@ -284,6 +284,19 @@ fn make_material(desc: &MaterialDesc) -> Material {
             reflectance: reflectance.0,
         },
         MaterialDesc::Dielectric { ior } => Material::Dielectric { ior: ior.0 },
+        MaterialDesc::RoughPlastic {
+            diffuse,
+            alpha,
+            ior,
+        } => Material::RoughPlastic(crate::bsdf::plastic::RoughPlastic::new(
+            crate::bsdf::conductor::Microfacet::Beckmann,
+            alpha.0,
+            ior.map_or(1.49, |i| i.0),
+            diffuse.0,
+            diffuse.0.element_sum() / 3.0,
+            Vec3::ONE,
+            false,
+        )),
         MaterialDesc::Conductor { alpha, reflectance } => {
             Material::Conductor(Conductor::ggx(alpha.0, reflectance.0))
         }

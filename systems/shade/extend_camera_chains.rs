@@ -7,7 +7,7 @@
 //! (PPM) a chain at a dielectric follows both branches instead, the second as a new chain,
 //! and at a followed conductor one sampled direction, with no roulette (see `camera_walk`).
 
-use crate::bsdf::{Material, MaterialKind, TransportMode, sample_direction};
+use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::CameraChains;
 use crate::components::Hits;
 use crate::components::Rays;
@@ -104,7 +104,7 @@ crate::system! {
                         continue;
                     }
                     let (mut ng, mut ns) = (sp.ng, sp.ns);
-                    if wo.dot(ng) < 0.0 && scene.kind_of(tri) == MaterialKind::Diffuse {
+                    if wo.dot(ng) < 0.0 && scene.kind_of(tri).is_two_sided() {
                         // Lambertian surfaces reflect on both sides: gather on wo's side.
                         ng = -ng;
                         ns = -ns;

@@ -16,17 +16,6 @@ use std::sync::Arc;
 
 pub struct ShadeMaterial(pub MaterialKind);
 
-impl MaterialKind {
-    /// The name of the shading system of this kind.
-    pub fn shading_system(self) -> &'static str {
-        match self {
-            MaterialKind::Diffuse => "shade_diffuse",
-            MaterialKind::Conductor => "shade_conductor",
-            MaterialKind::Dielectric => "shade_dielectric",
-        }
-    }
-}
-
 crate::system! {
     ShadeMaterial;
     name(this) = this.0.shading_system();
@@ -43,6 +32,9 @@ crate::system! {
                 data, sampler, *lanes, hits, surfaces, rays, paths, range,
             ),
             MaterialKind::Conductor => scatter_paths::<{ MaterialKind::Conductor as u8 }>(
+                data, sampler, *lanes, hits, surfaces, rays, paths, range,
+            ),
+            MaterialKind::RoughPlastic => scatter_paths::<{ MaterialKind::RoughPlastic as u8 }>(
                 data, sampler, *lanes, hits, surfaces, rays, paths, range,
             ),
         }

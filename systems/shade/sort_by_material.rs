@@ -22,16 +22,13 @@ use rayon::prelude::*;
 
 pub struct SortByMaterial;
 
-/// Queue of each kind, in slot order: non-delta kinds first (see `MaterialRanges`).
+/// Queue of each kind, in slot order: non-delta kinds first (see `MaterialKind`).
 fn queue_of(kind: MaterialKind) -> u8 {
-    match kind {
-        MaterialKind::Diffuse => 0,
-        MaterialKind::Conductor => 1,
-        MaterialKind::Dielectric => 2,
-    }
+    kind as u8
 }
 
-const DROPPED: u8 = 3;
+/// The queue after the material kinds': paths that end here.
+const DROPPED: u8 = MaterialKind::COUNT as u8;
 pub use crate::components::path_tracing::QUEUES;
 
 crate::system! {
@@ -155,11 +152,7 @@ crate::system! {
         }
         *active = kept;
         scratch.order = order;
-        *ranges = MaterialRanges {
-            diffuse: 0..counts[0],
-            conductor: counts[0]..counts[0] + counts[1],
-            dielectric: counts[0] + counts[1]..kept,
-        };
+        *ranges = MaterialRanges::from_counts(&counts[..MaterialKind::COUNT]);
         Flow::new(taken, kept)
     }
 }

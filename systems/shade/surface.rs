@@ -63,7 +63,7 @@ impl Surface {
         let mut ng = point.ng;
         let mut ns = point.ns;
         // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
-        if matches!(material, Material::Diffuse { .. }) && wo.dot(ng) < 0.0 {
+        if material.kind().is_two_sided() && wo.dot(ng) < 0.0 {
             ng = -ng;
             ns = -ns;
         }

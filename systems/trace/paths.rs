@@ -6,7 +6,6 @@
 //! state lives in registers and on the stack, and only its final radiance is written.
 
 use crate::accel::{Accel, Hit};
-use crate::bsdf::MaterialKind;
 use crate::components::Wave;
 use crate::components::path_tracing::PtSettings;
 use crate::components::{CHUNK, PathFlags};
@@ -179,11 +178,7 @@ fn walk_path(
         let point = shading_point(&data.scene.triangles, hit.triangle, hit.b1, hit.b2);
         let surf = Surface::new(data, hit.triangle, &point, dir);
         // sample_lights, only at non-delta kinds
-        let connection = if walk.has_emitters
-            && matches!(
-                surf.material.kind(),
-                MaterialKind::Diffuse | MaterialKind::Conductor
-            ) {
+        let connection = if walk.has_emitters && !surf.material.kind().is_delta() {
             light_sample(data, walk.sampler, &surf, key, depth, throughput)
         } else {
             None

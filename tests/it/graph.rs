@@ -71,7 +71,7 @@ fn graphs_follow_the_materials_in_use() {
     );
     assert_eq!(
         shading("door_ajar.ron"),
-        ["shade_diffuse", "shade_dielectric", "shade_conductor"]
+        ["shade_diffuse", "shade_conductor", "shade_dielectric"]
     );
 }
 

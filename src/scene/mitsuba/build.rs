@@ -12,6 +12,7 @@ use super::document::{
 };
 use crate::bsdf::Material;
 use crate::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
+use crate::bsdf::plastic::RoughPlastic;
 use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
@@ -48,7 +49,7 @@ pub struct FileSettings {
 pub const INTEGRATORS: &str = "path, direct, moment";
 pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
-pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor";
+pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor, roughplastic";
 pub const EMITTERS: &str = "area, point, spot, directional, constant, envmap";
 pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
@@ -936,9 +937,72 @@ impl<'a> Builder<'a> {
                 params.finish()?;
                 Material::Conductor(conductor)
             }
+            "roughplastic" => {
+                let diffuse_texture = match object.children.first() {
+                    Some(c)
+                        if c.name.as_deref() == Some("diffuse_reflectance")
+                            && self.object(c.object).class == Class::Texture
+                            && object.children.len() == 1 =>
+                    {
+                        Some(self.read_texture(c.object)?)
+                    }
+                    Some(c) => {
+                        return Err(XmlError::at(
+                            &c.spot,
+                            "roughplastic: only a texture named \"diffuse_reflectance\" may be nested",
+                        ));
+                    }
+                    None => None,
+                };
+                let int_ior = ior(&mut params, "int_ior", 1.49)?;
+                let ext_ior = ior(&mut params, "ext_ior", 1.000277)?;
+                // Visible normals or not changes only noise (Mitsuba's default: visible).
+                params.boolean("sample_visible")?;
+                let distribution = microfacet(&mut params)?;
+                for name in ["alpha_u", "alpha_v"] {
+                    if let Some((_, spot)) = params.float(name)? {
+                        return Err(XmlError::at(
+                            &spot,
+                            "roughplastic: anisotropic roughness is not supported (Mitsuba's \
+                             roughplastic refuses it too): give alpha",
+                        ));
+                    }
+                }
+                let (alpha, _) = roughness(&mut params, object, &[])?;
+                let nonlinear = params.boolean("nonlinear")?.unwrap_or(false);
+                let diffuse = params
+                    .color("diffuse_reflectance", Role::Reflectance)?
+                    .map_or(Vec3::splat(0.5), |(c, _)| c);
+                let specular = params
+                    .color("specular_reflectance", Role::Reflectance)?
+                    .map_or(Vec3::ONE, |(c, _)| c);
+                params.finish()?;
+                let eta = (int_ior / ext_ior) as f32;
+                if !(eta.is_finite() && eta > 0.0) || eta == 1.0 {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        format!(
+                            "roughplastic: int_ior / ext_ior = {eta} must be positive and not 1"
+                        ),
+                    ));
+                }
+                let diffuse_mean = match &diffuse_texture {
+                    Some(t) => t.mean(),
+                    None => diffuse.element_sum() / 3.0,
+                };
+                Material::RoughPlastic(RoughPlastic::new(
+                    distribution,
+                    alpha,
+                    eta,
+                    diffuse,
+                    diffuse_mean,
+                    specular,
+                    nonlinear,
+                ))
+            }
             _ => return Err(unsupported(object, BSDFS)),
         };
-        // Dielectrics refract on both sides; conductors reflect only on the front.
+        // Dielectrics refract on both sides; conductors and plastics reflect only on the front.
         Ok((material, Sides::One))
     }
 
@@ -1000,7 +1064,7 @@ impl<'a> Builder<'a> {
         };
         let mut varying = SurfaceVarying::default();
         match inner.kind.as_str() {
-            "diffuse" => {
+            "diffuse" | "roughplastic" => {
                 if let Some(c) = inner.children.first() {
                     varying.reflectance = Some(self.texture(c.object)?);
                 }

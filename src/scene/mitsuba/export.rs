@@ -143,6 +143,24 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
              <rgb name=\"reflectance\" value=\"{}\"/>\n        </bsdf>\n    </bsdf>",
             rgb(reflectance)
         ),
+        Material::RoughPlastic(p) => format!(
+            "    <bsdf type=\"roughplastic\" id=\"{id}\">\n        \
+             <string name=\"distribution\" value=\"{}\"/>\n        \
+             <float name=\"alpha\" value=\"{}\"/>\n        \
+             <float name=\"int_ior\" value=\"{}\"/>\n        <float name=\"ext_ior\" value=\"1\"/>\n        \
+             <rgb name=\"diffuse_reflectance\" value=\"{}\"/>\n        \
+             <rgb name=\"specular_reflectance\" value=\"{}\"/>\n        \
+             <boolean name=\"nonlinear\" value=\"{}\"/>\n    </bsdf>",
+            match p.distribution {
+                Microfacet::Ggx => "ggx",
+                Microfacet::Beckmann => "beckmann",
+            },
+            float(p.alpha),
+            float(p.eta),
+            rgb(p.diffuse),
+            rgb(p.specular),
+            p.nonlinear
+        ),
         Material::Dielectric { ior } => format!(
             "    <bsdf type=\"dielectric\" id=\"{id}\">\n        <float name=\"int_ior\" value=\"{}\"/>\n        \
              <float name=\"ext_ior\" value=\"1\"/>\n    </bsdf>",
