@@ -449,8 +449,8 @@ pub struct Connection {
     pub contribution: Vec3,
     /// The two vertices joined, light side first, when a shadow ray must test them.
     pub segment: Option<(Vertex, Vertex)>,
-    /// For t = 1, the pixel the light vertex projects to.
-    pub pixel: Option<usize>,
+    /// For t = 1, the pixel the light vertex projects to and where in it.
+    pub pixel: Option<(usize, glam::Vec2)>,
 }
 
 impl PathContext<'_> {
@@ -484,11 +484,11 @@ impl PathContext<'_> {
             Vec3::ZERO
         };
         if t == 1 {
-            let (contribution, pixel) = self.connect_to_camera(y, y_wo)?;
+            let (contribution, pixel, raster) = self.connect_to_camera(y, y_wo)?;
             return Some(Connection {
                 contribution,
                 segment: Some((*y, camera[0])),
-                pixel: Some(pixel),
+                pixel: Some((pixel, raster)),
             });
         }
         let z = &camera[t - 1];
@@ -512,9 +512,10 @@ impl PathContext<'_> {
 
     /// Strategy t = 1 (light tracing): the light vertex `y` (connectible, reached along
     /// `-y_wo`, zero at a light vertex) seen by the camera: its unweighted contribution and
-    /// the pixel it lands in, or `None` outside the image or for no contribution.
+    /// the pixel it lands in and its raster position there, or `None` outside the image, for
+    /// no contribution, or for a camera no direction reaches (orthographic).
     #[inline]
-    pub fn connect_to_camera(&self, y: &Vertex, y_wo: Vec3) -> Option<(Vec3, usize)> {
+    pub fn connect_to_camera(&self, y: &Vertex, y_wo: Vec3) -> Option<(Vec3, usize, glam::Vec2)> {
         if y.is_point_light() || y.is_at_infinity() {
             // A point light is not seen directly, as in Mitsuba and pbrt: no camera ray hits
             // it, and (s, t) = (1, 1), the only other strategy, is not counted either. The
@@ -526,7 +527,7 @@ impl PathContext<'_> {
         let to_y = y.p - cam.position;
         let dist2 = to_y.length_squared();
         let dir = to_y / dist2.sqrt();
-        let (pixel, importance) = cam.project(dir)?;
+        let (pixel, raster, importance) = cam.project(dir)?;
         let wi = -dir;
         let f = self.f(y, y_wo, wi, TransportMode::Importance);
         let cos_y = if y.is_point_light() {
@@ -537,7 +538,7 @@ impl PathContext<'_> {
             wi.dot(y.ns).abs()
         };
         let contribution = y.beta * f * (cos_y * importance / dist2);
-        (contribution != Vec3::ZERO).then_some((contribution, pixel))
+        (contribution != Vec3::ZERO).then_some((contribution, pixel, raster))
     }
 
     /// Strategies s >= 1, t >= 2: the unweighted contribution of joining light vertex `y` to

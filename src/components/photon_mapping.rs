@@ -129,6 +129,11 @@ const FOOTPRINT_RAYS_PER_SIDE: u32 = 32;
 /// sees (one huge ground triangle).
 pub fn pixel_footprint(data: &SceneData) -> Option<f32> {
     let frustum = data.scene.camera.frustum();
+    if let crate::scene::Projection::Orthographic { half_height, .. } = frustum.projection {
+        // Parallel rays: a pixel is as wide at every distance (the near plane's height over
+        // the film's rows).
+        return Some(2.0 * half_height / frustum.film_height as f32);
+    }
     let (w, h) = (frustum.width as f32, frustum.height as f32);
     let n = FOOTPRINT_RAYS_PER_SIDE;
     let mut distances: Vec<f32> = (0..n * n)

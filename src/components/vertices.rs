@@ -1,5 +1,5 @@
 use crate::sampling::SampleKey;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// One subpath vertex as a `PathVertices` store keeps it.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -169,6 +169,10 @@ crate::soa! {
         /// Pixel the contribution lands in: the sample's own, or for light tracing (t = 1)
         /// the pixel the light vertex projects to.
         pixel: u32,
+        /// For light tracing (t = 1), where in `pixel` the light vertex projects (raster
+        /// position, pixels of the rendered image): a filter wider than a pixel spreads the
+        /// splat from there. NaN for the other strategies (they land with their sample).
+        raster: Vec2,
         /// Light subpath vertices used (s).
         s: u16,
         /// Camera subpath vertices used (t).

@@ -25,21 +25,29 @@ use std::path::Path;
 /// Pixels per block of the splat sums that `Film::add_splats` gives one task.
 pub const SPLAT_BLOCK: usize = 4096;
 
-/// Splats (pixel, value) gathered by one task, sorted by `SPLAT_BLOCK` block of their pixel,
-/// for `Film::add_splats`.
+/// Splats (pixel, value, raster position) gathered by one task, sorted by `SPLAT_BLOCK` block
+/// of their pixel, for `Film::add_splats`.
 #[derive(Clone, Debug, Default)]
 pub struct Splats {
-    by_block: Vec<Vec<(u32, Vec3)>>,
+    by_block: Vec<Vec<(u32, Vec3, Vec2)>>,
 }
 
 impl Splats {
+    /// A splat into `pixel` alone (box filter only: a filtered film needs `push_at`).
     #[inline]
     pub fn push(&mut self, pixel: usize, value: Vec3) {
+        self.push_at(pixel, Vec2::NAN, value);
+    }
+
+    /// A splat that landed at raster position `at` (pixels of the rendered image, x right, y
+    /// down) inside `pixel`: under the gaussian it reaches every pixel of its footprint.
+    #[inline]
+    pub fn push_at(&mut self, pixel: usize, at: Vec2, value: Vec3) {
         let block = pixel / SPLAT_BLOCK;
         if self.by_block.len() <= block {
             self.by_block.resize_with(block + 1, Vec::new);
         }
-        self.by_block[block].push((pixel as u32, value));
+        self.by_block[block].push((pixel as u32, value, at));
     }
 
     pub fn len(&self) -> usize {
@@ -136,6 +144,31 @@ impl Film {
     pub fn at_origin(mut self, x: usize, y: usize) -> Film {
         self.origin = (x, y);
         self
+    }
+
+    /// Where this film's pixel (0, 0) lies on the whole film (a crop window's offset).
+    pub fn origin(&self) -> (usize, usize) {
+        self.origin
+    }
+
+    /// Per pixel, what its splat sum is divided by beyond the splats per pixel: 1 under the
+    /// box filter; under the gaussian the integral of the filter over the film about the
+    /// pixel (`Gaussian::integral_over_film` along each axis), so that a splat spread over its
+    /// footprint estimates the pixel that the camera's filtered samples do.
+    pub fn splat_normalisations(filter: PixelFilter, width: usize, height: usize) -> Vec<f64> {
+        match filter {
+            PixelFilter::Box => vec![1.0; width * height],
+            PixelFilter::Gaussian(g) => {
+                let columns: Vec<f64> =
+                    (0..width).map(|x| g.integral_over_film(x, width)).collect();
+                (0..height)
+                    .flat_map(|y| {
+                        let row = g.integral_over_film(y, height);
+                        columns.iter().map(move |c| c * row)
+                    })
+                    .collect()
+            }
+        }
     }
 
     /// The unit exponent of a scene's films (`fixed::unit_exponent` of its brightest
@@ -412,11 +445,14 @@ impl Film {
     /// was a stretch of one busy core in BDPT).
     pub fn add_splats(&mut self, batches: &[Splats]) {
         use rayon::prelude::*;
+        if let PixelFilter::Gaussian(gaussian) = self.filter {
+            return self.add_filtered_splats(batches, gaussian);
+        }
         let finite = batches
             .iter()
             .flat_map(|b| &b.by_block)
             .flatten()
-            .any(|(_, v)| v.is_finite());
+            .any(|(_, v, _)| v.is_finite());
         if finite && self.splat.is_empty() {
             self.splat = vec![FixedRgb::ZERO; self.width * self.height];
         }
@@ -429,7 +465,7 @@ impl Film {
                 let (mut nonfinite, mut out_of_range) = (0, 0);
                 let first = block * SPLAT_BLOCK;
                 for batch in batches {
-                    for &(pixel, value) in batch.by_block.get(block).into_iter().flatten() {
+                    for &(pixel, value, _) in batch.by_block.get(block).into_iter().flatten() {
                         match sums[pixel as usize - first].add_sample(value, exponent) {
                             Ok(()) => {}
                             Err(Rejected::NonFinite) => nonfinite += 1,
@@ -447,6 +483,79 @@ impl Film {
             0
         };
         self.nonfinite_splats += nonfinite + unallocated;
+        self.out_of_range += out_of_range;
+    }
+
+    /// `add_splats` under the gaussian: each splat reaches every pixel whose centre lies
+    /// within the radius of where it landed (`Gaussian::footprint`), weighted by the filter
+    /// there (not normalised: `image` divides each pixel's splat sum by the integral of the
+    /// filter over the film around it, `splat_normalisation`, so that a splat estimates the
+    /// pixel the camera's filtered samples do). The sums are shared out between threads in
+    /// blocks of `SPLAT_BLOCK` pixels; a block takes the splats of every block whose
+    /// footprints reach it, and the sums are exact, so the film does not depend on the thread
+    /// count or on how the splats were batched. A non-finite splat is counted once (in its
+    /// own pixel's block) and added nowhere.
+    fn add_filtered_splats(&mut self, batches: &[Splats], gaussian: Gaussian) {
+        use rayon::prelude::*;
+        let total: usize = batches.iter().map(Splats::len).sum();
+        if total == 0 {
+            return;
+        }
+        if self.splat.is_empty() {
+            self.splat = vec![FixedRgb::ZERO; self.width * self.height];
+        }
+        let (width, height) = (self.width, self.height);
+        let exponent = self.unit_exponent;
+        // A splat in pixel p reaches pixels at most `reach` rows and columns away.
+        let span = gaussian.reach() * (width + 1);
+        let blocks = batches.iter().map(|b| b.by_block.len()).max().unwrap_or(0);
+        let (nonfinite, out_of_range) = self
+            .splat
+            .par_chunks_mut(SPLAT_BLOCK)
+            .enumerate()
+            .map(|(block, sums)| {
+                let (mut nonfinite, mut out_of_range) = (0, 0);
+                let first = block * SPLAT_BLOCK;
+                let end = first + sums.len();
+                let from = first.saturating_sub(span) / SPLAT_BLOCK;
+                let to = ((end + span) / SPLAT_BLOCK + 1).min(blocks);
+                for batch in batches {
+                    for source in from..to.min(batch.by_block.len()) {
+                        for &(pixel, value, at) in &batch.by_block[source] {
+                            let own = (first..end).contains(&(pixel as usize));
+                            if !value.is_finite() || !at.is_finite() {
+                                nonfinite += own as u64;
+                                continue;
+                            }
+                            let xs = gaussian.footprint(at.x, width);
+                            let ys = gaussian.footprint(at.y, height);
+                            for y in ys {
+                                let row = y * width;
+                                if row + xs.end <= first || row + xs.start >= end {
+                                    continue;
+                                }
+                                let wy = gaussian.eval(y as f32 + 0.5 - at.y);
+                                for x in xs.clone() {
+                                    let q = row + x;
+                                    if !(first..end).contains(&q) {
+                                        continue;
+                                    }
+                                    let w = gaussian.eval(x as f32 + 0.5 - at.x) * wy;
+                                    if w == 0.0 {
+                                        continue;
+                                    }
+                                    if sums[q - first].add_sample(value * w, exponent).is_err() {
+                                        out_of_range += 1;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                (nonfinite, out_of_range)
+            })
+            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        self.nonfinite_splats += nonfinite;
         self.out_of_range += out_of_range;
     }
 

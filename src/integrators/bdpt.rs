@@ -70,6 +70,9 @@ pub struct BdptState {
     pub chosen_s: Vec<u16>,
     /// The pixel of each sample's camera ray (where strategies with t >= 2 land).
     pub sample_pixel: Vec<u32>,
+    /// Where each sample's camera ray left the film (raster position of the rendered image),
+    /// for a filter wider than a pixel.
+    pub sample_raster: Vec<glam::Vec2>,
     pub wave: Wave,
     /// Samples a wave may hold; light subpath k of the wave is subpath `capacity + k`.
     pub capacity: usize,
@@ -205,6 +208,7 @@ impl BdptState {
             multiplex: Vec::new(),
             chosen_s: vec![0; capacity],
             sample_pixel: vec![0; capacity],
+            sample_raster: vec![glam::Vec2::ZERO; capacity],
             data,
             settings,
             pixels,
@@ -493,13 +497,13 @@ mod bindings {
         }
         gather::connections::AccumulateConnections {
             read wave, shadow, connections, connection_start, connections_len, pixels,
-                strategy_images = settings.strategy_images;
+                sample_raster, strategy_images = settings.strategy_images;
             write sample_radiance, film, strategy_sums;
         }
         generate::subpaths::StartSubpaths {
             read wave, data, pixels, numbers = sampler, capacity, settings;
-            write vertices, walkers, rays, subpath_len, active, depth, sample_pixel, chosen_s,
-                multiplex;
+            write vertices, walkers, rays, subpath_len, active, depth, sample_pixel,
+                sample_raster, chosen_s, multiplex;
         }
         shade::compact_subpaths::CompactSubpaths {
             write walkers, rays, active, depth, scratch;

@@ -142,18 +142,21 @@ impl MltState {
     }
 
     /// The image of the steps taken: per group, b_k x its splat sums x pixels / steps per
-    /// chain, summed over the groups.
+    /// chain, summed over the groups; under the gaussian each pixel divided by the filter's
+    /// integral about it (`Film::splat_normalisations`: the splats were spread over their
+    /// footprints).
     pub fn image_film(&self) -> Film {
         let (w, h) = (self.bdpt.film.width, self.bdpt.film.height);
         let n = self.pixels as usize;
         let mut sums = vec![DVec3::ZERO; n];
+        let norm = Film::splat_normalisations(self.bdpt.data.scene.camera.filter, w, h);
         if self.step > 0 && self.selection.is_some() {
             let per_step = self.pixels as f64 / self.step as f64;
             for (g, group) in self.splat_sums.chunks(n).enumerate() {
                 let scale = self.normalisation.group(g) * per_step;
                 if scale > 0.0 {
-                    for (out, v) in sums.iter_mut().zip(group) {
-                        *out += *v * scale;
+                    for ((out, v), d) in sums.iter_mut().zip(group).zip(&norm) {
+                        *out += *v * (scale / d);
                     }
                 }
             }
@@ -522,7 +525,8 @@ mod bindings {
         gather::chain_contributions::GatherChainContributions {
             read wave = bdpt.wave, shadow = bdpt.shadow, connections = bdpt.connections,
                 starts = bdpt.connection_start, radiance = bdpt.sample_radiance,
-                sample_pixel = bdpt.sample_pixel, multiplex = bdpt.multiplex,
+                sample_pixel = bdpt.sample_pixel, sample_raster = bdpt.sample_raster,
+                multiplex = bdpt.multiplex,
                 chosen_s = bdpt.chosen_s;
             write out = chains.proposal_contributions;
         }
@@ -534,7 +538,7 @@ mod bindings {
             write normalisation;
         }
         mutate::accept::SplatExpectedValues {
-            read chains, pixels;
+            read chains, pixels, camera = bdpt.data.scene.camera;
             write splats, splat_sums, nonfinite;
         }
         mutate::accept::SplatStrategyImages {

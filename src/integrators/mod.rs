@@ -517,30 +517,66 @@ pub fn film_settings(kind: IntegratorKind, settings: &RenderSettings) -> String 
     }
 }
 
+/// The integrators that render an orthographic camera: its rays leave points of a plane in
+/// one direction, a delta that no light vertex can be joined to, so the bidirectional ones
+/// give their light-tracing strategies (t = 1) no weight, as for any delta vertex, and the
+/// photon mappers' camera passes shoot its rays.
+pub const TAKE_ORTHOGRAPHIC: [&str; 9] = [
+    "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt",
+];
+
+/// The integrators that reconstruct with the gaussian filter: camera-side samples land where
+/// their rays left the film, splats (light tracing, Metropolis) spread over the filter's
+/// footprint from where they land, normalised as the camera's samples are.
+pub const TAKE_GAUSSIAN: [&str; 9] = [
+    "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt",
+];
+
 /// Refuses a camera the integrator cannot render as the scene asks: an orthographic camera
-/// (its rays' direction is a delta, which light paths joined to the camera cannot meet:
-/// BDPT's t = 1 strategies and everything built on them; the photon mappers' camera passes
-/// shoot pinhole rays) and a filter wider than a pixel (only pt's film knows where each of its
-/// samples fell) anywhere but pt. The message names the integrator, the camera and what works.
+/// where `TAKE_ORTHOGRAPHIC` does not list the integrator, and a filter wider than a pixel
+/// where `TAKE_GAUSSIAN` does not. The message names the integrator, the camera, the reason
+/// and what works.
 pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Result<(), String> {
-    if kind.as_str() == "pt" {
-        return Ok(());
-    }
-    if !camera.is_pinhole() {
+    let name = kind.as_str();
+    if !camera.is_pinhole() && !TAKE_ORTHOGRAPHIC.contains(&name) {
         return Err(format!(
-            "{kind} cannot render an orthographic sensor (its rays all have one direction, a \
-             delta that light paths joined to the camera or pinhole camera passes cannot meet): \
-             render it with pt"
+            "{kind} cannot render an orthographic sensor: {}; {} render it",
+            orthographic_reason(name),
+            TAKE_ORTHOGRAPHIC.join(", ")
         ));
     }
-    if let crate::film::PixelFilter::Gaussian(_) = camera.filter {
+    if let crate::film::PixelFilter::Gaussian(_) = camera.filter
+        && !TAKE_GAUSSIAN.contains(&name)
+    {
         return Err(format!(
             "{kind} cannot reconstruct with the gaussian rfilter (Mitsuba's default when a film \
-             has none): only pt splats its samples by where they fell; render it with pt, or \
-             add <rfilter type=\"box\"/> to the film"
+             has none): {}; {} render it, or add <rfilter type=\"box\"/> to the film",
+            gaussian_reason(name),
+            TAKE_GAUSSIAN.join(", ")
         ));
     }
     Ok(())
+}
+
+/// Why an integrator that `TAKE_ORTHOGRAPHIC` leaves out cannot take the camera.
+fn orthographic_reason(name: &str) -> &'static str {
+    match name {
+        "mlt" => {
+            "its mutations move the camera end of a path by projecting vertices through a \
+             pinhole (the lens and multi-chain perturbations, the bidirectional mutation's \
+             camera joins), and an orthographic camera's rays share one direction, a delta no \
+             vertex can be projected through"
+        }
+        _ => "its rays all have one direction, a delta it does not model",
+    }
+}
+
+/// Why an integrator that `TAKE_GAUSSIAN` leaves out cannot take the filter.
+fn gaussian_reason(name: &str) -> &'static str {
+    match name {
+        "mlt" => "its splats do not yet carry where in their pixel they landed",
+        _ => "its camera pass keeps one estimate per pixel, not where each sample fell",
+    }
 }
 
 /// Renders a scene with an integrator from nothing.

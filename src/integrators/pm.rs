@@ -103,7 +103,9 @@ impl PmState {
             photon_pass,
             maps: None,
             caustics,
-            film: Film::for_scene(&data),
+            // One sample per pixel per pass, the filter already in its camera chain's weight
+            // (`generate_camera_chains`): the film's own is the box.
+            film: Film::for_scene(&data).with_filter(crate::film::PixelFilter::Box),
             nonfinite: 0,
             data,
         }

@@ -4,7 +4,7 @@
 use super::chains::{ChainStates, Contributions, MltCounters, VECTOR_BLOCK};
 use super::mutate::LANE_ACCEPT;
 use crate::components::CHUNK;
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 
 /// a = min(1, c_prop / c_cur) for a symmetric proposal. A proposal whose target is zero,
@@ -101,6 +101,9 @@ pub fn large_step_targets(chains: &ChainStates, groups: usize) -> Vec<(f64, u64)
 pub struct Splat {
     pub pixel: u32,
     pub value: Vec3,
+    /// Where in its pixel it landed (raster position of the rendered image; NaN if not
+    /// given): `add_splats_filtered` spreads it from there.
+    pub at: Vec2,
 }
 
 /// The splats of one step, one list per `CHUNK` of chains; each list in chain order, so
@@ -119,6 +122,21 @@ impl ChainSplats {
     /// Adds every finite splat to its pixel's sum (`add_splats`); returns (added, non-finite).
     pub fn add_to(&self, sums: &mut [DVec3]) -> (u64, u64) {
         add_splats(&self.chunks, sums)
+    }
+
+    /// `add_to` under the film's filter (`add_splats_filtered`).
+    pub fn add_to_filtered(
+        &self,
+        sums: &mut [DVec3],
+        filter: crate::film::PixelFilter,
+        size: (usize, usize),
+    ) -> (u64, u64) {
+        match filter {
+            crate::film::PixelFilter::Box => add_splats(&self.chunks, sums),
+            crate::film::PixelFilter::Gaussian(g) => {
+                add_splats_filtered(&self.chunks, sums, g, size)
+            }
+        }
     }
 
     /// Every splat of the step, in chain order.
@@ -161,7 +179,8 @@ pub fn add_splats(chunks: &[Vec<Splat>], sums: &mut [DVec3]) -> (u64, u64) {
             let mut grouped = vec![
                 Splat {
                     pixel: 0,
-                    value: Vec3::ZERO
+                    value: Vec3::ZERO,
+                    at: Vec2::NAN,
                 };
                 splats.len()
             ];
@@ -185,6 +204,83 @@ pub fn add_splats(chunks: &[Vec<Splat>], sums: &mut [DVec3]) -> (u64, u64) {
                         added += 1;
                     } else {
                         nonfinite += 1;
+                    }
+                }
+            }
+            (added, nonfinite)
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
+/// `add_splats` under the gaussian: each splat reaches every pixel of its image (a group's
+/// `width x height` slots, the image its slot lies in) whose centre lies within the radius of
+/// where it landed, weighted by the filter there (the image is divided by the filter's
+/// film-clipped integral about each pixel afterwards: `PixelFilter::splat_normalisation`).
+/// In parallel over blocks of pixels; a block takes, chunk after chunk, the splats of every
+/// block whose footprints reach it, in the order one loop over the chunks would add them,
+/// so each pixel's f64 sum has the same bits for any thread count. A non-finite splat (or one
+/// without a position) is counted once, in its own pixel's block, and added nowhere.
+pub fn add_splats_filtered(
+    chunks: &[Vec<Splat>],
+    sums: &mut [DVec3],
+    gaussian: crate::film::Gaussian,
+    (width, height): (usize, usize),
+) -> (u64, u64) {
+    let pixels = width * height;
+    if pixels == 0 {
+        return (0, 0);
+    }
+    let blocks = sums.len().div_ceil(SPLAT_BLOCK);
+    let span = gaussian.reach() * (width + 1);
+    let grouped: Vec<(Vec<Splat>, Vec<usize>)> = chunks
+        .par_iter()
+        .with_max_len(1)
+        .map(|splats| {
+            let mut grouped = splats.clone();
+            // Stable: each block's splats stay in chain order.
+            grouped.sort_by_key(|s| s.pixel as usize / SPLAT_BLOCK);
+            let mut starts = vec![0; blocks + 1];
+            for s in splats {
+                starts[s.pixel as usize / SPLAT_BLOCK + 1] += 1;
+            }
+            for b in 0..blocks {
+                starts[b + 1] += starts[b];
+            }
+            (grouped, starts)
+        })
+        .collect();
+    sums.par_chunks_mut(SPLAT_BLOCK)
+        .with_max_len(1)
+        .enumerate()
+        .map(|(b, sums)| {
+            let (mut added, mut nonfinite) = (0, 0);
+            let (first, end) = (b * SPLAT_BLOCK, b * SPLAT_BLOCK + sums.len());
+            let from = first.saturating_sub(span) / SPLAT_BLOCK;
+            let to = ((end + span) / SPLAT_BLOCK + 1).min(blocks);
+            for (splats, starts) in &grouped {
+                for s in &splats[starts[from]..starts[to]] {
+                    let own = (first..end).contains(&(s.pixel as usize));
+                    if !s.value.is_finite() || !s.at.is_finite() {
+                        nonfinite += own as u64;
+                        continue;
+                    }
+                    added += own as u64;
+                    let base = s.pixel as usize / pixels * pixels;
+                    let value = s.value.as_dvec3();
+                    let xs = gaussian.footprint(s.at.x, width);
+                    for y in gaussian.footprint(s.at.y, height) {
+                        let row = base + y * width;
+                        if row + xs.end <= first || row + xs.start >= end {
+                            continue;
+                        }
+                        let wy = gaussian.eval(y as f32 + 0.5 - s.at.y);
+                        for x in xs.clone() {
+                            let q = row + x;
+                            if (first..end).contains(&q) {
+                                let w = gaussian.eval(x as f32 + 0.5 - s.at.x) * wy;
+                                sums[q - first] += value * w as f64;
+                            }
+                        }
                     }
                 }
             }
@@ -268,11 +364,12 @@ pub fn splat_strategies(
 
 #[inline]
 fn emit(out: &mut Vec<Splat>, state: &Contributions, chain: usize, offset: u32, weight: f32) {
-    for (pixel, value) in state.entries(chain) {
+    for (pixel, at, value) in state.entries_at(chain) {
         if value != Vec3::ZERO {
             out.push(Splat {
                 pixel: offset + pixel,
                 value: value * weight,
+                at,
             });
         }
     }
@@ -331,6 +428,7 @@ pub fn commit_accepted(chains: &mut ChainStates) {
                 let n = proposal.count[i] as usize;
                 let (from, to) = (i * stride, local * stride);
                 chunk.pixel[to..to + n].copy_from_slice(&proposal.pixel[from..from + n]);
+                chunk.raster[to..to + n].copy_from_slice(&proposal.raster[from..from + n]);
                 chunk.value[to..to + n].copy_from_slice(&proposal.value[from..from + n]);
                 chunk.count[local] = n as u32;
                 chunk.target[local] = proposal.target[i];
@@ -393,7 +491,11 @@ mod tests {
                         } else {
                             Vec3::new(size, size * 0.3, (h >> 40) as f32 * 1e-9)
                         };
-                        Splat { pixel, value }
+                        Splat {
+                            pixel,
+                            value,
+                            at: Vec2::NAN,
+                        }
                     })
                     .collect()
             })

@@ -4,7 +4,7 @@
 use crate::components::CHUNK;
 use crate::math::luminance;
 use crate::sampling::{PrimarySamples, SampleKey};
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 /// Chains per task of the loops over primary-sample vectors (`propose_mutations`,
@@ -27,6 +27,9 @@ pub struct Contributions {
     /// Contributions in use per chain.
     pub count: Vec<u32>,
     pub pixel: Vec<u32>,
+    /// Where in its pixel each contribution landed (raster position of the rendered image),
+    /// for a filter wider than a pixel; NaN where none was given (box filter only).
+    pub raster: Vec<Vec2>,
     pub value: Vec<Vec3>,
     /// The strategy of each chain's evaluation, (depth, s), in mmlt (one strategy per
     /// evaluation); (0, 0) in pssmlt. Only the strategy images read it.
@@ -42,6 +45,7 @@ pub struct ContributionsChunk<'a> {
     pub target: &'a mut [f32],
     pub count: &'a mut [u32],
     pub pixel: &'a mut [u32],
+    pub raster: &'a mut [Vec2],
     pub value: &'a mut [Vec3],
     pub strategy: &'a mut [(u32, u16)],
 }
@@ -55,6 +59,7 @@ impl Contributions {
             target: vec![0.0; chains],
             count: vec![0; chains],
             pixel: vec![0; chains * stride],
+            raster: vec![Vec2::NAN; chains * stride],
             value: vec![Vec3::ZERO; chains * stride],
             strategy: vec![(0, 0); chains],
         }
@@ -69,6 +74,7 @@ impl Contributions {
         self.target.truncate(chains);
         self.count.truncate(chains);
         self.pixel.truncate(chains * self.stride);
+        self.raster.truncate(chains * self.stride);
         self.value.truncate(chains * self.stride);
         self.strategy.truncate(chains);
     }
@@ -86,15 +92,18 @@ impl Contributions {
         }
         let chains = self.chains();
         let mut pixel = vec![0; chains * stride];
+        let mut raster = vec![Vec2::NAN; chains * stride];
         let mut value = vec![Vec3::ZERO; chains * stride];
         for i in 0..chains {
             let n = self.count[i] as usize;
             let (from, to) = (i * self.stride, i * stride);
             pixel[to..to + n].copy_from_slice(&self.pixel[from..from + n]);
+            raster[to..to + n].copy_from_slice(&self.raster[from..from + n]);
             value[to..to + n].copy_from_slice(&self.value[from..from + n]);
         }
         self.stride = stride;
         self.pixel = pixel;
+        self.raster = raster;
         self.value = value;
     }
 
@@ -107,12 +116,16 @@ impl Contributions {
     /// Appends one contribution to `chain` (its target is left to the caller). Panics past
     /// `stride` contributions.
     pub fn push(&mut self, chain: usize, pixel: u32, value: Vec3) {
+        let range = chain * self.stride..(chain + 1) * self.stride;
         push_entry(
             self.stride,
             &mut self.count[chain],
-            &mut self.pixel[chain * self.stride..(chain + 1) * self.stride],
-            &mut self.value[chain * self.stride..(chain + 1) * self.stride],
-            pixel,
+            (
+                &mut self.pixel[range.clone()],
+                &mut self.raster[range.clone()],
+            ),
+            &mut self.value[range],
+            (pixel, Vec2::NAN),
             value,
         );
     }
@@ -126,12 +139,14 @@ impl Contributions {
 
     /// The contributions of `chain`, in the order they were pushed.
     pub fn entries(&self, chain: usize) -> impl Iterator<Item = (u32, Vec3)> + '_ {
+        self.entries_at(chain).map(|(p, _, v)| (p, v))
+    }
+
+    /// `entries` with where each landed (NaN where not given).
+    pub fn entries_at(&self, chain: usize) -> impl Iterator<Item = (u32, Vec2, Vec3)> + '_ {
         let start = chain * self.stride;
         let end = start + self.count[chain] as usize;
-        self.pixel[start..end]
-            .iter()
-            .copied()
-            .zip(self.value[start..end].iter().copied())
+        (start..end).map(|i| (self.pixel[i], self.raster[i], self.value[i]))
     }
 
     /// Views of the chains in `CHUNK`-sized pieces, in parallel.
@@ -143,18 +158,22 @@ impl Contributions {
             .par_chunks_mut(CHUNK)
             .zip(self.count.par_chunks_mut(CHUNK))
             .zip(self.pixel.par_chunks_mut(CHUNK * stride))
+            .zip(self.raster.par_chunks_mut(CHUNK * stride))
             .zip(self.value.par_chunks_mut(CHUNK * stride))
             .zip(self.strategy.par_chunks_mut(CHUNK))
             .enumerate()
             .map(
-                move |(c, ((((target, count), pixel), value), strategy))| ContributionsChunk {
-                    first_chain: c * CHUNK,
-                    stride,
-                    target,
-                    count,
-                    pixel,
-                    value,
-                    strategy,
+                move |(c, (((((target, count), pixel), raster), value), strategy))| {
+                    ContributionsChunk {
+                        first_chain: c * CHUNK,
+                        stride,
+                        target,
+                        count,
+                        pixel,
+                        raster,
+                        value,
+                        strategy,
+                    }
                 },
             )
     }
@@ -175,13 +194,21 @@ impl ContributionsChunk<'_> {
     }
 
     pub fn push(&mut self, local: usize, pixel: u32, value: Vec3) {
+        self.push_at(local, pixel, Vec2::NAN, value);
+    }
+
+    /// `push` of a contribution that landed at raster position `at` in `pixel`.
+    pub fn push_at(&mut self, local: usize, pixel: u32, at: Vec2, value: Vec3) {
         let range = local * self.stride..(local + 1) * self.stride;
         push_entry(
             self.stride,
             &mut self.count[local],
-            &mut self.pixel[range.clone()],
+            (
+                &mut self.pixel[range.clone()],
+                &mut self.raster[range.clone()],
+            ),
             &mut self.value[range],
-            pixel,
+            (pixel, at),
             value,
         );
     }
@@ -197,14 +224,15 @@ impl ContributionsChunk<'_> {
 fn push_entry(
     stride: usize,
     count: &mut u32,
-    pixels: &mut [u32],
+    (pixels, rasters): (&mut [u32], &mut [Vec2]),
     values: &mut [Vec3],
-    pixel: u32,
+    (pixel, raster): (u32, Vec2),
     value: Vec3,
 ) {
     let at = *count as usize;
     assert!(at < stride, "Contributions: more than {stride} per chain");
     pixels[at] = pixel;
+    rasters[at] = raster;
     values[at] = value;
     *count += 1;
 }

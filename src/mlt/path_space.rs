@@ -162,7 +162,7 @@ impl<'a> PathSpace<'a> {
             return None;
         }
         let cam = &path[n - 1];
-        let (pixel, importance) = self.ctx.camera.project(dir(cam, &path[n - 2]))?;
+        let (pixel, _, importance) = self.ctx.camera.project(dir(cam, &path[n - 2]))?;
         let le = self.ctx.emitted(&path[0], dir(&path[0], &path[1]));
         let mut f = le.as_dvec3() * f64::from(importance);
         if f == DVec3::ZERO {

@@ -188,13 +188,25 @@ impl Frustum {
     }
 
     /// Where a light vertex seen along `dir` (unit, from the camera) lands and the camera's
-    /// importance for it: the pixel, and what the vertex contributes per unit of incident
-    /// radiance and solid angle before division by the light paths per pixel. For a pinhole
-    /// with a box filter the importance equals the direction density `1 / (A cos^3)`.
+    /// importance for it: the pixel, the raster position in it, and what the vertex
+    /// contributes per unit of incident radiance and solid angle before division by the light
+    /// paths per pixel. For a pinhole the importance equals the direction density
+    /// `1 / (A cos^3)` (a filter wider than a pixel spreads it from the raster position, the
+    /// film normalising it as it does the camera's samples).
     #[inline]
-    pub fn project(&self, dir: Vec3) -> Option<(usize, f32)> {
-        let pixel = self.pixel_of(dir)?;
-        Some((pixel, self.pdf_dir_inside(dir)))
+    pub fn project(&self, dir: Vec3) -> Option<(usize, Vec2, f32)> {
+        let r = self.raster_of(dir)?;
+        let (x, y) = (r.x as usize, r.y as usize);
+        // Rounding at the far edge can give x == width: that direction is outside.
+        (x < self.width as usize && y < self.height as usize)
+            .then(|| (y * self.width as usize + x, r, self.pdf_dir_inside(dir)))
+    }
+
+    /// Whether the camera's rays share one origin (a pinhole): only such a camera can be
+    /// reached by a light path's connection; an orthographic camera's direction is a delta.
+    #[inline]
+    pub fn is_pinhole(&self) -> bool {
+        self.projection == Projection::Perspective
     }
 }
 

@@ -298,10 +298,12 @@ pub fn connect_wave(
                             if light.joints[s - 1].is_none() {
                                 continue;
                             }
-                            let Some((c, p)) = ctx.connect_to_camera(y, light.wo[s - 1]) else {
+                            let Some((c, p, raster)) = ctx.connect_to_camera(y, light.wo[s - 1])
+                            else {
                                 continue;
                             };
                             cn.pixel[slot] = p as u32;
+                            cn.raster[slot] = raster;
                             (c, (*y, camera.vertices[0]))
                         } else {
                             let Some(zj) = &camera.joints[t - 1] else {
@@ -410,6 +412,7 @@ fn open_slot(
     sh.contribution[slot] = Vec3::ZERO;
     cn.sample[slot] = k as u32;
     cn.pixel[slot] = pixel;
+    cn.raster[slot] = glam::Vec2::NAN;
     cn.s[slot] = s as u16;
     cn.t[slot] = t as u16;
 }

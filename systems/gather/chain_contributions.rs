@@ -3,7 +3,7 @@
 //! light-tracing splat (t = 1) at the pixel it projects to. The target is the luminance of
 //! them all (pssmlt: the whole BDPT sample; mmlt: its one strategy, MIS weight included).
 //! The same selection of connections as `accumulate_connections`, into the chains instead
-//! of the film.
+//! of the film; each with where it landed, for a filter wider than a pixel.
 
 use crate::components::Connections;
 use crate::components::ShadowRays;
@@ -11,7 +11,7 @@ use crate::components::Wave;
 use crate::math::luminance;
 use crate::mlt::Contributions;
 use crate::pipeline::Flow;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
 pub struct GatherChainContributions;
@@ -19,7 +19,8 @@ pub struct GatherChainContributions;
 crate::system! {
     GatherChainContributions = "gather_chain_contributions";
     read wave: Wave, shadow: ShadowRays, connections: Connections, starts: Vec<usize>,
-        radiance: Vec<Vec3>, sample_pixel: Vec<u32>, multiplex: Vec<u32>, chosen_s: Vec<u16>;
+        radiance: Vec<Vec3>, sample_pixel: Vec<u32>, sample_raster: Vec<Vec2>, multiplex: Vec<u32>,
+        chosen_s: Vec<u16>;
     write out: Contributions;
     run {
         let n = wave.len;
@@ -59,13 +60,13 @@ crate::system! {
                         }
                     }
                     if own != Vec3::ZERO {
-                        chunk.push(local, sample_pixel[k], own);
+                        chunk.push_at(local, sample_pixel[k], sample_raster[k], own);
                         total += own;
                     }
                     for slot in starts[k]..starts[k + 1] {
                         if connections.t[slot] == 1 && shadow.unoccluded[slot] {
                             let v = shadow.contribution[slot];
-                            chunk.push(local, connections.pixel[slot], v);
+                            chunk.push_at(local, connections.pixel[slot], connections.raster[slot], v);
                             total += v;
                         }
                     }

@@ -10,7 +10,7 @@ use crate::components::Wave;
 use crate::film::Film;
 use crate::film::Splats;
 use crate::pipeline::Flow;
-use glam::{DVec3, Vec3};
+use glam::{DVec3, Vec2, Vec3};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
@@ -19,7 +19,7 @@ pub struct AccumulateConnections;
 crate::system! {
     AccumulateConnections = "accumulate_connections";
     read wave: Wave, shadow: ShadowRays, connections: Connections, connection_start: Vec<usize>,
-        connections_len: usize, pixels: u64, strategy_images: bool;
+        connections_len: usize, pixels: u64, sample_raster: Vec<Vec2>, strategy_images: bool;
     write sample_radiance: Vec<Vec3>, film: Film, strategy_sums: BTreeMap<(u16, u16), Vec<DVec3>>;
     run {
         let n = wave.len;
@@ -41,7 +41,11 @@ crate::system! {
                         if conns.t[slot] >= 2 {
                             *value += shadow.contribution[slot];
                         } else {
-                            splats.push(conns.pixel[slot] as usize, shadow.contribution[slot]);
+                            splats.push_at(
+                                conns.pixel[slot] as usize,
+                                conns.raster[slot],
+                                shadow.contribution[slot],
+                            );
                         }
                     }
                 }
@@ -49,7 +53,12 @@ crate::system! {
             })
             .collect();
         debug_assert_eq!(*pixels as usize, film.width * film.height);
-        film.add_wave(wave.first, &sample_radiance[..n]);
+        // Each sample where its camera ray left the film (the film's filter weighs it there).
+        // The film takes positions on the whole film (a crop's offset added).
+        let first = wave.first;
+        let origin = Vec2::new(film.origin().0 as f32, film.origin().1 as f32);
+        let raster = |g: u64| sample_raster[(g - first) as usize] + origin;
+        film.add_wave_at(wave.first, &sample_radiance[..n], &raster);
         film.add_splats(&batches);
         let splats: usize = batches.iter().map(Splats::len).sum();
         let total = *connections_len;

@@ -3,6 +3,12 @@
 //! pass jitters anew; or, for PPM's trees, chain c is tree t = c / pixels of pixel c % pixels,
 //! jittered to point t of the pixel's stratified net (`CameraWalk::jitter`) and weighing
 //! 1 / trees.
+//!
+//! Under the gaussian filter the jitter is drawn by the filter's shape about the pixel's
+//! centre instead (`GaussianSampler`: the same numbers through its inverse distribution), and
+//! the chain weighs the filter over that density: each pixel's estimate is then the filtered
+//! pixel, however the photon mapper averages its passes. An orthographic camera's rays leave
+//! points of its near plane (`Frustum::ray`).
 
 use crate::components::CameraChains;
 use crate::components::Rays;
@@ -10,6 +16,7 @@ use crate::pipeline::Flow;
 use crate::sampling::Sampler;
 use crate::sampling::Stream;
 use crate::scene::Camera;
+use crate::scene::filter::{GaussianSampler, PixelFilter};
 use crate::systems::shade::extend_camera_chains::DIM_PIXEL;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -25,6 +32,11 @@ crate::system! {
     run {
         let cam = camera.frustum();
         let (w, pixels) = (cam.width as u64, cam.width as u64 * cam.height as u64);
+        let filter = match camera.filter {
+            PixelFilter::Box => None,
+            PixelFilter::Gaussian(g) => Some(GaussianSampler::new(g)),
+        };
+        let filter = filter.as_ref();
         let first = *started as u64;
         let n = (*starts - *started).min(pixels as usize);
         let (tree, trees, sample_index) = (*tree, *trees, *sample_index);
@@ -47,9 +59,18 @@ crate::system! {
                         let key = sampler.key(Stream::Camera, pixel, sample_index);
                         (key, sampler.get2(key, DIM_PIXEL), Vec3::ONE)
                     };
-                    let raster = Vec2::new((pixel % w) as f32, (pixel / w) as f32) + offset;
-                    r.origin[i] = cam.position;
-                    r.dir[i] = cam.direction(raster);
+                    let (px, py) = ((pixel % w) as usize, (pixel / w) as usize);
+                    let (raster, beta) = match filter {
+                        None => (Vec2::new(px as f32, py as f32) + offset, beta),
+                        Some(f) => {
+                            let (x, wx) = f.sample(offset.x, px, cam.width as usize);
+                            let (y, wy) = f.sample(offset.y, py, cam.height as usize);
+                            (Vec2::new(x, y), beta * (wx * wy))
+                        }
+                    };
+                    let (origin, dir) = cam.ray(raster);
+                    r.origin[i] = origin;
+                    r.dir[i] = dir;
                     c.pixel[i] = pixel as u32;
                     c.key[i] = key;
                     c.beta[i] = beta;

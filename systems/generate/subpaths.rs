@@ -41,8 +41,8 @@ crate::system! {
     read wave: Wave, data: Arc<SceneData>, pixels: u64, numbers: Numbers, capacity: usize,
         settings: BdptSettings;
     write vertices: Vec<PathVertices>, walkers: Walkers, rays: Rays, subpath_len: Vec<u32>,
-        active: usize, depth: usize, sample_pixel: Vec<u32>, chosen_s: Vec<u16>,
-        multiplex: Vec<u32>;
+        active: usize, depth: usize, sample_pixel: Vec<u32>, sample_raster: Vec<Vec2>,
+        chosen_s: Vec<u16>, multiplex: Vec<u32>;
     run {
         let n = wave.len;
         let cap = *capacity;
@@ -100,23 +100,31 @@ crate::system! {
         let camera_rays = rays.chunks_mut(0..n);
         // Chunks of CHUNK items from 0, as the stores' `chunks_mut` cut them.
         let sample_pixels = sample_pixel[..n].par_chunks_mut(crate::components::CHUNK);
+        let sample_rasters = sample_raster[..n].par_chunks_mut(crate::components::CHUNK);
+        // An orthographic camera's rays leave points of its near plane in one direction: a
+        // delta direction, which no light vertex can be joined to (t = 1) and which the MIS
+        // walk leaves out as it does any delta vertex's strategies.
+        let pinhole = cam.is_pinhole();
         views
             .into_par_iter()
             .zip(camera_walkers)
             .zip(camera_rays)
-            .zip(sample_pixels)
-            .for_each(|(((mut v, wk), r), sample_pixel)| {
-                for (i, sample_pixel) in sample_pixel.iter_mut().enumerate() {
+            .zip(sample_pixels.zip(sample_rasters))
+            .for_each(|(((mut v, wk), r), (sample_pixel, sample_raster))| {
+                for (i, (sample_pixel, sample_raster)) in
+                    sample_pixel.iter_mut().zip(sample_raster).enumerate()
+                {
                     let k = v.start + i;
                     let (key, raster, pixel) = raster_of(k);
                     *sample_pixel = pixel as u32;
-                    let dir = cam.direction(raster);
+                    *sample_raster = raster;
+                    let (origin, dir) = cam.ray(raster);
                     // A multiplexed sample with t = 1 needs only the camera vertex.
                     let walks = !multiplexed || lengths(k).0 >= 2;
                     v.set(
                         i,
                         PathVertex {
-                            p: cam.position,
+                            p: origin,
                             p_error: Vec3::ZERO,
                             ng: cam.forward,
                             ns: cam.forward,
@@ -124,16 +132,19 @@ crate::system! {
                             beta: Vec3::ONE,
                             pdf_fwd: 1.0,
                             pdf_rev: 0.0,
-                            delta: false,
+                            delta: !pinhole,
                         },
                     );
                     wk.subpath[i] = k as u32;
                     wk.key[i] = key;
                     wk.beta[i] = Vec3::ONE;
+                    // 0 for the orthographic camera's delta direction: its first vertex's
+                    // forward density is then "no choice" (1 in the walk), which only the
+                    // left-out t = 1 strategies would read.
                     wk.pdf_dir[i] = cam.pdf_dir(dir);
                     wk.roulette_scale[i] = 1.0;
                     wk.alive[i] = walks;
-                    r.origin[i] = cam.position;
+                    r.origin[i] = origin;
                     r.dir[i] = if walks { dir } else { Vec3::ZERO };
                 }
             });

@@ -12,6 +12,7 @@ use crate::mlt::ChainStates;
 use crate::mlt::MltCounters;
 use crate::mlt::Normalisation;
 use crate::pipeline::Flow;
+use crate::scene::Camera;
 use glam::DVec3;
 use std::collections::BTreeMap;
 
@@ -49,11 +50,13 @@ pub struct SplatExpectedValues;
 
 crate::system! {
     SplatExpectedValues = "splat_expected_values";
-    read chains: ChainStates, pixels: u64;
+    read chains: ChainStates, pixels: u64, camera: Camera;
     write splats: ChainSplats, splat_sums: Vec<DVec3>, nonfinite: u64;
     run {
         crate::mlt::splat_expected_values(chains, splats, *pixels as u32);
-        let (added, dropped) = splats.add_to(splat_sums);
+        // Under the gaussian each splat spreads over its footprint from where it landed.
+        let size = (camera.width as usize, camera.height as usize);
+        let (added, dropped) = splats.add_to_filtered(splat_sums, camera.filter, size);
         *nonfinite += dropped;
         Flow::new(chains.chains(), (added + dropped) as usize)
     }

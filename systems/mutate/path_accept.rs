@@ -77,12 +77,12 @@ crate::system! {
                 let a = chains.acceptance[i];
                 if a > 0.0 {
                     let w = f64::from(scale) * a / chains.proposal_target[i];
-                    out.push(Splat { pixel: chains.proposal_pixel[i], value: (chains.proposal_f[i] * w).as_vec3() });
+                    out.push(Splat { pixel: chains.proposal_pixel[i], value: (chains.proposal_f[i] * w).as_vec3(), at: glam::Vec2::NAN });
                 }
                 let t = chains.current_target[i];
                 if a < 1.0 && t.is_finite() && t > 0.0 {
                     let w = f64::from(scale) * (1.0 - a) / t;
-                    out.push(Splat { pixel: chains.current_pixel[i], value: (chains.current_f[i] * w).as_vec3() });
+                    out.push(Splat { pixel: chains.current_pixel[i], value: (chains.current_f[i] * w).as_vec3(), at: glam::Vec2::NAN });
                 }
             }
         });

@@ -302,10 +302,10 @@ fn variance_image_matches_the_spread_of_seeds() {
     );
 }
 
-/// Only pt renders an orthographic sensor or the gaussian filter; the others refuse them by
-/// name, with what works.
+/// Every integrator renders the gaussian filter and the orthographic sensor but path-space
+/// mlt, which refuses both by name with its reason; every other integrator takes both.
 #[test]
-fn other_integrators_refuse_orthographic_and_gaussian_by_name() {
+fn only_mlt_refuses_orthographic_and_gaussian_by_name() {
     use stagelight::integrators::{IntegratorKind, check_camera};
     let ortho = load_xml("orthographic.xml", |t| t).camera;
     let gaussian = load_xml("gaussian_filter.xml", |t| t).camera;
@@ -318,16 +318,294 @@ fn other_integrators_refuse_orthographic_and_gaussian_by_name() {
     .camera;
     for kind in IntegratorKind::all() {
         assert!(check_camera(kind, &boxed).is_ok());
-        if kind.as_str() == "pt" {
-            assert!(check_camera(kind, &ortho).is_ok() && check_camera(kind, &gaussian).is_ok());
+        if kind.as_str() != "mlt" {
+            assert!(
+                check_camera(kind, &ortho).is_ok() && check_camera(kind, &gaussian).is_ok(),
+                "{kind}"
+            );
             continue;
         }
         let e = check_camera(kind, &ortho).unwrap_err();
         assert!(
-            e.contains(kind.as_str()) && e.contains("orthographic"),
+            e.contains("mlt") && e.contains("orthographic") && e.contains("pinhole"),
             "{e}"
         );
         let e = check_camera(kind, &gaussian).unwrap_err();
-        assert!(e.contains(kind.as_str()) && e.contains("gaussian"), "{e}");
+        assert!(e.contains("mlt") && e.contains("gaussian"), "{e}");
+    }
+}
+
+/// One render of `scene` by integrator `name` at `spp`, seed `seed`, on 2 threads.
+fn render_by(name: &str, scene: &PreparedScene, spp: u64, seed: u64) -> Image {
+    use stagelight::integrators::{IntegratorKind, RenderSettings};
+    let kind = IntegratorKind::from_name(name).unwrap();
+    // Mitsuba's max_depth 3 (segments) is 2 bounces here, as pt's tests above render it.
+    let mut settings = RenderSettings {
+        max_depth: 2,
+        seed,
+        ..RenderSettings::default()
+    };
+    settings.photons.radius = Some(0.01);
+    let data = Arc::new(SceneData::new(scene.clone()));
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap()
+        .install(|| crate::common::render_with(kind, data, &settings, spp))
+}
+
+/// Per channel, the image's mean over that of `reference`.
+fn mean_ratio(image: &Image, reference: &Image) -> [f64; 3] {
+    let (a, b) = (image.channel_means(), reference.channel_means());
+    [a.x / b.x, a.y / b.y, a.z / b.z]
+}
+
+/// The mean over pixels of the squared luminance difference of two images.
+fn luminance_mse(a: &Image, b: &Image) -> f64 {
+    let lum = |p: glam::Vec3| 0.2126 * p.x as f64 + 0.7152 * p.y as f64 + 0.0722 * p.z as f64;
+    a.pixels
+        .iter()
+        .zip(&b.pixels)
+        .map(|(p, q)| (lum(*p) - lum(*q)).powi(2))
+        .sum::<f64>()
+        / a.pixels.len() as f64
+}
+
+/// Every `block` x `block` block's luminance within `tolerance` (relative, plus 2e-3) of the
+/// reference's.
+fn assert_blocks_near(what: &str, image: &Image, reference: &Image, block: usize, tolerance: f64) {
+    let lum = |b: &[f64; 3]| 0.2126 * b[0] + 0.7152 * b[1] + 0.0722 * b[2];
+    let (ours, theirs) = (
+        crate::common::block_means(image, block),
+        crate::common::block_means(reference, block),
+    );
+    for (i, (o, t)) in ours.iter().zip(&theirs).enumerate() {
+        let (o, t) = (lum(o), lum(t));
+        assert!(
+            (o - t).abs() <= tolerance * t + 2e-3,
+            "{what} block {i}: {o:.5} against Mitsuba's {t:.5}"
+        );
+    }
+}
+
+/// The integrators besides pt (tested above against the same references by Mitsuba's own
+/// per-pixel test) and their samples per pixel for the gaussian and orthographic scenes.
+const OTHERS: [(&str, u64); 8] = [
+    ("bdpt", 64),
+    ("vcm", 64),
+    ("bpm", 512),
+    ("pm", 64),
+    ("ppm", 64),
+    ("sppm", 256),
+    ("pssmlt", 256),
+    ("mmlt", 1024),
+];
+
+/// `gaussian_filter.xml` (Mitsuba's default gaussian) under every other integrator against
+/// Mitsuba's render: the mean within 3% per channel, every 8 x 8 block within 6%, and the
+/// image nearer Mitsuba's than the same integrator's render with the box filter (the light's
+/// edges and the cube's silhouette are one-pixel steps that the gaussian blurs: a
+/// box-filtered image is several times further off; its squared error is printed).
+#[test]
+fn gaussian_filter_agrees_with_mitsuba_in_every_integrator() {
+    let reference = Image::read_exr(&mitsuba_dir().join("gaussian_filter_mitsuba.exr")).unwrap();
+    let gaussian = load_xml("gaussian_filter.xml", |t| t);
+    let boxed = load_xml("gaussian_filter.xml", |t| {
+        t.replace(
+            "<film type=\"hdrfilm\">",
+            "<film type=\"hdrfilm\"><rfilter type=\"box\"/>",
+        )
+    });
+    for (name, spp) in OTHERS {
+        let image = render_by(name, &gaussian, spp, 1);
+        let ratio = mean_ratio(&image, &reference);
+        let boxed = render_by(name, &boxed, spp, 1);
+        let (g, b) = (
+            luminance_mse(&image, &reference),
+            luminance_mse(&boxed, &reference),
+        );
+        eprintln!(
+            "{name}: gaussian mean ratio {ratio:.4?}, squared error {g:.3e} (box filter {b:.3e})"
+        );
+        for r in ratio {
+            assert!((r - 1.0).abs() < 0.03, "{name}: mean ratio {ratio:?}");
+        }
+        assert_blocks_near(name, &image, &reference, 8, 0.06);
+        assert!(g < 0.5 * b, "{name}: gaussian {g:.3e} against box {b:.3e}");
+    }
+}
+
+/// `orthographic.xml` (an orthographic sensor with the default gaussian) under every other
+/// integrator against Mitsuba's render: the mean within 3% per channel and every 8 x 8 block
+/// within 6%. (pt's test shows the same view through a pinhole fails against this
+/// reference.)
+#[test]
+fn orthographic_agrees_with_mitsuba_in_every_integrator() {
+    let reference = Image::read_exr(&mitsuba_dir().join("orthographic_mitsuba.exr")).unwrap();
+    let scene = load_xml("orthographic.xml", |t| t);
+    for (name, spp) in OTHERS {
+        let image = render_by(name, &scene, spp, 2);
+        let ratio = mean_ratio(&image, &reference);
+        eprintln!(
+            "{name}: orthographic mean ratio {ratio:.4?}, squared error {:.3e}",
+            luminance_mse(&image, &reference)
+        );
+        for r in ratio {
+            assert!((r - 1.0).abs() < 0.03, "{name}: mean ratio {ratio:?}");
+        }
+        assert_blocks_near(name, &image, &reference, 8, 0.06);
+    }
+}
+
+/// Under an orthographic camera no light vertex can be joined to the camera: BDPT's
+/// light-tracing strategies (t = 1) alone render black, where through a pinhole they light
+/// the image, and the MIS-weighted image's strategy layers have no t = 1 light in them.
+#[test]
+fn light_tracing_contributes_nothing_under_an_orthographic_camera() {
+    use stagelight::integrators::bdpt::{BdptSettings, StrategyFilter};
+    let ortho = load_xml("orthographic.xml", |t| t);
+    let pinhole = load_xml("orthographic.xml", |t| {
+        t.replace("type=\"orthographic\"", "type=\"perspective\"")
+            .replace(
+                "<float name=\"near_clip\" value=\"1\"/>",
+                "<float name=\"fov\" value=\"30\"/>",
+            )
+            .replace("<scale x=\"1.5\" y=\"1.5\"/>", "")
+    });
+    let light_tracing = BdptSettings {
+        strategies: StrategyFilter::Only {
+            s: None,
+            t: Some(1),
+        },
+        ..BdptSettings::new(4, 2)
+    };
+    let mean = |scene: &PreparedScene, s: BdptSettings| {
+        let image = crate::common::render_bdpt(scene.clone(), 8, s)
+            .0
+            .film
+            .image();
+        image.channel_means()
+    };
+    assert_eq!(mean(&ortho, light_tracing), glam::DVec3::ZERO);
+    assert!(mean(&pinhole, light_tracing).min_element() > 0.05);
+    let layered = BdptSettings {
+        strategy_images: true,
+        ..BdptSettings::new(4, 2)
+    };
+    let (outcome, layers) = crate::common::render_bdpt(ortho, 8, layered);
+    assert!(outcome.film.image().channel_means().min_element() > 0.05);
+    for (name, layer) in &layers {
+        if name.ends_with("_t1") {
+            assert_eq!(layer.channel_means(), glam::DVec3::ZERO, "{name}");
+        }
+    }
+    // The light faces away from the camera: direct light (s = 1, t = 2) is the image's.
+    assert!(
+        layers
+            .iter()
+            .any(|(n, l)| n == "s1_t2" && l.channel_means().max_element() > 0.0)
+    );
+}
+
+/// Light tracing alone (BDPT's t = 1 strategies, unweighted) under the gaussian estimates the
+/// image pt's filtered camera samples do, in the film's border rows and columns too (where
+/// the filter's footprint leaves the film and the splats' normalisation, the filter's
+/// integral over the film about each pixel, differs most from the integral over the whole
+/// line: Mitsuba's particle tracer's per-splat normalisation would darken the outermost ring
+/// by about 40%): the means of the outer ring, the next ring and the interior over 8 seeds
+/// each agree within 4.5 combined standard errors.
+#[test]
+fn light_tracing_under_the_gaussian_estimates_the_cameras_filtered_image() {
+    use stagelight::integrators::bdpt::{BdptSettings, StrategyFilter};
+    let scene = load_xml("gaussian_filter.xml", |t| t);
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let ring = |x: usize, y: usize| x.min(y).min(w - 1 - x).min(h - 1 - y).min(2);
+    let regions = |image: &Image| {
+        let mut sums = [[0.0f64; 3]; 3];
+        let mut counts = [0.0f64; 3];
+        for y in 0..h {
+            for x in 0..w {
+                let r = ring(x, y);
+                let p = image.pixels[y * w + x];
+                for c in 0..3 {
+                    sums[r][c] += p[c] as f64;
+                }
+                counts[r] += 1.0;
+            }
+        }
+        (0..3)
+            .map(|r| sums[r].map(|s| s / counts[r]))
+            .collect::<Vec<_>>()
+    };
+    let stats = |render: &dyn Fn(u64) -> Image| {
+        let runs: Vec<Vec<[f64; 3]>> = (0..8).map(|seed| regions(&render(seed))).collect();
+        (0..3)
+            .map(|r| {
+                let mut mean = [0.0; 3];
+                let mut se = [0.0; 3];
+                for c in 0..3 {
+                    mean[c] = runs.iter().map(|m| m[r][c]).sum::<f64>() / 8.0;
+                    let var = runs
+                        .iter()
+                        .map(|m| (m[r][c] - mean[c]).powi(2))
+                        .sum::<f64>()
+                        / 7.0;
+                    se[c] = (var / 8.0).sqrt();
+                }
+                (mean, se)
+            })
+            .collect::<Vec<_>>()
+    };
+    let light_tracing = BdptSettings {
+        strategies: StrategyFilter::Only {
+            s: None,
+            t: Some(1),
+        },
+        ..BdptSettings::new(0, 2)
+    };
+    let lt = stats(&|seed| {
+        crate::common::render_bdpt(
+            scene.clone(),
+            16,
+            BdptSettings {
+                seed: 10 + seed,
+                ..light_tracing
+            },
+        )
+        .0
+        .film
+        .image()
+    });
+    let pt = stats(&|seed| render(&scene, 16, 30 + seed, 2).film.image());
+    for (r, name) in ["outer ring", "second ring", "interior"].iter().enumerate() {
+        eprintln!("{name}: light tracing {:.5?} pt {:.5?}", lt[r].0, pt[r].0);
+        crate::bdpt::assert_agree(name, lt[r], pt[r], 4.5);
+    }
+}
+
+/// Under the gaussian the films of bdpt (samples and splats), pssmlt (spread splats) and
+/// sppm (filter-drawn camera rays) are the same bits on 1 and 3 threads.
+#[test]
+fn filtered_images_do_not_depend_on_the_thread_count() {
+    use stagelight::integrators::{IntegratorKind, RenderSettings};
+    let scene = load_xml("gaussian_filter.xml", |t| t);
+    let data = Arc::new(SceneData::new(scene));
+    for name in ["bdpt", "pssmlt", "sppm"] {
+        let kind = IntegratorKind::from_name(name).unwrap();
+        let settings = RenderSettings {
+            max_depth: 2,
+            seed: 9,
+            ..RenderSettings::default()
+        };
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| crate::common::render_with(kind, data.clone(), &settings, 4))
+        };
+        let one = on(1);
+        assert_eq!(one, on(3), "{name}");
+        assert!(one.channel_means().x > 0.05, "{name}");
     }
 }
