@@ -154,16 +154,25 @@ pub fn to_area(pdf_dir: f32, from: &Vertex, to: &Vertex) -> f32 {
     pdf
 }
 
-/// The shading frame and geometric normal of a surface vertex seen from `wo`: Lambertian
-/// surfaces reflect on both sides, so their normals turn to `wo`'s side.
+/// The material of surface vertex `v` seen from `wo`, its shading frame and its geometric
+/// normal: a material that reflects on both sides (`Material::is_two_sided`) is evaluated
+/// about normals turned to `wo`'s side (and read in that frame: an anisotropic lobe's axis).
 #[inline]
-pub fn local_frame(material: &Material, v: &Vertex, wo: Vec3) -> (Frame, Vec3) {
-    let (mut ng, mut ns) = (v.ng, v.ns);
-    if material.kind().is_two_sided() && wo.dot(ng) < 0.0 {
-        ng = -ng;
-        ns = -ns;
+pub fn local_frame(scene: &PreparedScene, v: &Vertex, wo: Vec3) -> (Material, Frame, Vec3) {
+    let (ng, ns) = turned_normals(scene, v, wo);
+    let material = scene.material_seen(v.triangle, v.p, wo, v.ng, ns);
+    (material, Frame::from_normal(ns), ng)
+}
+
+/// `v`'s geometric and shading normals, turned to `wo`'s side where its material reflects on
+/// both sides.
+#[inline]
+fn turned_normals(scene: &PreparedScene, v: &Vertex, wo: Vec3) -> (Vec3, Vec3) {
+    if wo.dot(v.ng) < 0.0 && scene.reflects_on_both_sides(v.triangle) {
+        (-v.ng, -v.ns)
+    } else {
+        (v.ng, v.ns)
     }
-    (Frame::from_normal(ns), ng)
 }
 
 impl<'a> PathContext<'a> {
@@ -183,10 +192,12 @@ impl PathContext<'_> {
     }
 
     /// The material at surface vertex `v` as seen from direction `wo` (see
-    /// `PreparedScene::material_seen`).
+    /// `PreparedScene::material_seen`) and the shading normal it is evaluated about (turned to
+    /// `wo`'s side where it reflects on both sides).
     #[inline]
-    pub fn material_seen(&self, v: &Vertex, wo: Vec3) -> Material {
-        self.scene.material_seen(v.triangle, v.p, wo, v.ng, v.ns)
+    pub fn material_seen(&self, v: &Vertex, wo: Vec3) -> (Material, Vec3) {
+        let (_, ns) = turned_normals(self.scene, v, wo);
+        (self.scene.material_seen(v.triangle, v.p, wo, v.ng, ns), ns)
     }
 
     /// Whether a strategy may join a subpath at this vertex: not at a delta surface.
@@ -302,7 +313,8 @@ impl PathContext<'_> {
                     // Only reflection is connectible (the dielectric, which refracts, is not).
                     return Vec3::ZERO;
                 }
-                let f = self.material_seen(v, wo).eval_world(v.ns, wo, wi);
+                let (material, ns) = self.material_seen(v, wo);
+                let f = material.eval_world(ns, wo, wi);
                 match mode {
                     TransportMode::Radiance => f,
                     TransportMode::Importance => f * shading_correction(v, wo, wi),
@@ -339,7 +351,8 @@ impl PathContext<'_> {
                 if wi.dot(v.ng) * wo.dot(v.ng) <= 0.0 {
                     return 0.0;
                 }
-                self.material_seen(v, wo).pdf_world(v.ns, wo, wi)
+                let (material, ns) = self.material_seen(v, wo);
+                material.pdf_world(ns, wo, wi)
             }
         }
     }
@@ -375,19 +388,17 @@ enum Lobe {
     PointLight(usize),
     /// Lambertian: reflectance / pi.
     Diffuse(Vec3),
-    /// Any other connectible BSDF.
-    Other(Material),
+    /// Any other connectible BSDF, and the shading normal it is evaluated about.
+    Other(Material, Vec3),
 }
 
 impl Joint {
-    /// f(wo, wi) at vertex `v` (the one the joint was prepared for) for unit `wi`, given
-    /// wi . ng and wi . ns.
+    /// f(wo, wi) at the vertex the joint was prepared for, for unit `wi`, given wi . ng and
+    /// wi . ns.
     #[inline]
-    #[allow(clippy::too_many_arguments)]
     fn f(
         &self,
         emitters: &crate::scene::Emitters,
-        v: &Vertex,
         wi: Vec3,
         wi_ng: f32,
         wi_ns: f32,
@@ -406,7 +417,7 @@ impl Joint {
                     return Vec3::ZERO;
                 }
             }
-            Lobe::Other(material) => material.eval_world(v.ns, self.wo, wi),
+            Lobe::Other(material, ns) => material.eval_world(ns, self.wo, wi),
         };
         match mode {
             TransportMode::Importance if self.shading_normal => {
@@ -563,9 +574,9 @@ impl PathContext<'_> {
             }
             VertexKind::Light => Lobe::Light,
             VertexKind::Surface => match self.material_seen(v, wo) {
-                Material::Dielectric { .. } => return None,
-                Material::Diffuse { reflectance } => Lobe::Diffuse(reflectance * FRAC_1_PI),
-                material => Lobe::Other(material),
+                (Material::Dielectric { .. }, _) => return None,
+                (Material::Diffuse { reflectance }, _) => Lobe::Diffuse(reflectance * FRAC_1_PI),
+                (material, ns) => Lobe::Other(material, ns),
             },
         };
         Some(Joint {
@@ -594,7 +605,6 @@ impl PathContext<'_> {
         let emitters = &self.scene.emitters;
         let fz = zj.f(
             emitters,
-            z,
             w,
             w.dot(z.ng),
             w.dot(z.ns),
@@ -605,7 +615,7 @@ impl PathContext<'_> {
         }
         // Towards z from y: -w, whose dot products are those of w negated, exactly.
         let (w_ng_y, w_ns_y) = (w.dot(y.ng), w.dot(y.ns));
-        let fy = yj.f(emitters, y, -w, -w_ng_y, -w_ns_y, TransportMode::Importance);
+        let fy = yj.f(emitters, -w, -w_ng_y, -w_ns_y, TransportMode::Importance);
         let cos_y = if y.is_point_light() {
             1.0
         } else if y.kind == VertexKind::Light {

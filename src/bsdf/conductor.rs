@@ -46,6 +46,9 @@ pub struct Conductor {
     /// A factor on the Fresnel term (Mitsuba's `specular_reflectance`).
     pub reflectance: Vec3,
     pub ior: ComplexIor,
+    /// Reflects on both sides (Mitsuba's `twosided`): the engine turns the shading frame to
+    /// the side a ray arrives from, as for Lambertian surfaces.
+    pub two_sided: bool,
 }
 
 impl Conductor {
@@ -63,6 +66,7 @@ impl Conductor {
             axis: Vec2::X,
             reflectance,
             ior,
+            two_sided: false,
         }
     }
 

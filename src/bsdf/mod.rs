@@ -62,17 +62,6 @@ impl MaterialKind {
         }
     }
 
-    /// Whether it reflects alike on both sides of a surface: the engine turns the normals to
-    /// the side a ray arrives from (the others are black from behind, or transmit).
-    pub const fn is_two_sided(self) -> bool {
-        match self {
-            MaterialKind::Diffuse => true,
-            MaterialKind::Conductor | MaterialKind::RoughPlastic | MaterialKind::Dielectric => {
-                false
-            }
-        }
-    }
-
     /// The name of the shading system of this kind.
     pub const fn shading_system(self) -> &'static str {
         match self {
@@ -95,6 +84,18 @@ const _: () = {
 };
 
 impl Material {
+    /// Whether it reflects alike on both sides of a surface: the engine turns the shading
+    /// frame to the side a ray arrives from (Lambertian surfaces always; a conductor or a
+    /// plastic inside Mitsuba's `twosided`). The others are black from behind, or transmit.
+    pub const fn is_two_sided(&self) -> bool {
+        match self {
+            Material::Diffuse { .. } => true,
+            Material::Conductor(c) => c.two_sided,
+            Material::RoughPlastic(p) => p.two_sided,
+            Material::Dielectric { .. } => false,
+        }
+    }
+
     pub fn kind(&self) -> MaterialKind {
         match self {
             Material::Diffuse { .. } => MaterialKind::Diffuse,

@@ -55,6 +55,8 @@ pub struct RoughPlastic {
     /// the means over the channels (and over a texture's texels where textured).
     pub specular_weight: f32,
     pub coat: &'static Coat,
+    /// Reflects on both sides (Mitsuba's `twosided`; see `Conductor::two_sided`).
+    pub two_sided: bool,
 }
 
 impl RoughPlastic {
@@ -80,6 +82,7 @@ impl RoughPlastic {
             specular,
             specular_weight: specular_mean / (diffuse_mean + specular_mean),
             coat: coat_tables(distribution, alpha, eta),
+            two_sided: false,
         }
     }
 

@@ -473,8 +473,7 @@ impl<'a> PathSpace<'a> {
                 })
             }
             VertexKind::Surface => {
-                let material = self.ctx.material_seen(v, wo);
-                let (frame, ng) = local_frame(&material, v, wo);
+                let (material, frame, ng) = local_frame(self.ctx.scene, v, wo);
                 let (bs, wi) =
                     sample_direction(&material, &frame, ng, wo, frame.to_local(wo), u, mode)?;
                 (bs.value.max_element() > 0.0).then_some((wi, bs.pdf))

@@ -283,10 +283,10 @@ impl PreparedScene {
         }
     }
 
-    /// The kind of triangle `tri`'s material (whatever its textures).
+    /// Whether triangle `tri`'s material reflects alike on both sides (`Material::is_two_sided`).
     #[inline]
-    pub fn kind_of(&self, tri: u32) -> crate::bsdf::MaterialKind {
-        self.materials[self.triangles.material[tri as usize] as usize].kind()
+    pub fn reflects_on_both_sides(&self, tri: u32) -> bool {
+        self.materials[self.triangles.material[tri as usize] as usize].is_two_sided()
     }
 
     /// The material of triangle `tri` at point `p` on it, its textures looked up there. `ns` is

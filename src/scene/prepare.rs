@@ -105,7 +105,9 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             materials.push(*material);
             // Conductors are black from behind by their own maths; only the Lambertian lobe,
             // which the engine mirrors to the side a ray comes from, needs the mark.
-            black_behind.push(one_sided.is_some() && material.kind().is_two_sided());
+            // Only a material the engine would mirror to the side a ray comes from needs the
+            // mark; the others are black from behind by their own maths.
+            black_behind.push(one_sided.is_some() && material.is_two_sided());
         } else {
             warnings.push(format!(
                 "material \"{}\" is not used",

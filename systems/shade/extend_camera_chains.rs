@@ -104,7 +104,7 @@ crate::system! {
                         continue;
                     }
                     let (mut ng, mut ns) = (sp.ng, sp.ns);
-                    if wo.dot(ng) < 0.0 && scene.kind_of(tri).is_two_sided() {
+                    if wo.dot(ng) < 0.0 && scene.reflects_on_both_sides(tri) {
                         // Lambertian surfaces reflect on both sides: gather on wo's side.
                         ng = -ng;
                         ns = -ns;

@@ -219,8 +219,7 @@ fn scatter(
     light: bool,
 ) -> Option<Scattered> {
     let wo = (prev.p - here.p).normalize_or_zero();
-    let material = scene.material_seen(here.triangle, here.p, wo, here.ng, here.ns);
-    let (frame, ng) = local_frame(&material, here, wo);
+    let (material, frame, ng) = local_frame(scene, here, wo);
     let wo_local = frame.to_local(wo);
     let (dim, mode) = if light {
         (light_vertex_dim(d), TransportMode::Importance)

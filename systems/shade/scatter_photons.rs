@@ -100,7 +100,7 @@ crate::system! {
                         pdf_rev: 0.0,
                         delta: false,
                     };
-                    let (frame, ng) = local_frame(&material, &here, wo);
+                    let (material, frame, ng) = local_frame(scene, &here, wo);
                     let wo_local = frame.to_local(wo);
                     let key = w.key[i];
                     let dim = bounce_dim(depth);

@@ -76,7 +76,7 @@ crate::system! {
                 *total += n;
             }
         }
-        let kept = counts[0] + counts[1] + counts[2];
+        let kept: usize = counts[..MaterialKind::COUNT].iter().sum();
         // Pass 2, per chunk in parallel: each chunk writes its slots into its own stretch of
         // every queue (queues in slot order, dropped paths last), so the order is the same as a
         // serial stable partition's, whatever the thread count.

@@ -57,16 +57,17 @@ impl Surface {
     #[inline(always)]
     pub fn new(data: &SceneData, triangle: u32, point: &SurfacePoint, dir: Vec3) -> Surface {
         let wo = -dir;
-        let material = data
-            .scene
-            .material_seen(triangle, point.p, wo, point.ng, point.ns);
         let mut ng = point.ng;
         let mut ns = point.ns;
-        // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
-        if material.kind().is_two_sided() && wo.dot(ng) < 0.0 {
+        // Lambertian surfaces (and two-sided others) reflect on both sides: shade from the
+        // side the ray came from, the material read in that frame.
+        if wo.dot(ng) < 0.0 && data.scene.reflects_on_both_sides(triangle) {
             ng = -ng;
             ns = -ns;
         }
+        let material = data
+            .scene
+            .material_seen(triangle, point.p, wo, point.ng, ns);
         let frame = Frame::from_normal(ns);
         Surface {
             p: point.p,

@@ -864,16 +864,26 @@ impl<'a> Builder<'a> {
                     ));
                 };
                 let inner = self.object(one.object);
-                if inner.class != Class::Bsdf || inner.kind != "diffuse" {
+                const REFLECTORS: [&str; 4] =
+                    ["diffuse", "conductor", "roughconductor", "roughplastic"];
+                if inner.class != Class::Bsdf || !REFLECTORS.contains(&inner.kind.as_str()) {
                     return Err(XmlError::at(
                         &one.spot,
                         format!(
-                            "twosided of \"{}\" is not supported (supported: twosided of diffuse)",
-                            super::super::echo(&inner.kind)
+                            "twosided of \"{}\" is not supported (supported: twosided of {})",
+                            super::super::echo(&inner.kind),
+                            REFLECTORS.join(", ")
                         ),
                     ));
                 }
-                return Ok((self.diffuse(inner)?, Sides::Two));
+                let (mut material, _) = self.material_of(inner)?;
+                match &mut material {
+                    Material::Conductor(c) => c.two_sided = true,
+                    Material::RoughPlastic(p) => p.two_sided = true,
+                    // Lambertian reflection is two-sided in the engine already.
+                    Material::Diffuse { .. } | Material::Dielectric { .. } => {}
+                }
+                return Ok((material, Sides::Two));
             }
             "diffuse" => {
                 drop(params);
