@@ -187,27 +187,47 @@ type TableKey = (Microfacet, u32, u32);
 /// for the process's life so that materials stay `Copy`.
 fn coat_tables(distribution: Microfacet, alpha: f32, eta: f32) -> &'static Coat {
     static TABLES: OnceLock<Mutex<HashMap<TableKey, &'static Coat>>> = OnceLock::new();
+    let tables = TABLES.get_or_init(Default::default);
     let key = (distribution, alpha.to_bits(), eta.to_bits());
-    let mut tables = TABLES
-        .get_or_init(Default::default)
-        .lock()
-        .unwrap_or_else(|e| e.into_inner());
-    tables.entry(key).or_insert_with(|| {
-        let mut t = [0.0f32; TRANSMITTANCE_POINTS];
-        let mut inside = 0.0f64;
-        for (i, ti) in t.iter_mut().enumerate() {
+    let lock = || tables.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(coat) = lock().get(&key) {
+        return coat;
+    }
+    // Computed without the lock held (the quadratures run on rayon's threads); a thread that
+    // raced to the same key keeps the first table stored, equal to its own.
+    let coat = compute_coat(distribution, alpha, eta);
+    lock()
+        .entry(key)
+        .or_insert_with(|| Box::leak(Box::new(coat)))
+}
+
+/// `coat_tables`' work: each cosine's two quadratures on rayon's threads (tens of thousands of
+/// visible-normal samples each), summed in index order, so the tables do not depend on the
+/// thread count.
+fn compute_coat(distribution: Microfacet, alpha: f32, eta: f32) -> Coat {
+    use rayon::prelude::*;
+    let per_cosine: Vec<(f32, f64)> = (0..TRANSMITTANCE_POINTS)
+        .into_par_iter()
+        .map(|i| {
             let mu = (i as f32 / (TRANSMITTANCE_POINTS - 1) as f32).max(1e-6);
             let w = Vec3::new((1.0 - mu * mu).sqrt(), 0.0, mu);
-            *ti = coat_scattering(distribution, alpha, w, eta, false) as f32;
-            inside += coat_scattering(distribution, alpha, w, 1.0 / eta, true) * f64::from(mu);
-        }
+            (
+                coat_scattering(distribution, alpha, w, eta, false) as f32,
+                coat_scattering(distribution, alpha, w, 1.0 / eta, true) * f64::from(mu),
+            )
+        })
+        .collect();
+    let mut transmittance = [0.0f32; TRANSMITTANCE_POINTS];
+    let mut inside = 0.0f64;
+    for (t, (transmitted, reflected)) in transmittance.iter_mut().zip(per_cosine) {
+        *t = transmitted;
+        inside += reflected;
+    }
+    Coat {
+        transmittance,
         // Twice the mean of R(mu) mu over the same cosines: the cosine-weighted average.
-        let internal_reflectance = (2.0 * inside / TRANSMITTANCE_POINTS as f64) as f32;
-        Box::leak(Box::new(Coat {
-            transmittance: t,
-            internal_reflectance,
-        }))
-    })
+        internal_reflectance: (2.0 * inside / TRANSMITTANCE_POINTS as f64) as f32,
+    }
 }
 
 /// What a rough dielectric interface of relative index `eta` reflects (`reflect`) or refracts

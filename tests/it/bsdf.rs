@@ -1689,7 +1689,10 @@ fn stability_all_materials() {
             for other in [1e-4f32, 1.0] {
                 check_material_finite(anisotropic_of(distribution, alpha, other, 33.0));
             }
-            check_material_finite(plastic_of(distribution, alpha));
+            // The coat's tables take a second each: the extremes and one between.
+            if [0.0, 0.3, 1e4].contains(&alpha) {
+                check_material_finite(plastic_of(distribution, alpha));
+            }
         }
     }
     // Near-mirror pairs at tiny alpha stay finite: the peak of D at grazing angles.
