@@ -127,14 +127,8 @@ impl Conductor {
         // Both above the surface: h.z > 0 and |h| >= h.z, so normalising is safe.
         let h = h / h.length();
         let a = Alphas::new(self.alpha_u, self.alpha_v);
-        let (d, go, gi) = match self.distribution {
-            Microfacet::Ggx => (a.ggx_ndf(h), a.ggx_g1_over_cos(wo), a.ggx_g1_over_cos(wi)),
-            Microfacet::Beckmann => (
-                a.beckmann_ndf(h),
-                a.beckmann_g1_over_cos(wo),
-                a.beckmann_g1_over_cos(wi),
-            ),
-        };
+        let m = self.distribution;
+        let (d, go, gi) = (a.ndf(m, h), a.g1_over_cos(m, wo), a.g1_over_cos(m, wi));
         // The pdf's (wo.h) factors cancel: D_wo(h) / (4 wo.h) = G1(wo) D(h) / (4 wo.z).
         let pdf = 0.25 * go * d;
         let reflectance = if self.ior == ComplexIor::PERFECT_MIRROR {
@@ -154,10 +148,7 @@ impl Conductor {
         }
         let on_axis = self.onto_axis(wo);
         let a = Alphas::new(self.alpha_u, self.alpha_v);
-        let h = match self.distribution {
-            Microfacet::Ggx => a.ggx_visible_normal(on_axis, u),
-            Microfacet::Beckmann => a.beckmann_visible_normal(on_axis, u),
-        };
+        let h = a.visible_normal(self.distribution, on_axis, u);
         let wi = 2.0 * on_axis.dot(h) * h - on_axis;
         if wi.z <= 0.0 {
             return None; // reflected below the surface: masked

@@ -57,6 +57,33 @@ impl Alphas {
         }
     }
 
+    /// D(m) of `distribution` (see `ggx_ndf`, `beckmann_ndf`).
+    #[inline]
+    pub(crate) fn ndf(&self, distribution: Microfacet, m: Vec3) -> f32 {
+        match distribution {
+            Microfacet::Ggx => self.ggx_ndf(m),
+            Microfacet::Beckmann => self.beckmann_ndf(m),
+        }
+    }
+
+    /// Smith's G1(w) / w.z of `distribution`, w.z > 0.
+    #[inline]
+    pub(crate) fn g1_over_cos(&self, distribution: Microfacet, w: Vec3) -> f32 {
+        match distribution {
+            Microfacet::Ggx => self.ggx_g1_over_cos(w),
+            Microfacet::Beckmann => self.beckmann_g1_over_cos(w),
+        }
+    }
+
+    /// A normal of `distribution` visible from `wo` (wo.z > 0), for the numbers `u`.
+    #[inline]
+    pub(crate) fn visible_normal(&self, distribution: Microfacet, wo: Vec3, u: Vec2) -> Vec3 {
+        match distribution {
+            Microfacet::Ggx => self.ggx_visible_normal(wo, u),
+            Microfacet::Beckmann => self.beckmann_visible_normal(wo, u),
+        }
+    }
+
     /// The roughness in `w`'s azimuth times sin(theta): alpha sin for an isotropic lobe,
     /// sqrt(alpha_u^2 w.x^2 + alpha_v^2 w.y^2) in general.
     #[inline]

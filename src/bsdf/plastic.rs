@@ -122,14 +122,8 @@ impl RoughPlastic {
         let h = wo + wi;
         let h = h / h.length();
         let a = Alphas::new(self.alpha, self.alpha);
-        let (d, go, gi) = match self.distribution {
-            Microfacet::Ggx => (a.ggx_ndf(h), a.ggx_g1_over_cos(wo), a.ggx_g1_over_cos(wi)),
-            Microfacet::Beckmann => (
-                a.beckmann_ndf(h),
-                a.beckmann_g1_over_cos(wo),
-                a.beckmann_g1_over_cos(wi),
-            ),
-        };
+        let m = self.distribution;
+        let (d, go, gi) = (a.ndf(m, h), a.g1_over_cos(m, wo), a.g1_over_cos(m, wi));
         let glossy_pdf = 0.25 * go * d;
         let glossy = self.specular * (fresnel(wo.dot(h), self.eta) * glossy_pdf * gi);
         let (t_o, t_i) = (self.transmittance_at(wo.z), self.transmittance_at(wi.z));
@@ -155,10 +149,7 @@ impl RoughPlastic {
         let wi = if u.x < p {
             let u = Vec2::new(u.x / p, u.y);
             let a = Alphas::new(self.alpha, self.alpha);
-            let h = match self.distribution {
-                Microfacet::Ggx => a.ggx_visible_normal(wo, u),
-                Microfacet::Beckmann => a.beckmann_visible_normal(wo, u),
-            };
+            let h = a.visible_normal(self.distribution, wo, u);
             (2.0 * wo.dot(h) * h - wo).normalize()
         } else {
             let u = Vec2::new(((u.x - p) / (1.0 - p)).min(1.0 - f32::EPSILON), u.y);
@@ -242,20 +233,13 @@ fn coat_scattering(distribution: Microfacet, alpha: f32, w: Vec3, eta: f32, refl
     let g1 = |v: Vec3| {
         // Smith's G1 is even in v.z (a refracted direction lies below the surface).
         let up = Vec3::new(v.x, v.y, v.z.abs());
-        let ratio = match distribution {
-            Microfacet::Ggx => a.ggx_g1_over_cos(up),
-            Microfacet::Beckmann => a.beckmann_g1_over_cos(up),
-        };
-        f64::from(ratio * up.z)
+        f64::from(a.g1_over_cos(distribution, up) * up.z)
     };
     let mut sum = 0.0f64;
     for (x, wx) in nodes.iter().zip(&weights) {
         for (y, wy) in nodes.iter().zip(&weights) {
             let u = Vec2::new((0.5 * x + 0.5) as f32, (0.5 * y + 0.5) as f32);
-            let m = match distribution {
-                Microfacet::Ggx => a.ggx_visible_normal(w, u),
-                Microfacet::Beckmann => a.beckmann_visible_normal(w, u),
-            };
+            let m = a.visible_normal(distribution, w, u);
             let cos_i = w.dot(m);
             let f = f64::from(fresnel(cos_i, eta));
             let value = if reflect {

@@ -24,6 +24,7 @@ use crate::math::Frame;
 use crate::path::{PathContext, Vertex, VertexKind, local_frame, to_area};
 use crate::sampling::{SampleKey, cosine_hemisphere};
 use crate::scene::SceneData;
+use crate::systems::shade::sort_by_material::shading_point;
 use glam::{DVec3, Vec2, Vec3};
 use std::f32::consts::PI;
 
@@ -301,19 +302,20 @@ impl<'a> PathSpace<'a> {
             VertexKind::Camera => from.p,
             _ => offset_ray_origin(from.p, from.p_error, from.ng, dir),
         };
+        self.first_surface(origin, dir)
+    }
+
+    /// The surface vertex where the ray (origin, dir) first hits, its shading normal turned to
+    /// the geometric one's side.
+    fn first_surface(&self, origin: Vec3, dir: Vec3) -> Option<Vertex> {
         let hit = self.accel.closest_hit(origin, dir, f32::INFINITY)?;
-        let sp = surface_point(&self.data.scene.triangles, hit.triangle, hit.b1, hit.b2);
-        let ns = if sp.ns.dot(sp.ng) < 0.0 {
-            -sp.ns
-        } else {
-            sp.ns
-        };
+        let sp = shading_point(&self.data.scene.triangles, hit.triangle, hit.b1, hit.b2);
         Some(Vertex {
             kind: VertexKind::Surface,
             p: sp.p,
             p_error: sp.p_error,
             ng: sp.ng,
-            ns,
+            ns: sp.ns,
             triangle: hit.triangle,
             beta: Vec3::ZERO,
             pdf_fwd: 0.0,
@@ -353,26 +355,7 @@ impl<'a> PathSpace<'a> {
     /// the scene at the point for `u`; the solid-angle-like density of that choice is the
     /// disk's (`PathContext::pdf_light_dir`).
     pub fn trace_from_infinity(&self, v: &Vertex, u: Vec2) -> Option<Vertex> {
-        let origin = self.data.scene.emitters.disk.origin(-v.ng, u);
-        let hit = self.accel.closest_hit(origin, v.ng, f32::INFINITY)?;
-        let sp = surface_point(&self.data.scene.triangles, hit.triangle, hit.b1, hit.b2);
-        let ns = if sp.ns.dot(sp.ng) < 0.0 {
-            -sp.ns
-        } else {
-            sp.ns
-        };
-        Some(Vertex {
-            kind: VertexKind::Surface,
-            p: sp.p,
-            p_error: sp.p_error,
-            ng: sp.ng,
-            ns,
-            triangle: hit.triangle,
-            beta: Vec3::ZERO,
-            pdf_fwd: 0.0,
-            pdf_rev: 0.0,
-            delta: false,
-        })
+        self.first_surface(self.data.scene.emitters.disk.origin(-v.ng, u), v.ng)
     }
 
     /// Whether nothing lies between `a` and `b` (to the end of the scene where one of them

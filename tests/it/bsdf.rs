@@ -665,12 +665,7 @@ fn rough_plastic_matches_mitsuba_eval_and_pdf() {
         specular,
         true,
     );
-    #[allow(clippy::type_complexity)]
-    let cases: [(
-        RoughPlastic,
-        f32,
-        Vec<((f64, f64), (f64, f64), [f32; 3], f32)>,
-    ); 2] = [
+    let cases: [(RoughPlastic, f32, Vec<MitsubaPair>); 2] = [
         (
             beckmann,
             0.01,
@@ -757,22 +752,7 @@ fn rough_plastic_matches_mitsuba_eval_and_pdf() {
         ),
     ];
     for (m, tolerance, pairs) in cases {
-        for (wo, wi, f, pdf) in pairs {
-            let (wo, wi) = (dir_deg(wo.0, wo.1), dir_deg(wi.0, wi.1));
-            let (got_f, got_pdf) = (m.eval(wo, wi), m.pdf(wo, wi));
-            for c in 0..3 {
-                assert!(
-                    rel_close(got_f[c], f[c], tolerance),
-                    "{:?} wo {wo} wi {wi}: f {got_f}, Mitsuba's {f:?}",
-                    m.distribution
-                );
-            }
-            assert!(
-                rel_close(got_pdf, pdf, tolerance),
-                "{:?} wo {wo} wi {wi}: pdf {got_pdf}, Mitsuba's {pdf}",
-                m.distribution
-            );
-        }
+        assert_matches_mitsuba(&Material::RoughPlastic(m), tolerance, &pairs);
     }
 }
 
@@ -1010,6 +990,28 @@ fn near_mirror_conductor_reflects_its_fresnel_term() {
     }
 }
 
+/// A direction pair (wo, wi as polar and azimuth angles in degrees) with Mitsuba's f (over
+/// the cosine) and pdf there.
+type MitsubaPair = ((f64, f64), (f64, f64), [f32; 3], f32);
+
+/// `m`'s eval and pdf equal Mitsuba's values at each pair within relative `tolerance`.
+fn assert_matches_mitsuba(m: &Material, tolerance: f32, pairs: &[MitsubaPair]) {
+    for &(wo, wi, f, pdf) in pairs {
+        let (wo, wi) = (dir_deg(wo.0, wo.1), dir_deg(wi.0, wi.1));
+        let (got_f, got_pdf) = (m.eval(wo, wi), m.pdf(wo, wi));
+        for c in 0..3 {
+            assert!(
+                rel_close(got_f[c], f[c], tolerance),
+                "{m:?} wo {wo} wi {wi}: f {got_f}, Mitsuba's {f:?}"
+            );
+        }
+        assert!(
+            rel_close(got_pdf, pdf, tolerance),
+            "{m:?} wo {wo} wi {wi}: pdf {got_pdf}, Mitsuba's {pdf}"
+        );
+    }
+}
+
 /// Anisotropic f and pdf against Mitsuba 3.9.1's `roughconductor` (scalar_rgb, `BSDF::eval`
 /// over the cosine and `BSDF::pdf`, alpha_u along the frame's first tangent, si.wi our wo):
 /// gold with GGX (alpha_u 0.1, alpha_v 0.4) and copper with Beckmann (0.3, 0.05). Pairs where
@@ -1024,8 +1026,7 @@ fn anisotropic_conductor_matches_mitsuba_eval_and_pdf() {
     ggx.alpha_v = 0.4;
     let mut beckmann = Conductor::isotropic(Microfacet::Beckmann, 0.3, Vec3::ONE, copper);
     beckmann.alpha_v = 0.05;
-    #[allow(clippy::type_complexity)]
-    let cases: [(Conductor, f32, Vec<((f64, f64), (f64, f64), [f32; 3], f32)>); 2] = [
+    let cases: [(Conductor, f32, Vec<MitsubaPair>); 2] = [
         (
             ggx,
             1e-4,
@@ -1100,20 +1101,7 @@ fn anisotropic_conductor_matches_mitsuba_eval_and_pdf() {
         ),
     ];
     for (m, tolerance, pairs) in cases {
-        for (wo, wi, f, pdf) in pairs {
-            let (wo, wi) = (dir_deg(wo.0, wo.1), dir_deg(wi.0, wi.1));
-            let (got_f, got_pdf) = (m.eval(wo, wi), m.pdf(wo, wi));
-            for c in 0..3 {
-                assert!(
-                    rel_close(got_f[c], f[c], tolerance),
-                    "{m:?} wo {wo} wi {wi}: f {got_f}, Mitsuba's {f:?}"
-                );
-            }
-            assert!(
-                rel_close(got_pdf, pdf, tolerance),
-                "{m:?} wo {wo} wi {wi}: pdf {got_pdf}, Mitsuba's {pdf}"
-            );
-        }
+        assert_matches_mitsuba(&Material::Conductor(m), tolerance, &pairs);
     }
 }
 
@@ -1194,8 +1182,7 @@ fn conductor_matches_mitsuba_eval_and_pdf() {
         },
     );
     // (conductor, tolerance, [(wo theta, phi), (wi theta, phi), Mitsuba's f, Mitsuba's pdf]).
-    #[allow(clippy::type_complexity)]
-    let cases: [(Conductor, f32, Vec<((f64, f64), (f64, f64), [f32; 3], f32)>); 3] = [
+    let cases: [(Conductor, f32, Vec<MitsubaPair>); 3] = [
         (
             beckmann(0.3, GOLD),
             0.008,
@@ -1294,20 +1281,7 @@ fn conductor_matches_mitsuba_eval_and_pdf() {
         ),
     ];
     for (m, tolerance, pairs) in cases {
-        for (wo, wi, f, pdf) in pairs {
-            let (wo, wi) = (dir_deg(wo.0, wo.1), dir_deg(wi.0, wi.1));
-            let (got_f, got_pdf) = (m.eval(wo, wi), m.pdf(wo, wi));
-            for c in 0..3 {
-                assert!(
-                    rel_close(got_f[c], f[c], tolerance),
-                    "{m:?} wo {wo} wi {wi}: f {got_f}, Mitsuba's {f:?}"
-                );
-            }
-            assert!(
-                rel_close(got_pdf, pdf, tolerance),
-                "{m:?} wo {wo} wi {wi}: pdf {got_pdf}, Mitsuba's {pdf}"
-            );
-        }
+        assert_matches_mitsuba(&Material::Conductor(m), tolerance, &pairs);
     }
 }
 
