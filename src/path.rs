@@ -10,7 +10,7 @@
 //! would have; a strategy's weight needs only ratios of the two along the path, so the weight
 //! of every strategy is found in one walk instead of by evaluating each from scratch.
 
-use crate::bsdf::{Material, TransportMode};
+use crate::bsdf::{Material, TransportMode, scatters_between};
 use crate::components::{CAMERA_VERTEX, PathVertex, PathVerticesView};
 use crate::math::Frame;
 use crate::scene::lights;
@@ -290,8 +290,9 @@ impl PathContext<'_> {
     }
 
     /// f(wo, wi) at a surface vertex (no cosine), with `wo` towards the vertex the subpath
-    /// came from and `wi` towards the one it goes to. Reflection that would cross the
-    /// geometric surface is refused (shading normals must not leak light). A subpath from a
+    /// came from and `wi` towards the one it goes to. Scattering the geometric surface and the
+    /// shading frame disagree on is refused (`scatters_between`: shading normals must not leak
+    /// light). A subpath from a
     /// light carries importance, and there shading normals break the symmetry of the BSDF:
     /// the factor |wo.ns| |wi.ng| / (|wo.ng| |wi.ns|) restores it (Veach, sec. 5.3).
     /// At a light vertex (y_0), 1 on the emitting side (its radiance is in `beta`).
@@ -309,12 +310,17 @@ impl PathContext<'_> {
                 }
             }
             VertexKind::Surface => {
-                if wi.dot(v.ng) * wo.dot(v.ng) <= 0.0 {
-                    // Only reflection is connectible (the dielectric, which refracts, is not).
+                let (material, ns) = self.material_seen(v, wo);
+                if !scatters_between(
+                    material.kind(),
+                    wo.dot(v.ng),
+                    wi.dot(v.ng),
+                    wo.dot(ns),
+                    wi.dot(ns),
+                ) {
                     return Vec3::ZERO;
                 }
-                let (material, ns) = self.material_seen(v, wo);
-                let f = material.eval_world(ns, wo, wi);
+                let f = material.eval_world(ns, wo, wi, mode);
                 match mode {
                     TransportMode::Radiance => f,
                     TransportMode::Importance => f * shading_correction(v, wo, wi),
@@ -348,10 +354,16 @@ impl PathContext<'_> {
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
             VertexKind::Surface if !self.is_connectible(v) => 1.0,
             VertexKind::Surface => {
-                if wi.dot(v.ng) * wo.dot(v.ng) <= 0.0 {
+                let (material, ns) = self.material_seen(v, wo);
+                if !scatters_between(
+                    material.kind(),
+                    wo.dot(v.ng),
+                    wi.dot(v.ng),
+                    wo.dot(ns),
+                    wi.dot(ns),
+                ) {
                     return 0.0;
                 }
-                let (material, ns) = self.material_seen(v, wo);
                 material.pdf_world(ns, wo, wi)
             }
         }
@@ -409,6 +421,12 @@ impl Joint {
                 return if wi_ng > 0.0 { Vec3::ONE } else { Vec3::ZERO };
             }
             Lobe::PointLight(e) => return emitters.profile_towards(e, wi),
+            Lobe::Other(material, ns) => {
+                if !scatters_between(material.kind(), self.wo_ng, wi_ng, self.wo_ns, wi_ns) {
+                    return Vec3::ZERO;
+                }
+                material.eval_world(ns, self.wo, wi, mode)
+            }
             _ if wi_ng * self.wo_ng <= 0.0 => return Vec3::ZERO,
             Lobe::Diffuse(value) => {
                 if (self.wo_ns > 0.0 && wi_ns > 0.0) || (self.wo_ns < 0.0 && wi_ns < 0.0) {
@@ -417,7 +435,6 @@ impl Joint {
                     return Vec3::ZERO;
                 }
             }
-            Lobe::Other(material, ns) => material.eval_world(ns, self.wo, wi),
         };
         match mode {
             TransportMode::Importance if self.shading_normal => {

@@ -9,8 +9,8 @@
 //! The microfacet maths (src/bsdf/microfacet.rs) is Mitsuba's up to Beckmann's exact G1, which
 //! moves images by far less than noise.
 use super::BsdfSample;
-use super::microfacet::Alphas;
 pub use super::microfacet::{ALPHA_MIN, Microfacet};
+use super::microfacet::{Alphas, off_axis, onto_axis};
 use glam::{Vec2, Vec3};
 
 /// A conductor's complex index of refraction eta + i k, per RGB channel, relative to the
@@ -86,26 +86,6 @@ impl Conductor {
         self.alpha_u.max(self.alpha_v)
     }
 
-    /// `w` in the frame whose first tangent is `axis` (identity for isotropic lobes).
-    #[inline]
-    fn onto_axis(&self, w: Vec3) -> Vec3 {
-        if self.axis == Vec2::X {
-            return w;
-        }
-        let (c, s) = (self.axis.x, self.axis.y);
-        Vec3::new(c * w.x + s * w.y, c * w.y - s * w.x, w.z)
-    }
-
-    /// The inverse of `onto_axis`.
-    #[inline]
-    fn off_axis(&self, w: Vec3) -> Vec3 {
-        if self.axis == Vec2::X {
-            return w;
-        }
-        let (c, s) = (self.axis.x, self.axis.y);
-        Vec3::new(c * w.x - s * w.y, s * w.x + c * w.y, w.z)
-    }
-
     /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         self.eval_pdf(wo, wi).0
@@ -119,7 +99,7 @@ impl Conductor {
     /// (f, pdf) for a reflection pair; zero unless both lie strictly above the surface.
     #[inline]
     fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
-        let (wo, wi) = (self.onto_axis(wo), self.onto_axis(wi));
+        let (wo, wi) = (onto_axis(self.axis, wo), onto_axis(self.axis, wi));
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return (Vec3::ZERO, 0.0);
         }
@@ -146,14 +126,14 @@ impl Conductor {
         if wo.z <= 0.0 {
             return None;
         }
-        let on_axis = self.onto_axis(wo);
+        let on_axis = onto_axis(self.axis, wo);
         let a = Alphas::new(self.alpha_u, self.alpha_v);
         let h = a.visible_normal(self.distribution, on_axis, u);
         let wi = 2.0 * on_axis.dot(h) * h - on_axis;
         if wi.z <= 0.0 {
             return None; // reflected below the surface: masked
         }
-        let wi = self.off_axis(wi.normalize());
+        let wi = off_axis(self.axis, wi.normalize());
         // Value and pdf from the same code as eval/pdf so that MIS sees identical densities.
         let (value, pdf) = self.eval_pdf(wo, wi);
         if !(pdf > 0.0 && pdf.is_finite()) {

@@ -36,6 +36,20 @@ fn fresnel_cs(cos_i: f32, sin2_i: f32, eta: f32) -> f32 {
     (0.5 * (r_s * r_s + r_p * r_p)).min(1.0)
 }
 
+/// Fresnel reflectance of a refraction pair from both its cosines: `cos_outside` and
+/// `cos_inside` (both positive) on the two sides of an interface of relative index `eta`
+/// (inside over outside). The same value as `fresnel` from either side, but without forming
+/// the transmitted cosine as sqrt(1 - sin^2), which loses all its digits near the critical
+/// angle.
+pub fn fresnel_of_pair(cos_outside: f32, cos_inside: f32, eta: f32) -> f32 {
+    let r_s = (cos_outside - eta * cos_inside) / (cos_outside + eta * cos_inside);
+    let r_p = (eta * cos_outside - cos_inside) / (eta * cos_outside + cos_inside);
+    if !(r_s.is_finite() && r_p.is_finite()) {
+        return 1.0; // both cosines zero: grazing on both sides
+    }
+    (0.5 * (r_s * r_s + r_p * r_p)).min(1.0)
+}
+
 /// Samples reflection with probability F and refraction with probability 1 - F, choosing with
 /// `u`. The reflected sample has weight 1; the refracted one has weight 1 in importance mode and
 /// (eta_o / eta_t)^2 in radiance mode, where eta_o is the index of wo's side and eta_t that of

@@ -36,6 +36,27 @@ fn clamp_alpha(alpha: f32) -> f32 {
     }
 }
 
+/// `w` in the frame whose first tangent is `axis` ((cos, sin) of its angle from the current
+/// frame's first tangent): the identity for `Vec2::X`, the axis of every isotropic lobe.
+#[inline]
+pub(crate) fn onto_axis(axis: Vec2, w: Vec3) -> Vec3 {
+    if axis == Vec2::X {
+        return w;
+    }
+    let (c, s) = (axis.x, axis.y);
+    Vec3::new(c * w.x + s * w.y, c * w.y - s * w.x, w.z)
+}
+
+/// The inverse of `onto_axis`.
+#[inline]
+pub(crate) fn off_axis(axis: Vec2, w: Vec3) -> Vec3 {
+    if axis == Vec2::X {
+        return w;
+    }
+    let (c, s) = (axis.x, axis.y);
+    Vec3::new(c * w.x - s * w.y, s * w.x + c * w.y, w.z)
+}
+
 /// A lobe's two roughnesses, clamped (see `clamp_alpha`), in the frame of its axis. With
 /// alpha_u = alpha_v every formula below performs the isotropic lobe's operations exactly,
 /// so isotropic materials render as they did before anisotropy existed.

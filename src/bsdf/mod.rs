@@ -10,6 +10,7 @@ pub mod dielectric;
 pub mod diffuse;
 pub mod microfacet;
 pub mod plastic;
+pub mod rough_dielectric;
 
 use glam::{Vec2, Vec3};
 
@@ -26,6 +27,8 @@ pub enum Material {
     Conductor(conductor::Conductor),
     /// Rough plastic: a rough dielectric coat over a Lambertian base (see `plastic`).
     RoughPlastic(plastic::RoughPlastic),
+    /// Rough dielectric: microfacets that reflect and refract (see `rough_dielectric`).
+    RoughDielectric(rough_dielectric::RoughDielectric),
 }
 
 // Materials are copied by value into every shading point and visible point: keep them small
@@ -41,15 +44,17 @@ pub enum MaterialKind {
     Diffuse = 0,
     Conductor = 1,
     RoughPlastic = 2,
-    Dielectric = 3,
+    RoughDielectric = 3,
+    Dielectric = 4,
 }
 
 impl MaterialKind {
     /// Every kind, in queue order.
-    pub const ALL: [MaterialKind; 4] = [
+    pub const ALL: [MaterialKind; 5] = [
         MaterialKind::Diffuse,
         MaterialKind::Conductor,
         MaterialKind::RoughPlastic,
+        MaterialKind::RoughDielectric,
         MaterialKind::Dielectric,
     ];
     pub const COUNT: usize = MaterialKind::ALL.len();
@@ -57,8 +62,23 @@ impl MaterialKind {
     /// Whether every lobe is a Dirac delta: light sampling and connections cannot reach it.
     pub const fn is_delta(self) -> bool {
         match self {
-            MaterialKind::Diffuse | MaterialKind::Conductor | MaterialKind::RoughPlastic => false,
+            MaterialKind::Diffuse
+            | MaterialKind::Conductor
+            | MaterialKind::RoughPlastic
+            | MaterialKind::RoughDielectric => false,
             MaterialKind::Dielectric => true,
+        }
+    }
+
+    /// Whether a non-delta lobe transmits: connections, light samples and merges may then join
+    /// the surface's two sides (where the shading frame agrees, see `scatters_between`).
+    pub const fn transmits(self) -> bool {
+        match self {
+            MaterialKind::RoughDielectric => true,
+            MaterialKind::Diffuse
+            | MaterialKind::Conductor
+            | MaterialKind::RoughPlastic
+            | MaterialKind::Dielectric => false,
         }
     }
 
@@ -68,6 +88,7 @@ impl MaterialKind {
             MaterialKind::Diffuse => "shade_diffuse",
             MaterialKind::Conductor => "shade_conductor",
             MaterialKind::RoughPlastic => "shade_rough_plastic",
+            MaterialKind::RoughDielectric => "shade_rough_dielectric",
             MaterialKind::Dielectric => "shade_dielectric",
         }
     }
@@ -92,7 +113,7 @@ impl Material {
             Material::Diffuse { .. } => true,
             Material::Conductor(c) => c.two_sided,
             Material::RoughPlastic(p) => p.two_sided,
-            Material::Dielectric { .. } => false,
+            Material::RoughDielectric(_) | Material::Dielectric { .. } => false,
         }
     }
 
@@ -102,6 +123,7 @@ impl Material {
             Material::Dielectric { .. } => MaterialKind::Dielectric,
             Material::Conductor(_) => MaterialKind::Conductor,
             Material::RoughPlastic(_) => MaterialKind::RoughPlastic,
+            Material::RoughDielectric(_) => MaterialKind::RoughDielectric,
         }
     }
 }
@@ -153,14 +175,43 @@ pub fn sample_direction(
     Some((bs, wi))
 }
 
+/// Whether a material of `kind` may scatter between two directions at a surface, from their
+/// cosines with the geometric normal (`wo_ng`, `wi_ng`) and the shading normal (`wo_ns`,
+/// `wi_ns`): reflection on the geometric surface, and where the kind transmits (see
+/// `MaterialKind::transmits`) refraction too, when the shading frame sees the same (shading
+/// normals alone would let light leak through surfaces). What the BSDF then makes of the pair
+/// is its `eval`.
+#[inline]
+pub fn scatters_between(
+    kind: MaterialKind,
+    wo_ng: f32,
+    wi_ng: f32,
+    wo_ns: f32,
+    wi_ns: f32,
+) -> bool {
+    let reflected = wo_ng * wi_ng > 0.0;
+    if kind.transmits() {
+        let refracted = wo_ng * wi_ng < 0.0;
+        (reflected && wo_ns * wi_ns > 0.0) || (refracted && wo_ns * wi_ns < 0.0)
+    } else {
+        reflected
+    }
+}
+
 impl Material {
-    /// f(wo, wi) without the cosine; zero for delta materials.
+    /// f(wo, wi) without the cosine, for radiance; zero for delta materials.
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        self.eval_mode(wo, wi, TransportMode::Radiance)
+    }
+
+    /// f(wo, wi) for what the path carries: only refraction tells the two apart.
+    pub fn eval_mode(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
         match *self {
             Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
             Material::Dielectric { .. } => Vec3::ZERO,
             Material::Conductor(c) => c.eval(wo, wi),
             Material::RoughPlastic(p) => p.eval(wo, wi),
+            Material::RoughDielectric(d) => d.eval(wo, wi, mode),
         }
     }
 
@@ -171,22 +222,23 @@ impl Material {
             Material::Dielectric { .. } => 0.0,
             Material::Conductor(c) => c.pdf(wo, wi),
             Material::RoughPlastic(p) => p.pdf(wo, wi),
+            Material::RoughDielectric(d) => d.pdf(wo, wi),
         }
     }
 
-    /// `eval` for world-space directions about the shading normal `ns`. The Lambertian lobe
-    /// depends only on the two cosines, so it needs no frame (the common case in
+    /// `eval_mode` for world-space directions about the shading normal `ns`. The Lambertian
+    /// lobe depends only on the two cosines, so it needs no frame (the common case in
     /// bidirectional connections, which evaluate many direction pairs per vertex).
     #[inline]
-    pub fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
+    pub fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
         match *self {
             Material::Diffuse { reflectance } => {
                 diffuse::eval_cos(reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
             }
             Material::Dielectric { .. } => Vec3::ZERO,
-            Material::Conductor(_) | Material::RoughPlastic(_) => {
+            Material::Conductor(_) | Material::RoughPlastic(_) | Material::RoughDielectric(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
-                self.eval(frame.to_local(wo), frame.to_local(wi))
+                self.eval_mode(frame.to_local(wo), frame.to_local(wi), mode)
             }
         }
     }
@@ -197,7 +249,7 @@ impl Material {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf_cos(wo.dot(ns), wi.dot(ns)),
             Material::Dielectric { .. } => 0.0,
-            Material::Conductor(_) | Material::RoughPlastic(_) => {
+            Material::Conductor(_) | Material::RoughPlastic(_) | Material::RoughDielectric(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.pdf(frame.to_local(wo), frame.to_local(wi))
             }
@@ -213,6 +265,7 @@ impl Material {
             Material::Dielectric { ior } => Some(dielectric::sample(ior, wo, u.x, mode)),
             Material::Conductor(c) => c.sample(wo, u),
             Material::RoughPlastic(p) => p.sample(wo, u),
+            Material::RoughDielectric(d) => d.sample(wo, u, mode),
         }
     }
 }

@@ -59,6 +59,12 @@ pub enum MaterialDesc {
         #[serde(default)]
         ior: Option<Ior>,
     },
+    /// Mitsuba's `roughdielectric` on its defaults but `alpha` and `ior` (Beckmann, the index
+    /// inside over outside; reflectance and transmittance 1).
+    RoughDielectric {
+        alpha: Alpha,
+        ior: Ior,
+    },
 }
 
 #[derive(Clone, Debug, Deserialize)]
@@ -264,7 +270,8 @@ impl TryFrom<i64> for ImageSize {
     }
 }
 
-/// Index of refraction: finite and positive.
+/// Index of refraction: finite, positive and not 1 (as Mitsuba requires: index 1 is no
+/// interface, and a rough one would refract straight through, a delta it cannot sample).
 #[derive(Clone, Copy, Debug, Deserialize)]
 #[serde(try_from = "f32")]
 pub struct Ior(pub f32);
@@ -272,10 +279,10 @@ pub struct Ior(pub f32);
 impl TryFrom<f32> for Ior {
     type Error = String;
     fn try_from(v: f32) -> Result<Self, String> {
-        if v.is_finite() && v > 0.0 {
+        if v.is_finite() && v > 0.0 && v != 1.0 {
             Ok(Ior(v))
         } else {
-            Err(format!("ior {v} must be finite and positive"))
+            Err(format!("ior {v} must be finite, positive and not 1"))
         }
     }
 }

@@ -331,6 +331,17 @@ impl PreparedScene {
                     plastic.diffuse = texture(t).eval(uv);
                 }
             }
+            Material::RoughDielectric(d) => {
+                if let Some(t) = v.alpha_u {
+                    d.alpha_u = texture(t).eval_1(uv);
+                }
+                if let Some(t) = v.alpha_v {
+                    d.alpha_v = texture(t).eval_1(uv);
+                }
+                if v.anisotropic && d.alpha_u != d.alpha_v {
+                    d.axis = self.uv_axis(tri, ns);
+                }
+            }
             Material::Dielectric { .. } => {}
         }
         material
@@ -386,28 +397,40 @@ impl PreparedScene {
 
     /// Next-event estimation's light sample from the surface point (p, its error bound,
     /// geometric normal ng) seen along wo: an emitter point by `sample_emitter`, or None when
-    /// the point faces away from it or it lies on the other side of the surface than wo.
+    /// the point faces away from it or it lies on the other side of the surface than wo and
+    /// the surface does not transmit (`transmits`, see `MaterialKind::transmits`).
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     pub fn sample_light_from(
         &self,
         p: Vec3,
         p_error: Vec3,
         ng: Vec3,
         wo: Vec3,
+        transmits: bool,
         u_pick: f32,
         u_point: glam::Vec2,
     ) -> Option<LightSample> {
+        let wo_ng = wo.dot(ng);
+        let reaches = |wi: Vec3| {
+            let side = wi.dot(ng) * wo_ng;
+            side > 0.0 || (transmits && side < 0.0)
+        };
         if let Some((env_index, env)) = self.emitters.environment()
             && crate::sampling::sample_cdf(&self.emitters.cdf, u_pick) == env_index
         {
-            return self.sample_environment_from(p, p_error, ng, wo, env_index, env, u_point);
+            let (wi, pdf_dir) = env.sample(u_point);
+            if pdf_dir <= 0.0 || pdf_dir.is_nan() || !reaches(wi) {
+                return None;
+            }
+            return Some(self.environment_sample(p, p_error, ng, env_index, env, wi, pdf_dir));
         }
         let sampled = self.sample_emitter(u_pick, u_point);
         if self.emitters.is_directional(sampled.emitter) {
             // A delta direction: the irradiance it brings, no falloff, a shadow ray that must
             // leave the scene.
             let wi = -self.emitters.position[sampled.emitter];
-            if wi.dot(ng) * wo.dot(ng) <= 0.0 {
+            if !reaches(wi) {
                 return None;
             }
             return Some(LightSample {
@@ -427,7 +450,7 @@ impl PreparedScene {
         if sampled.triangle & POINT_LIGHT != 0 {
             // A delta position: no other technique finds it, and the intensity falls off
             // with the squared distance.
-            if !wi.is_finite() || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+            if !wi.is_finite() || !reaches(wi) {
                 return None;
             }
             let origin = crate::geometry::offset_ray_origin(p, p_error, ng, wi);
@@ -442,7 +465,7 @@ impl PreparedScene {
             });
         }
         let cos_light = -wi.dot(light.ng);
-        if cos_light <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
+        if cos_light <= 0.0 || !reaches(wi) {
             return None;
         }
         let (origin, dir, t_max) =
@@ -458,26 +481,23 @@ impl PreparedScene {
         })
     }
 
-    /// `sample_light_from` when it picked the light at infinity (emitter `e`): a direction by
-    /// the environment's own distribution and a shadow ray that must leave the scene.
+    /// `sample_light_from`'s sample of the light at infinity (emitter `e`): direction `wi`
+    /// drawn by the environment's own distribution with density `pdf_dir`, and a shadow ray
+    /// that must leave the scene.
     #[inline(never)]
     #[allow(clippy::too_many_arguments)]
-    fn sample_environment_from(
+    fn environment_sample(
         &self,
         p: Vec3,
         p_error: Vec3,
         ng: Vec3,
-        wo: Vec3,
         e: usize,
         env: &environment::Environment,
-        u: glam::Vec2,
-    ) -> Option<LightSample> {
-        let (wi, pdf_dir) = env.sample(u);
-        if pdf_dir <= 0.0 || wi.dot(ng) * wo.dot(ng) <= 0.0 {
-            return None;
-        }
+        wi: Vec3,
+        pdf_dir: f32,
+    ) -> LightSample {
         let origin = crate::geometry::offset_ray_origin(p, p_error, ng, wi);
-        Some(LightSample {
+        LightSample {
             wi,
             pdf: self.emitters.pmf[e] * pdf_dir,
             origin,
@@ -485,7 +505,7 @@ impl PreparedScene {
             t_max: f32::INFINITY,
             radiance: env.eval(wi),
             delta: false,
-        })
+        }
     }
 
     /// The density with which light sampling picks the light at infinity in direction `dir`

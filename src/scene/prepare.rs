@@ -86,13 +86,14 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                 };
                 // Anisotropic where the two roughnesses can differ: different textures, or one
                 // texture and one value, or two different values.
-                let anisotropic = match material {
-                    Material::Conductor(c) => {
-                        v.anisotropic
-                            && (alpha_u != alpha_v || (alpha_u.is_none() && c.alpha_u != c.alpha_v))
-                    }
-                    _ => false,
+                let roughnesses = match material {
+                    Material::Conductor(c) => Some((c.alpha_u, c.alpha_v)),
+                    Material::RoughDielectric(d) => Some((d.alpha_u, d.alpha_v)),
+                    _ => None,
                 };
+                let anisotropic = roughnesses.is_some_and(|(u, v_)| {
+                    v.anisotropic && (alpha_u != alpha_v || (alpha_u.is_none() && u != v_))
+                });
                 let varies = reflectance.is_some() || alpha_u.is_some() || anisotropic;
                 varies.then_some(super::Varying {
                     reflectance,
@@ -103,8 +104,6 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             }));
             material_index.insert(entity, materials.len() as u32);
             materials.push(*material);
-            // Conductors are black from behind by their own maths; only the Lambertian lobe,
-            // which the engine mirrors to the side a ray comes from, needs the mark.
             // Only a material the engine would mirror to the side a ray comes from needs the
             // mark; the others are black from behind by their own maths.
             black_behind.push(one_sided.is_some() && material.is_two_sided());

@@ -297,6 +297,13 @@ fn make_material(desc: &MaterialDesc) -> Material {
             Vec3::ONE,
             false,
         )),
+        MaterialDesc::RoughDielectric { alpha, ior } => {
+            Material::RoughDielectric(crate::bsdf::rough_dielectric::RoughDielectric::isotropic(
+                crate::bsdf::conductor::Microfacet::Beckmann,
+                alpha.0,
+                ior.0,
+            ))
+        }
         MaterialDesc::Conductor { alpha, reflectance } => {
             Material::Conductor(Conductor::ggx(alpha.0, reflectance.0))
         }

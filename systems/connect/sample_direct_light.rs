@@ -9,6 +9,7 @@
 //! hit the light too (`extend_camera_chains` weighs that emission): both are weighted by the
 //! power heuristic, as a path tracer's.
 
+use crate::bsdf::scatters_between;
 use crate::components::NO_VISIBLE_POINT;
 use crate::components::ShadowRays;
 use crate::components::VisiblePoints;
@@ -60,19 +61,32 @@ crate::system! {
                     // A pixel's points draw from its key's dimensions in turn.
                     let key = sampler.key(Stream::DirectLight, at.pixel[k] as u64, index);
                     let wo = at.wo[k];
+                    let material = scene.material_at(tri, at.p[k], at.ns[k]);
+                    let kind = material.kind();
                     let Some(light) = scene.sample_light_from(
                         at.p[k],
                         at.p_error[k],
                         at.ng[k],
                         wo,
+                        kind.transmits(),
                         sampler.get(key, dim),
                         sampler.get2(key, dim + 1),
                     ) else {
                         continue;
                     };
-                    let material = scene.material_at(tri, at.p[k], at.ns[k]);
                     let frame = Frame::from_normal(at.ns[k]);
                     let (wo_local, wi_local) = (frame.to_local(wo), frame.to_local(light.wi));
+                    if kind.transmits()
+                        && !scatters_between(
+                            kind,
+                            wo.dot(at.ng[k]),
+                            light.wi.dot(at.ng[k]),
+                            wo_local.z,
+                            wi_local.z,
+                        )
+                    {
+                        continue;
+                    }
                     let f = material.eval(wo_local, wi_local);
                     if f.max_element() <= 0.0 {
                         continue;

@@ -2,7 +2,7 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
-use crate::bsdf::diffuse;
+use crate::bsdf::{diffuse, scatters_between};
 use crate::components::ShadowRays;
 use crate::components::path_tracing::DIM_LIGHT_PICK;
 use crate::components::path_tracing::DIM_LIGHT_POINT;
@@ -249,15 +249,28 @@ pub fn light_sample(
     throughput: Vec3,
 ) -> Option<LightConnection> {
     let dim = bounce_dim(depth);
+    let kind = surf.material.kind();
     let light = data.scene.sample_light_from(
         surf.p,
         surf.p_error,
         surf.ng,
         surf.wo,
+        kind.transmits(),
         sampler.get(key, dim + DIM_LIGHT_PICK),
         sampler.get2(key, dim + DIM_LIGHT_POINT),
     )?;
     let wi_local = surf.frame.to_local(light.wi);
+    if kind.transmits()
+        && !scatters_between(
+            kind,
+            surf.wo.dot(surf.ng),
+            light.wi.dot(surf.ng),
+            surf.wo_local.z,
+            wi_local.z,
+        )
+    {
+        return None;
+    }
     let f = surf.material.eval(surf.wo_local, wi_local);
     if f == Vec3::ZERO {
         return None;

@@ -37,6 +37,11 @@ crate::system! {
             MaterialKind::RoughPlastic => scatter_paths::<{ MaterialKind::RoughPlastic as u8 }>(
                 data, sampler, *lanes, hits, surfaces, rays, paths, range,
             ),
+            MaterialKind::RoughDielectric => {
+                scatter_paths::<{ MaterialKind::RoughDielectric as u8 }>(
+                    data, sampler, *lanes, hits, surfaces, rays, paths, range,
+                )
+            }
         }
     }
 }

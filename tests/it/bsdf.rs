@@ -9,6 +9,8 @@ use stagelight::bsdf::{Material, TransportMode, conductor, dielectric};
 use stagelight::sampling::SampleKey;
 use std::f64::consts::PI;
 
+mod rough_dielectric;
+
 // ---------------------------------------------------------------------------------------------
 // Helpers
 
@@ -130,7 +132,9 @@ fn chi2_p_value_matches_tables() {
 // samples `sample` refuses (the leftover probability). Cells expected below 5 are pooled.
 
 /// Number of chi-square tests in this file, for the Sidak correction.
-const CHI2_TESTS: usize = 3 + 2 * (4 * 3 + 2);
+const CHI2_TESTS: usize = 3 + 2 * (4 * 3 + 2) + ROUGH_DIELECTRIC_CHI2_TESTS;
+/// The rough dielectric's: 14 incident directions, two transport modes each.
+const ROUGH_DIELECTRIC_CHI2_TESTS: usize = 2 * 14;
 const CHI2_SAMPLES: u64 = 1_000_000;
 const CHI2_BINS: usize = 40;
 
@@ -351,19 +355,41 @@ fn chi2_test(
     sample: &dyn Fn(Vec2) -> Option<Vec3>,
     pdf: &dyn Fn(Vec3) -> f32,
 ) -> Chi2Result {
+    chi2_test_over(&[binning], stream, sample, pdf)
+}
+
+/// `chi2_test` over the cells of several binnings (a direction falls in the first that holds
+/// it: one per hemisphere for a BSDF that transmits).
+fn chi2_test_over(
+    binnings: &[&Binning],
+    stream: u64,
+    sample: &dyn Fn(Vec2) -> Option<Vec3>,
+    pdf: &dyn Fn(Vec3) -> f32,
+) -> Chi2Result {
     let n = CHI2_SAMPLES;
-    let cells = binning.cells();
+    let cells: usize = binnings.iter().map(|b| b.cells()).sum();
+    let bin = |wi: Vec3| {
+        let mut offset = 0;
+        for b in binnings {
+            let cell = b.bin(wi);
+            if cell < b.cells() {
+                return offset + cell;
+            }
+            offset += b.cells();
+        }
+        cells
+    };
     // Cells, then the other side, then the refused samples.
     let mut observed = vec![0.0f64; cells + 2];
     for i in 0..n {
         match sample(u2(0xc41_5eed, stream, i)) {
-            Some(wi) => observed[binning.bin(wi)] += 1.0,
+            Some(wi) => observed[bin(wi)] += 1.0,
             None => observed[cells + 1] += 1.0,
         }
     }
-    let mut expected: Vec<f64> = binning
-        .integrate(pdf)
-        .into_iter()
+    let mut expected: Vec<f64> = binnings
+        .iter()
+        .flat_map(|b| b.integrate(pdf))
         .map(|p| p * n as f64)
         .collect();
     let total_probability = expected.iter().sum::<f64>() / n as f64;

@@ -24,6 +24,9 @@ tests=(
   "tests/scenes/spot_light/test_spot_direct.xml test_spot"
   "tests/scenes/bsdf_spheres/test_textured_diffuse_path.xml test_textured_diffuse"
   "tests/scenes/bsdf_spheres/test_textured_roughconductor_path.xml test_textured_roughconductor"
+  "tests/scenes/bsdf_spheres/test_roughplastic_linear_path.xml test_roughplastic_linear"
+  "tests/scenes/bsdf_spheres/test_roughplastic_nonlinear_path.xml test_roughplastic_nonlinear"
+  "tests/scenes/bsdf_spheres/test_roughdielectric_path.xml test_roughdielectric"
 )
 for entry in "${tests[@]}"; do
   read -r xml stem _ <<< "$entry"

@@ -13,6 +13,7 @@ use super::document::{
 use crate::bsdf::Material;
 use crate::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
 use crate::bsdf::plastic::RoughPlastic;
+use crate::bsdf::rough_dielectric::RoughDielectric;
 use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
@@ -49,7 +50,8 @@ pub struct FileSettings {
 pub const INTEGRATORS: &str = "path, direct, moment";
 pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
-pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor, roughplastic";
+pub const BSDFS: &str =
+    "diffuse, twosided, dielectric, roughdielectric, conductor, roughconductor, roughplastic";
 pub const EMITTERS: &str = "area, point, spot, directional, constant, envmap";
 pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
@@ -881,7 +883,9 @@ impl<'a> Builder<'a> {
                     Material::Conductor(c) => c.two_sided = true,
                     Material::RoughPlastic(p) => p.two_sided = true,
                     // Lambertian reflection is two-sided in the engine already.
-                    Material::Diffuse { .. } | Material::Dielectric { .. } => {}
+                    Material::Diffuse { .. }
+                    | Material::Dielectric { .. }
+                    | Material::RoughDielectric(_) => {}
                 }
                 return Ok((material, Sides::Two));
             }
@@ -916,7 +920,7 @@ impl<'a> Builder<'a> {
                 Material::Dielectric { ior: ratio }
             }
             "conductor" | "roughconductor" => {
-                let textured = self.conductor_textures(object)?;
+                let textured = self.microfacet_textures(object)?;
                 let ior = conductor_ior(&mut params, object)?;
                 let reflectance = params
                     .color("specular_reflectance", Role::Reflectance)?
@@ -946,6 +950,41 @@ impl<'a> Builder<'a> {
                 }
                 params.finish()?;
                 Material::Conductor(conductor)
+            }
+            "roughdielectric" => {
+                let textured = self.microfacet_textures(object)?;
+                let int_ior = ior(&mut params, "int_ior", 1.5046)?;
+                let ext_ior = ior(&mut params, "ext_ior", 1.000277)?;
+                // Visible normals or not changes only noise (Mitsuba's default: visible).
+                params.boolean("sample_visible")?;
+                let distribution = microfacet(&mut params)?;
+                let (alpha_u, alpha_v) = roughness(&mut params, object, &textured)?;
+                let mut factor = |name: &str| -> Result<Vec3, XmlError> {
+                    Ok(params
+                        .color(name, Role::Reflectance)?
+                        .map_or(Vec3::ONE, |(c, _)| c))
+                };
+                let reflectance = factor("specular_reflectance")?;
+                let transmittance = factor("specular_transmittance")?;
+                params.finish()?;
+                let eta = (int_ior / ext_ior) as f32;
+                if !(eta.is_finite() && eta > 0.0) || eta == 1.0 {
+                    return Err(XmlError::at(
+                        &object.spot,
+                        format!(
+                            "roughdielectric: int_ior / ext_ior = {eta} must be positive and not 1"
+                        ),
+                    ));
+                }
+                Material::RoughDielectric(RoughDielectric {
+                    distribution,
+                    alpha_u,
+                    alpha_v,
+                    axis: glam::Vec2::X,
+                    eta,
+                    reflectance,
+                    transmittance,
+                })
             }
             "roughplastic" => {
                 let diffuse_texture = match object.children.first() {
@@ -1018,14 +1057,14 @@ impl<'a> Builder<'a> {
 
     /// A conductor's nested textures, by parameter name: specular_reflectance, and for a
     /// roughconductor alpha, alpha_u and alpha_v; anything else nested is an error.
-    fn conductor_textures(
+    fn microfacet_textures(
         &self,
         object: &Object,
     ) -> Result<Vec<(&'static str, ObjectId)>, XmlError> {
-        let names: &[&'static str] = if object.kind == "roughconductor" {
-            &["specular_reflectance", "alpha", "alpha_u", "alpha_v"]
-        } else {
-            &["specular_reflectance"]
+        let names: &[&'static str] = match object.kind.as_str() {
+            "roughconductor" => &["specular_reflectance", "alpha", "alpha_u", "alpha_v"],
+            "roughdielectric" => &["alpha", "alpha_u", "alpha_v"],
+            _ => &["specular_reflectance"],
         };
         let mut textured = Vec::new();
         for c in &object.children {
@@ -1079,9 +1118,9 @@ impl<'a> Builder<'a> {
                     varying.reflectance = Some(self.texture(c.object)?);
                 }
             }
-            "conductor" | "roughconductor" => {
+            "conductor" | "roughconductor" | "roughdielectric" => {
                 let inner = inner.clone();
-                for (name, id) in self.conductor_textures(&inner)? {
+                for (name, id) in self.microfacet_textures(&inner)? {
                     let texture = Some(self.texture(id)?);
                     match name {
                         "specular_reflectance" => varying.reflectance = texture,
@@ -2029,14 +2068,14 @@ fn microfacet(params: &mut Params) -> Result<Microfacet, XmlError> {
         _ => Err(XmlError::at(
             &spot,
             format!(
-                "roughconductor distribution \"{}\" is not supported (supported: beckmann, ggx)",
+                "microfacet distribution \"{}\" is not supported (supported: beckmann, ggx)",
                 super::super::echo(name)
             ),
         )),
     }
 }
 
-/// A roughconductor's roughness (alpha_u, alpha_v): `alpha` (default 0.1, as Mitsuba's) for
+/// A roughconductor's or roughdielectric's roughness (alpha_u, alpha_v): `alpha` (default 0.1, as Mitsuba's) for
 /// both, or `alpha_u` and `alpha_v` apart (anisotropic: alpha_u along the uv tangent), each a
 /// value or a texture (`textured` names those given as textures; their values here are
 /// placeholders that the textures replace at every shading point).
@@ -2057,7 +2096,7 @@ fn roughness(
                 if value.is_some() {
                     return Err(XmlError::at(
                         &spot,
-                        format!("roughconductor: {name} is given twice"),
+                        format!("{}: {name} is given twice", object.kind),
                     ));
                 }
                 Ok(Some((0.1, spot)))
@@ -2076,13 +2115,19 @@ fn roughness(
         (Some(_), Some((_, spot)), _) | (Some(_), None, Some((_, spot))) => {
             return Err(XmlError::at(
                 &spot,
-                "roughconductor: give either alpha or alpha_u and alpha_v, not both",
+                format!(
+                    "{}: give either alpha or alpha_u and alpha_v, not both",
+                    object.kind
+                ),
             ));
         }
         (None, Some((_, spot)), None) | (None, None, Some((_, spot))) => {
             return Err(XmlError::at(
                 &spot,
-                "roughconductor: alpha_u and alpha_v must be given together",
+                format!(
+                    "{}: alpha_u and alpha_v must be given together",
+                    object.kind
+                ),
             ));
         }
         (None, Some(u), Some(v)) => (u, v),

@@ -135,6 +135,26 @@ fn float(x: f32) -> String {
     }
 }
 
+fn distribution_name(distribution: Microfacet) -> &'static str {
+    match distribution {
+        Microfacet::Ggx => "ggx",
+        Microfacet::Beckmann => "beckmann",
+    }
+}
+
+/// A microfacet lobe's roughness: `alpha`, or `alpha_u` and `alpha_v` where they differ.
+fn alphas_xml(alpha_u: f32, alpha_v: f32) -> String {
+    if alpha_u == alpha_v {
+        format!("<float name=\"alpha\" value=\"{}\"/>", float(alpha_u))
+    } else {
+        format!(
+            "<float name=\"alpha_u\" value=\"{}\"/>\n        <float name=\"alpha_v\" value=\"{}\"/>",
+            float(alpha_u),
+            float(alpha_v)
+        )
+    }
+}
+
 fn bsdf_xml(material: &Material, id: &str) -> String {
     let rgb = |v: Vec3| format!("{}, {}, {}", float(v.x), float(v.y), float(v.z));
     match *material {
@@ -151,15 +171,24 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
              <rgb name=\"diffuse_reflectance\" value=\"{}\"/>\n        \
              <rgb name=\"specular_reflectance\" value=\"{}\"/>\n        \
              <boolean name=\"nonlinear\" value=\"{}\"/>\n    </bsdf>",
-            match p.distribution {
-                Microfacet::Ggx => "ggx",
-                Microfacet::Beckmann => "beckmann",
-            },
+            distribution_name(p.distribution),
             float(p.alpha),
             float(p.eta),
             rgb(p.diffuse),
             rgb(p.specular),
             p.nonlinear
+        ),
+        Material::RoughDielectric(d) => format!(
+            "    <bsdf type=\"roughdielectric\" id=\"{id}\">\n        \
+             <string name=\"distribution\" value=\"{}\"/>\n        {}\n        \
+             <float name=\"int_ior\" value=\"{}\"/>\n        <float name=\"ext_ior\" value=\"1\"/>\n        \
+             <rgb name=\"specular_reflectance\" value=\"{}\"/>\n        \
+             <rgb name=\"specular_transmittance\" value=\"{}\"/>\n    </bsdf>",
+            distribution_name(d.distribution),
+            alphas_xml(d.alpha_u, d.alpha_v),
+            float(d.eta),
+            rgb(d.reflectance),
+            rgb(d.transmittance)
         ),
         Material::Dielectric { ior } => format!(
             "    <bsdf type=\"dielectric\" id=\"{id}\">\n        <float name=\"int_ior\" value=\"{}\"/>\n        \
@@ -178,19 +207,8 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
                     rgb(c.ior.k)
                 )
             };
-            let distribution = match c.distribution {
-                Microfacet::Ggx => "ggx",
-                Microfacet::Beckmann => "beckmann",
-            };
-            let alpha = if c.alpha_u == c.alpha_v {
-                format!("<float name=\"alpha\" value=\"{}\"/>", float(c.alpha_u))
-            } else {
-                format!(
-                    "<float name=\"alpha_u\" value=\"{}\"/>\n        <float name=\"alpha_v\" value=\"{}\"/>",
-                    float(c.alpha_u),
-                    float(c.alpha_v)
-                )
-            };
+            let distribution = distribution_name(c.distribution);
+            let alpha = alphas_xml(c.alpha_u, c.alpha_v);
             format!(
                 "    <bsdf type=\"roughconductor\" id=\"{id}\">\n        {ior}\n        \
                  <string name=\"distribution\" value=\"{distribution}\"/>\n        {alpha}\n        \
