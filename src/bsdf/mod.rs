@@ -2,7 +2,8 @@
 //!
 //! Conventions: `wo` and `wi` are unit vectors pointing away from the surface; `eval` returns
 //! f(wo, wi) without the cosine; `sample` returns a direction with its value and solid-angle pdf
-//! so that the path weight is `value * |wi.z| / pdf`. Delta lobes (the smooth dielectric) return
+//! so that the path weight is `value * |wi.z| / pdf`. Delta lobes (the smooth dielectric and
+//! the thin one) return
 //! `delta: true`, and for them `value * |wi.z| / pdf` is still the weight.
 
 pub mod conductor;
@@ -26,6 +27,10 @@ pub enum Material {
     Conductor(conductor::Conductor),
     /// Rough plastic: a rough dielectric coat over a Lambertian base (see `plastic`).
     RoughPlastic(plastic::RoughPlastic),
+    /// Thin dielectric sheet (Mitsuba's `thindielectric`): reflects R' (the Fresnel term of
+    /// both faces and the light bouncing between them) and lets 1 - R' straight through.
+    /// `ior` is the sheet's index over its surroundings'; alike from both sides.
+    ThinDielectric { ior: f32 },
 }
 
 // Materials are copied by value into every shading point and visible point: keep them small
@@ -42,15 +47,17 @@ pub enum MaterialKind {
     Conductor = 1,
     RoughPlastic = 2,
     Dielectric = 3,
+    ThinDielectric = 4,
 }
 
 impl MaterialKind {
     /// Every kind, in queue order.
-    pub const ALL: [MaterialKind; 4] = [
+    pub const ALL: [MaterialKind; 5] = [
         MaterialKind::Diffuse,
         MaterialKind::Conductor,
         MaterialKind::RoughPlastic,
         MaterialKind::Dielectric,
+        MaterialKind::ThinDielectric,
     ];
     pub const COUNT: usize = MaterialKind::ALL.len();
 
@@ -58,7 +65,7 @@ impl MaterialKind {
     pub const fn is_delta(self) -> bool {
         match self {
             MaterialKind::Diffuse | MaterialKind::Conductor | MaterialKind::RoughPlastic => false,
-            MaterialKind::Dielectric => true,
+            MaterialKind::Dielectric | MaterialKind::ThinDielectric => true,
         }
     }
 
@@ -69,6 +76,7 @@ impl MaterialKind {
             MaterialKind::Conductor => "shade_conductor",
             MaterialKind::RoughPlastic => "shade_rough_plastic",
             MaterialKind::Dielectric => "shade_dielectric",
+            MaterialKind::ThinDielectric => "shade_thin_dielectric",
         }
     }
 }
@@ -92,7 +100,7 @@ impl Material {
             Material::Diffuse { .. } => true,
             Material::Conductor(c) => c.two_sided,
             Material::RoughPlastic(p) => p.two_sided,
-            Material::Dielectric { .. } => false,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => false,
         }
     }
 
@@ -102,6 +110,7 @@ impl Material {
             Material::Dielectric { .. } => MaterialKind::Dielectric,
             Material::Conductor(_) => MaterialKind::Conductor,
             Material::RoughPlastic(_) => MaterialKind::RoughPlastic,
+            Material::ThinDielectric { .. } => MaterialKind::ThinDielectric,
         }
     }
 }
@@ -158,7 +167,7 @@ impl Material {
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         match *self {
             Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
-            Material::Dielectric { .. } => Vec3::ZERO,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
             Material::Conductor(c) => c.eval(wo, wi),
             Material::RoughPlastic(p) => p.eval(wo, wi),
         }
@@ -168,7 +177,7 @@ impl Material {
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf(wo, wi),
-            Material::Dielectric { .. } => 0.0,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
             Material::Conductor(c) => c.pdf(wo, wi),
             Material::RoughPlastic(p) => p.pdf(wo, wi),
         }
@@ -183,7 +192,7 @@ impl Material {
             Material::Diffuse { reflectance } => {
                 diffuse::eval_cos(reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
             }
-            Material::Dielectric { .. } => Vec3::ZERO,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
             Material::Conductor(_) | Material::RoughPlastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.eval(frame.to_local(wo), frame.to_local(wi))
@@ -196,7 +205,7 @@ impl Material {
     pub fn pdf_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf_cos(wo.dot(ns), wi.dot(ns)),
-            Material::Dielectric { .. } => 0.0,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
             Material::Conductor(_) | Material::RoughPlastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.pdf(frame.to_local(wo), frame.to_local(wi))
@@ -213,6 +222,7 @@ impl Material {
             Material::Dielectric { ior } => Some(dielectric::sample(ior, wo, u.x, mode)),
             Material::Conductor(c) => c.sample(wo, u),
             Material::RoughPlastic(p) => p.sample(wo, u),
+            Material::ThinDielectric { ior } => Some(dielectric::sample_thin(ior, wo, u.x)),
         }
     }
 }

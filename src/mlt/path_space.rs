@@ -16,7 +16,7 @@
 //! so an image is splats x pixels / mutations.
 
 use crate::accel::Accel;
-use crate::bsdf::dielectric::fresnel;
+use crate::bsdf::dielectric::{fresnel, thin_reflectance};
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::CAMERA_VERTEX;
 use crate::geometry::{offset_ray_origin, spawn_ray_to, surface_point};
@@ -226,6 +226,12 @@ impl<'a> PathSpace<'a> {
                 }
                 None => Vec3::ZERO,
             },
+            // Thin glass: R' back, 1 - R' straight on, in either mode (no index change).
+            Material::ThinDielectric { ior } => match specular_lobe(v, wo, wi) {
+                Some(true) => Vec3::splat(thin_reflectance(wo.dot(v.ns), ior)),
+                Some(false) => Vec3::splat(1.0 - thin_reflectance(wo.dot(v.ns), ior)),
+                None => Vec3::ZERO,
+            },
             _ => self.ctx.f(v, wo, wi, mode) * wi.dot(v.ns).abs(),
         }
     }
@@ -233,14 +239,19 @@ impl<'a> PathSpace<'a> {
     /// Solid-angle density with which a subpath at `v`, arrived from direction `wo` (towards
     /// its previous vertex), samples `wi`; at a specular vertex the lobe's probability.
     pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
-        if v.kind == VertexKind::Surface
-            && let Material::Dielectric { ior } = self.ctx.material(v)
-        {
-            return match specular_lobe(v, wo, wi) {
-                Some(true) => fresnel(wo.dot(v.ns), ior),
-                Some(false) => 1.0 - fresnel(wo.dot(v.ns), ior),
-                None => 0.0,
+        if v.kind == VertexKind::Surface {
+            let reflectance = match self.ctx.material(v) {
+                Material::Dielectric { ior } => Some(fresnel(wo.dot(v.ns), ior)),
+                Material::ThinDielectric { ior } => Some(thin_reflectance(wo.dot(v.ns), ior)),
+                _ => None,
             };
+            if let Some(r) = reflectance {
+                return match specular_lobe(v, wo, wi) {
+                    Some(true) => r,
+                    Some(false) => 1.0 - r,
+                    None => 0.0,
+                };
+            }
         }
         self.ctx.pdf_dir(v, wo, wi)
     }
@@ -464,12 +475,20 @@ impl<'a> PathSpace<'a> {
         }
     }
 
-    /// The direction a specular vertex sends `wo` to by reflection (`reflect`) or refraction;
-    /// `None` under total internal reflection or where the shading normal would send it
-    /// through the wrong geometric side.
+    /// The direction a specular vertex sends `wo` to by reflection (`reflect`) or refraction
+    /// (thin glass: straight through, `-wo`); `None` under total internal reflection (or where
+    /// thin glass reflects everything) or where the shading normal would send it through the
+    /// wrong geometric side.
     pub fn follow_specular(&self, v: &Vertex, wo: Vec3, reflect: bool) -> Option<Vec3> {
-        let Material::Dielectric { ior } = self.ctx.material(v) else {
-            return None;
+        let ior = match self.ctx.material(v) {
+            Material::Dielectric { ior } => ior,
+            Material::ThinDielectric { ior } if !reflect => {
+                // Straight on: -wo is on the other geometric side whatever the normals.
+                return (thin_reflectance(wo.dot(v.ns), ior) < 1.0 && wo.dot(v.ng) != 0.0)
+                    .then_some(-wo);
+            }
+            Material::ThinDielectric { ior } => ior,
+            _ => return None,
         };
         let frame = Frame::from_normal(v.ns);
         let w = frame.to_local(wo);

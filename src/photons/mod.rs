@@ -251,14 +251,14 @@ impl PhotonMaps {
 pub const FOLLOW_ALPHA: f32 = 0.2;
 
 /// Whether camera chains pass through `material` (sampling it) rather than gather photons on
-/// it: smooth dielectrics, and conductors smoother than `FOLLOW_ALPHA`. Photons are not stored
+/// it: smooth dielectrics (thick or thin), and conductors smoother than `FOLLOW_ALPHA`. Photons are not stored
 /// there (nothing gathers them), and a photon path through them to a diffuse surface is a
 /// caustic (PM's caustic map).
 #[inline]
 pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     use crate::bsdf::Material;
     match *material {
-        Material::Dielectric { .. } => true,
+        Material::Dielectric { .. } | Material::ThinDielectric { .. } => true,
         Material::Conductor(c) => c.max_alpha() < FOLLOW_ALPHA,
         Material::Diffuse { .. } | Material::RoughPlastic(_) => false,
     }

@@ -47,6 +47,10 @@ pub enum MaterialDesc {
     Dielectric {
         ior: Ior,
     },
+    /// Mitsuba's `thindielectric`: a thin sheet of index `ior` (relative to its surroundings).
+    ThinDielectric {
+        ior: Ior,
+    },
     Conductor {
         alpha: Alpha,
         reflectance: Reflectance,

@@ -331,7 +331,7 @@ impl PreparedScene {
                     plastic.diffuse = texture(t).eval(uv);
                 }
             }
-            Material::Dielectric { .. } => {}
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => {}
         }
         material
     }

@@ -284,6 +284,7 @@ fn make_material(desc: &MaterialDesc) -> Material {
             reflectance: reflectance.0,
         },
         MaterialDesc::Dielectric { ior } => Material::Dielectric { ior: ior.0 },
+        MaterialDesc::ThinDielectric { ior } => Material::ThinDielectric { ior: ior.0 },
         MaterialDesc::RoughPlastic {
             diffuse,
             alpha,

@@ -4,7 +4,7 @@
 //! or ends on any other surface, which becomes the chain's gather point unless the chain is
 //! at the depth cap. Chains that leave the scene, reach the depth cap or lose the roulette
 //! (after `ROULETTE_DEPTH` bounces, by throughput) end with no gather point. In a ray tree
-//! (PPM) a chain at a dielectric follows both branches instead, the second as a new chain,
+//! (PPM) a chain at a dielectric (thick or thin) follows both branches instead, the second as a new chain,
 //! and at a followed conductor one sampled direction, with no roulette (see `camera_walk`).
 
 use crate::bsdf::{Material, TransportMode, sample_direction};
@@ -135,7 +135,12 @@ crate::system! {
                     }
                     let frame = Frame::from_normal(ns);
                     let wo_local = frame.to_local(wo);
-                    if tree && matches!(material, Material::Dielectric { .. }) {
+                    if tree
+                        && matches!(
+                            material,
+                            Material::Dielectric { .. } | Material::ThinDielectric { .. }
+                        )
+                    {
                         // Refraction (u = 1 is never below F), then reflection (u = 0 is
                         // below F unless F = 0); each weighs its Fresnel term: f cos, not
                         // divided by the probability of choosing it.

@@ -1598,6 +1598,109 @@ fn dielectric_generalised_reciprocity() {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Thin dielectric.
+
+/// Mitsuba 3.9.1's `thindielectric` (scalar_rgb, `BSDF::sample` with sample1 0 and 0.999, si.wi
+/// our wo at azimuth 20 degrees, int_ior bk7 and 1.33 over air): the reflection's probability
+/// at each polar angle of wo (from both sides); both lobes weigh 1 and the transmitted
+/// direction is -wo.
+#[test]
+fn thin_dielectric_matches_mitsuba_sample() {
+    let cases: [(f32, [(f64, f32); 6]); 2] = [
+        (
+            1.5046,
+            [
+                (0.0, 0.077_914_33),
+                (30.0, 0.080_739_05),
+                (60.0, 0.164_935_4),
+                (85.0, 0.760_275_5),
+                (120.0, 0.164_935_4),
+                (170.0, 0.077_943_13),
+            ],
+        ),
+        (
+            1.33,
+            [
+                (0.0, 0.039_255_84),
+                (30.0, 0.041_275_78),
+                (60.0, 0.111_525_9),
+                (85.0, 0.736_280_6),
+                (120.0, 0.111_525_9),
+                (170.0, 0.039_275_76),
+            ],
+        ),
+    ];
+    for (int_ior, by_theta) in cases {
+        let m = Material::ThinDielectric {
+            ior: int_ior / 1.000_277,
+        };
+        for (theta, r) in by_theta {
+            let wo = dir_deg(theta, 20.0);
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                let reflected = m.sample(wo, Vec2::new(0.0, 0.5), mode).unwrap();
+                let through = m.sample(wo, Vec2::new(0.999, 0.5), mode).unwrap();
+                assert!(reflected.delta && through.delta);
+                assert!(
+                    rel_close(reflected.pdf, r, 1e-4) && rel_close(through.pdf, 1.0 - r, 1e-4),
+                    "ior {int_ior} theta {theta}: R' {} and {}, Mitsuba's {r}",
+                    reflected.pdf,
+                    through.pdf
+                );
+                let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
+                assert!((reflected.wi - mirror).length() < 1e-6, "{reflected:?}");
+                assert!((through.wi + wo).length() < 1e-6, "{through:?}");
+                for s in [reflected, through] {
+                    let weight = s.value * s.wi.z.abs() / s.pdf;
+                    assert!((weight - Vec3::ONE).abs().max_element() < 1e-5, "{s:?}");
+                }
+                // Not reachable by evaluation: a pure delta material.
+                assert_eq!(m.eval(wo, through.wi), Vec3::ZERO);
+                assert_eq!(m.pdf(wo, reflected.wi), 0.0);
+            }
+        }
+    }
+}
+
+/// R' is the sum of the sheet's internal bounces, R + T R T + T R^3 T + ..., summed here term
+/// by term from the single-face Fresnel term; lobe frequencies follow it.
+#[test]
+fn thin_dielectric_sums_its_internal_reflections() {
+    for ior in [1.0001f32, 1.33, 1.5, 2.4, 4.0] {
+        for theta in [0.0f64, 20.0, 45.0, 70.0, 85.0, 89.0] {
+            let cos = theta.to_radians().cos() as f32;
+            let r = f64::from(dielectric::fresnel(cos, ior));
+            let t = 1.0 - r;
+            let series: f64 = r + (0..200).map(|k| t * t * r.powi(2 * k + 1)).sum::<f64>();
+            let got = f64::from(dielectric::thin_reflectance(cos, ior));
+            let from_behind = f64::from(dielectric::thin_reflectance(-cos, ior));
+            assert!(
+                (got - series).abs() < 2e-6 && got == from_behind,
+                "ior {ior} theta {theta}: R' {got}, series {series}, from behind {from_behind}"
+            );
+            // One choice in [0, 1): reflection below R', straight through above.
+            let m = Material::ThinDielectric { ior };
+            let wo = dir_deg(theta, 0.0);
+            let n = 20_000u64;
+            let reflected = (0..n)
+                .filter(|&i| {
+                    let u = (i as f32 + 0.5) / n as f32;
+                    m.sample(wo, Vec2::new(u, 0.5), TransportMode::Radiance)
+                        .unwrap()
+                        .wi
+                        .z
+                        > 0.0
+                })
+                .count();
+            let frequency = reflected as f64 / n as f64;
+            assert!(
+                (frequency - got).abs() < 1e-4,
+                "ior {ior} theta {theta}: {frequency} against {got}"
+            );
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Stability.
 
 fn edge_directions() -> Vec<Vec3> {
@@ -1655,6 +1758,9 @@ fn stability_all_materials() {
     });
     for ior in [1.0f32, 1.5, 2.4, 1.0 / 1.5] {
         check_material_finite(Material::Dielectric { ior });
+    }
+    for ior in [1.0f32, 1.0001, 1.5, 4.0, 1.0 / 1.5] {
+        check_material_finite(Material::ThinDielectric { ior });
     }
     for alpha in [0.0f32, 1e-6, 1e-4, 1e-3, 0.01, 0.3, 1.0, 1e4] {
         for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {

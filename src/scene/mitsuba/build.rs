@@ -49,7 +49,8 @@ pub struct FileSettings {
 pub const INTEGRATORS: &str = "path, direct, moment";
 pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
-pub const BSDFS: &str = "diffuse, twosided, dielectric, conductor, roughconductor, roughplastic";
+pub const BSDFS: &str =
+    "diffuse, twosided, dielectric, thindielectric, conductor, roughconductor, roughplastic";
 pub const EMITTERS: &str = "area, point, spot, directional, constant, envmap";
 pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
@@ -881,7 +882,9 @@ impl<'a> Builder<'a> {
                     Material::Conductor(c) => c.two_sided = true,
                     Material::RoughPlastic(p) => p.two_sided = true,
                     // Lambertian reflection is two-sided in the engine already.
-                    Material::Diffuse { .. } | Material::Dielectric { .. } => {}
+                    Material::Diffuse { .. }
+                    | Material::Dielectric { .. }
+                    | Material::ThinDielectric { .. } => {}
                 }
                 return Ok((material, Sides::Two));
             }
@@ -889,7 +892,8 @@ impl<'a> Builder<'a> {
                 drop(params);
                 return Ok((self.diffuse(object)?, Sides::One));
             }
-            "dielectric" => {
+            "dielectric" | "thindielectric" => {
+                let kind = object.kind.as_str();
                 no_children(object)?;
                 let int_ior = ior(&mut params, "int_ior", 1.5046)?;
                 let ext_ior = ior(&mut params, "ext_ior", 1.000277)?;
@@ -899,21 +903,32 @@ impl<'a> Builder<'a> {
                     {
                         return Err(XmlError::at(
                             &spot,
-                            format!("dielectric: {name} other than 1 is not supported yet"),
+                            format!("{kind}: {name} other than 1 is not supported yet"),
                         ));
                     }
                 }
                 params.finish()?;
                 let ratio = (int_ior / ext_ior) as f32;
-                if !(ratio.is_finite() && ratio > 0.0) || ratio == 1.0 {
-                    return Err(XmlError::at(
-                        &object.spot,
-                        format!(
-                            "dielectric: int_ior / ext_ior = {ratio} must be positive and not 1"
-                        ),
-                    ));
+                if kind == "thindielectric" {
+                    // Index-matched (ratio 1) is a valid, invisible, sheet.
+                    if !(ratio.is_finite() && ratio > 0.0) {
+                        return Err(XmlError::at(
+                            &object.spot,
+                            format!("thindielectric: int_ior / ext_ior = {ratio} must be positive"),
+                        ));
+                    }
+                    Material::ThinDielectric { ior: ratio }
+                } else {
+                    if !(ratio.is_finite() && ratio > 0.0) || ratio == 1.0 {
+                        return Err(XmlError::at(
+                            &object.spot,
+                            format!(
+                                "dielectric: int_ior / ext_ior = {ratio} must be positive and not 1"
+                            ),
+                        ));
+                    }
+                    Material::Dielectric { ior: ratio }
                 }
-                Material::Dielectric { ior: ratio }
             }
             "conductor" | "roughconductor" => {
                 let textured = self.conductor_textures(object)?;
@@ -1012,7 +1027,8 @@ impl<'a> Builder<'a> {
             }
             _ => return Err(unsupported(object, BSDFS)),
         };
-        // Dielectrics refract on both sides; conductors and plastics reflect only on the front.
+        // Dielectrics (thick or thin) scatter on both sides; conductors and plastics reflect only
+        // on the front.
         Ok((material, Sides::One))
     }
 
