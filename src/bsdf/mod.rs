@@ -11,6 +11,7 @@ pub mod dielectric;
 pub mod diffuse;
 pub mod microfacet;
 pub mod plastic;
+pub mod smooth_plastic;
 
 use glam::{Vec2, Vec3};
 
@@ -27,6 +28,9 @@ pub enum Material {
     Conductor(conductor::Conductor),
     /// Rough plastic: a rough dielectric coat over a Lambertian base (see `plastic`).
     RoughPlastic(plastic::RoughPlastic),
+    /// Smooth plastic: a delta reflection off a smooth coat over a Lambertian base (see
+    /// `smooth_plastic`): a delta lobe and a non-delta one.
+    Plastic(smooth_plastic::SmoothPlastic),
     /// Thin dielectric sheet (Mitsuba's `thindielectric`): reflects R' (the Fresnel term of
     /// both faces and the light bouncing between them) and lets 1 - R' straight through.
     /// `ior` is the sheet's index over its surroundings'; alike from both sides.
@@ -46,26 +50,41 @@ pub enum MaterialKind {
     Diffuse = 0,
     Conductor = 1,
     RoughPlastic = 2,
-    Dielectric = 3,
-    ThinDielectric = 4,
+    Plastic = 3,
+    Dielectric = 4,
+    ThinDielectric = 5,
 }
 
 impl MaterialKind {
     /// Every kind, in queue order.
-    pub const ALL: [MaterialKind; 5] = [
+    pub const ALL: [MaterialKind; 6] = [
         MaterialKind::Diffuse,
         MaterialKind::Conductor,
         MaterialKind::RoughPlastic,
+        MaterialKind::Plastic,
         MaterialKind::Dielectric,
         MaterialKind::ThinDielectric,
     ];
     pub const COUNT: usize = MaterialKind::ALL.len();
 
     /// Whether every lobe is a Dirac delta: light sampling and connections cannot reach it.
+    /// (The smooth plastic is not: its diffuse lobe is reached; see `has_delta_lobe`.)
     pub const fn is_delta(self) -> bool {
         match self {
-            MaterialKind::Diffuse | MaterialKind::Conductor | MaterialKind::RoughPlastic => false,
+            MaterialKind::Diffuse
+            | MaterialKind::Conductor
+            | MaterialKind::RoughPlastic
+            | MaterialKind::Plastic => false,
             MaterialKind::Dielectric | MaterialKind::ThinDielectric => true,
+        }
+    }
+
+    /// Whether `sample` may return a delta lobe (`BsdfSample::delta`): the delta kinds, and
+    /// the smooth plastic, whose specular reflection is a delta beside its diffuse lobe.
+    pub const fn has_delta_lobe(self) -> bool {
+        match self {
+            MaterialKind::Diffuse | MaterialKind::Conductor | MaterialKind::RoughPlastic => false,
+            MaterialKind::Plastic | MaterialKind::Dielectric | MaterialKind::ThinDielectric => true,
         }
     }
 
@@ -75,6 +94,7 @@ impl MaterialKind {
             MaterialKind::Diffuse => "shade_diffuse",
             MaterialKind::Conductor => "shade_conductor",
             MaterialKind::RoughPlastic => "shade_rough_plastic",
+            MaterialKind::Plastic => "shade_plastic",
             MaterialKind::Dielectric => "shade_dielectric",
             MaterialKind::ThinDielectric => "shade_thin_dielectric",
         }
@@ -100,6 +120,7 @@ impl Material {
             Material::Diffuse { .. } => true,
             Material::Conductor(c) => c.two_sided,
             Material::RoughPlastic(p) => p.two_sided,
+            Material::Plastic(p) => p.two_sided,
             Material::Dielectric { .. } | Material::ThinDielectric { .. } => false,
         }
     }
@@ -110,6 +131,7 @@ impl Material {
             Material::Dielectric { .. } => MaterialKind::Dielectric,
             Material::Conductor(_) => MaterialKind::Conductor,
             Material::RoughPlastic(_) => MaterialKind::RoughPlastic,
+            Material::Plastic(_) => MaterialKind::Plastic,
             Material::ThinDielectric { .. } => MaterialKind::ThinDielectric,
         }
     }
@@ -163,23 +185,27 @@ pub fn sample_direction(
 }
 
 impl Material {
-    /// f(wo, wi) without the cosine; zero for delta materials.
+    /// f(wo, wi) without the cosine; zero for delta materials (the smooth plastic's diffuse
+    /// lobe alone: its delta reflection only `sample` returns).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         match *self {
             Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
             Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
             Material::Conductor(c) => c.eval(wo, wi),
             Material::RoughPlastic(p) => p.eval(wo, wi),
+            Material::Plastic(p) => p.eval(wo, wi),
         }
     }
 
-    /// Solid-angle density with which `sample` returns `wi`; zero for delta materials.
+    /// Solid-angle density with which `sample` returns `wi`; zero for delta materials (the
+    /// smooth plastic's diffuse lobe's, times the probability of choosing that lobe).
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf(wo, wi),
             Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
             Material::Conductor(c) => c.pdf(wo, wi),
             Material::RoughPlastic(p) => p.pdf(wo, wi),
+            Material::Plastic(p) => p.pdf(wo, wi),
         }
     }
 
@@ -193,7 +219,7 @@ impl Material {
                 diffuse::eval_cos(reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
             }
             Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
-            Material::Conductor(_) | Material::RoughPlastic(_) => {
+            Material::Conductor(_) | Material::RoughPlastic(_) | Material::Plastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.eval(frame.to_local(wo), frame.to_local(wi))
             }
@@ -206,7 +232,7 @@ impl Material {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf_cos(wo.dot(ns), wi.dot(ns)),
             Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
-            Material::Conductor(_) | Material::RoughPlastic(_) => {
+            Material::Conductor(_) | Material::RoughPlastic(_) | Material::Plastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.pdf(frame.to_local(wo), frame.to_local(wi))
             }
@@ -222,6 +248,7 @@ impl Material {
             Material::Dielectric { ior } => Some(dielectric::sample(ior, wo, u.x, mode)),
             Material::Conductor(c) => c.sample(wo, u),
             Material::RoughPlastic(p) => p.sample(wo, u),
+            Material::Plastic(p) => p.sample(wo, u),
             Material::ThinDielectric { ior } => Some(dielectric::sample_thin(ior, wo, u.x)),
         }
     }

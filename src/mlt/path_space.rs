@@ -100,13 +100,28 @@ impl<'a> PathSpace<'a> {
         }
     }
 
-    /// Whether `v` scatters only by a delta lobe.
+    /// Whether `v` scatters by a delta lobe in this path: at a delta material always; at a
+    /// material with a delta lobe beside a non-delta one (the smooth plastic) when the
+    /// vertex's `delta` says so. That flag is the vertex's role in the path: set where a
+    /// subpath sampled the delta lobe there, cleared at a joint (a connection evaluates the
+    /// non-delta lobe), kept by a perturbation's new vertex from the one it replaces
+    /// (`in_role_of`). The contribution, the densities and the specular chains all read it.
     #[inline]
     pub fn is_specular(&self, v: &Vertex) -> bool {
-        v.kind != VertexKind::Camera
-            && !v.is_point_light()
-            && !v.is_at_infinity()
-            && self.ctx.material(v).kind().is_delta()
+        if !v.is_on_surface() {
+            return false;
+        }
+        let kind = self.ctx.material(v).kind();
+        kind.is_delta() || (v.delta && kind.has_delta_lobe())
+    }
+
+    /// `hit`, a perturbation's new vertex in place of `old`, in `old`'s role (its lobe, delta
+    /// or not, where its material has both).
+    #[inline]
+    pub fn in_role_of(&self, mut hit: Vertex, old: &Vertex) -> Vertex {
+        hit.delta =
+            old.delta && hit.is_on_surface() && self.ctx.material(&hit).kind().has_delta_lobe();
+        hit
     }
 
     /// The surface vertex of a point on triangle `triangle` given its position (the light
@@ -226,6 +241,19 @@ impl<'a> PathSpace<'a> {
                 }
                 None => Vec3::ZERO,
             },
+            // The smooth plastic's reflection, in the delta role (`is_specular`).
+            Material::Plastic(p) if v.delta => {
+                // The cosine on the side the coat faces (either, inside `twosided`).
+                let cos = if p.two_sided {
+                    wo.dot(v.ns).abs()
+                } else {
+                    wo.dot(v.ns)
+                };
+                match specular_lobe(v, wo, wi) {
+                    Some(true) if cos > 0.0 => p.specular * fresnel(cos, p.eta),
+                    _ => Vec3::ZERO,
+                }
+            }
             // Thin glass: R' back, 1 - R' straight on, in either mode (no index change).
             Material::ThinDielectric { ior } => match specular_lobe(v, wo, wi) {
                 Some(true) => Vec3::splat(thin_reflectance(wo.dot(v.ns), ior)),
@@ -240,6 +268,19 @@ impl<'a> PathSpace<'a> {
     /// its previous vertex), samples `wi`; at a specular vertex the lobe's probability.
     pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
         if v.kind == VertexKind::Surface {
+            if let Material::Plastic(p) = self.ctx.material(v)
+                && v.delta
+            {
+                let cos = if p.two_sided {
+                    wo.dot(v.ns).abs()
+                } else {
+                    wo.dot(v.ns)
+                };
+                return match specular_lobe(v, wo, wi) {
+                    Some(true) if cos > 0.0 => p.specular_probability(cos),
+                    _ => 0.0,
+                };
+            }
             let reflectance = match self.ctx.material(v) {
                 Material::Dielectric { ior } => Some(fresnel(wo.dot(v.ns), ior)),
                 Material::ThinDielectric { ior } => Some(thin_reflectance(wo.dot(v.ns), ior)),
@@ -292,8 +333,9 @@ impl<'a> PathSpace<'a> {
     pub fn split_density(&self, path: &[Vertex], lo: usize, count: usize, s: usize) -> f64 {
         let joint_light = (lo + s).checked_sub(1);
         let joint_camera = lo + s;
+        let joins = |v: &Vertex| self.ctx.is_connectible(v) && !self.is_specular(v);
         if let Some(a) = joint_light
-            && (!self.ctx.is_connectible(&path[a]) || !self.ctx.is_connectible(&path[joint_camera]))
+            && (!joins(&path[a]) || !joins(&path[joint_camera]))
         {
             return 0.0;
         }
@@ -434,28 +476,29 @@ impl<'a> PathSpace<'a> {
     }
 
     /// A direction out of `v` as a subpath would sample it (the camera's ray with the raster
-    /// position uniform, the light's cosine lobe, or the BSDF, arrived from `wo`) and the
-    /// solid-angle density the sampler reports for it (a delta lobe's probability).
+    /// position uniform, the light's cosine lobe, or the BSDF, arrived from `wo`), the
+    /// solid-angle density the sampler reports for it (a delta lobe's probability) and
+    /// whether a delta lobe made it (`v`'s role then: `is_specular`).
     pub fn sample_direction(
         &self,
         v: &Vertex,
         wo: Vec3,
         u: Vec2,
         mode: TransportMode,
-    ) -> Option<(Vec3, f32)> {
+    ) -> Option<(Vec3, f32, bool)> {
         match v.kind {
             VertexKind::Camera => {
                 let cam = &self.ctx.camera;
                 let raster = Vec2::new(u.x * cam.width as f32, u.y * cam.height as f32);
                 let w = cam.direction(raster);
-                Some((w, cam.pdf_dir(w)))
+                Some((w, cam.pdf_dir(w), false))
             }
             // Its paths leave a disk, not a point: `trace_from_infinity`.
             VertexKind::Light if v.is_at_infinity() => None,
             VertexKind::Light if v.is_point_light() => {
                 let profile = self.ctx.point_profile(v).unwrap_or(&None);
                 let (w, pdf) = crate::scene::lights::sample_direction(profile, u);
-                (pdf > 0.0).then_some((w, pdf))
+                (pdf > 0.0).then_some((w, pdf, false))
             }
             VertexKind::Light => {
                 let local = cosine_hemisphere(u);
@@ -463,6 +506,7 @@ impl<'a> PathSpace<'a> {
                     (
                         Frame::from_normal(v.ng).to_world(local).normalize(),
                         local.z * std::f32::consts::FRAC_1_PI,
+                        false,
                     )
                 })
             }
@@ -470,7 +514,7 @@ impl<'a> PathSpace<'a> {
                 let (material, frame, ng) = local_frame(self.ctx.scene, v, wo);
                 let (bs, wi) =
                     sample_direction(&material, &frame, ng, wo, frame.to_local(wo), u, mode)?;
-                (bs.value.max_element() > 0.0).then_some((wi, bs.pdf))
+                (bs.value.max_element() > 0.0).then_some((wi, bs.pdf, bs.delta))
             }
         }
     }
@@ -482,6 +526,8 @@ impl<'a> PathSpace<'a> {
     pub fn follow_specular(&self, v: &Vertex, wo: Vec3, reflect: bool) -> Option<Vec3> {
         let ior = match self.ctx.material(v) {
             Material::Dielectric { ior } => ior,
+            // The plastic's delta lobe only reflects (its `eta` is not used below then).
+            Material::Plastic(p) if v.delta && reflect => p.eta,
             Material::ThinDielectric { ior } if !reflect => {
                 // Straight on: -wo is on the other geometric side whatever the normals.
                 return (thin_reflectance(wo.dot(v.ns), ior) < 1.0 && wo.dot(v.ng) != 0.0)

@@ -260,7 +260,9 @@ pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     match *material {
         Material::Dielectric { .. } | Material::ThinDielectric { .. } => true,
         Material::Conductor(c) => c.max_alpha() < FOLLOW_ALPHA,
-        Material::Diffuse { .. } | Material::RoughPlastic(_) => false,
+        // The smooth plastic gathers on its diffuse lobe; camera chains follow its delta
+        // reflection by a per-chain choice (`extend_camera_chains`).
+        Material::Diffuse { .. } | Material::RoughPlastic(_) | Material::Plastic(_) => false,
     }
 }
 

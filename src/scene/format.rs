@@ -63,6 +63,13 @@ pub enum MaterialDesc {
         #[serde(default)]
         ior: Option<Ior>,
     },
+    /// Mitsuba's smooth `plastic` on its defaults but `diffuse` (polypropylene's index 1.49
+    /// unless `ior` says otherwise, specular 1, linear).
+    Plastic {
+        diffuse: Reflectance,
+        #[serde(default)]
+        ior: Option<Ior>,
+    },
 }
 
 #[derive(Clone, Debug, Deserialize)]

@@ -331,6 +331,11 @@ impl PreparedScene {
                     plastic.diffuse = texture(t).eval(uv);
                 }
             }
+            Material::Plastic(plastic) => {
+                if let Some(t) = v.reflectance {
+                    plastic.diffuse = texture(t).eval(uv);
+                }
+            }
             Material::Dielectric { .. } | Material::ThinDielectric { .. } => {}
         }
         material

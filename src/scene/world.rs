@@ -298,6 +298,15 @@ fn make_material(desc: &MaterialDesc) -> Material {
             Vec3::ONE,
             false,
         )),
+        MaterialDesc::Plastic { diffuse, ior } => {
+            Material::Plastic(crate::bsdf::smooth_plastic::SmoothPlastic::new(
+                ior.map_or(1.49, |i| i.0),
+                diffuse.0,
+                diffuse.0.element_sum() / 3.0,
+                Vec3::ONE,
+                false,
+            ))
+        }
         MaterialDesc::Conductor { alpha, reflectance } => {
             Material::Conductor(Conductor::ggx(alpha.0, reflectance.0))
         }

@@ -37,6 +37,9 @@ crate::system! {
             MaterialKind::RoughPlastic => scatter_paths::<{ MaterialKind::RoughPlastic as u8 }>(
                 data, sampler, *lanes, hits, surfaces, rays, paths, range,
             ),
+            MaterialKind::Plastic => scatter_paths::<{ MaterialKind::Plastic as u8 }>(
+                data, sampler, *lanes, hits, surfaces, rays, paths, range,
+            ),
             MaterialKind::ThinDielectric => {
                 scatter_paths::<{ MaterialKind::ThinDielectric as u8 }>(
                     data, sampler, *lanes, hits, surfaces, rays, paths, range,

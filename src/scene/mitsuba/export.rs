@@ -161,6 +161,17 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
             rgb(p.specular),
             p.nonlinear
         ),
+        Material::Plastic(p) => format!(
+            "    <bsdf type=\"plastic\" id=\"{id}\">\n        \
+             <float name=\"int_ior\" value=\"{}\"/>\n        <float name=\"ext_ior\" value=\"1\"/>\n        \
+             <rgb name=\"diffuse_reflectance\" value=\"{}\"/>\n        \
+             <rgb name=\"specular_reflectance\" value=\"{}\"/>\n        \
+             <boolean name=\"nonlinear\" value=\"{}\"/>\n    </bsdf>",
+            float(p.eta),
+            rgb(p.diffuse),
+            rgb(p.specular),
+            p.nonlinear
+        ),
         Material::Dielectric { ior } => format!(
             "    <bsdf type=\"dielectric\" id=\"{id}\">\n        <float name=\"int_ior\" value=\"{}\"/>\n        \
              <float name=\"ext_ior\" value=\"1\"/>\n    </bsdf>",
