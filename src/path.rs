@@ -591,7 +591,7 @@ impl PathContext<'_> {
             }
             VertexKind::Light => Lobe::Light,
             VertexKind::Surface => match self.material_seen(v, wo) {
-                (Material::Dielectric { .. }, _) => return None,
+                (m, _) if m.kind().is_delta() => return None,
                 (Material::Diffuse { reflectance }, _) => Lobe::Diffuse(reflectance * FRAC_1_PI),
                 (material, ns) => Lobe::Other(material, ns),
             },

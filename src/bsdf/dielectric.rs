@@ -92,3 +92,33 @@ pub fn sample(ior: f32, wo: Vec3, u: f32, mode: TransportMode) -> BsdfSample {
         delta: true,
     }
 }
+
+/// Reflectance of a thin dielectric sheet (Mitsuba 3's `thindielectric`): light that enters
+/// one face leaves by either after any number of internal reflections, so with R the Fresnel
+/// reflectance of one face and T = 1 - R, R' = R + T^2 R / (1 - R^2) = 2R / (1 + R) (the rest,
+/// 1 - R', goes straight through: the two refractions cancel). The sheet is alike from both
+/// sides: `cos` is taken as |cos|, `ior` is the sheet's index over its surroundings'.
+pub fn thin_reflectance(cos: f32, ior: f32) -> f32 {
+    let c = cos.abs().min(1.0);
+    let r = fresnel(c, ior);
+    (2.0 * r / (1.0 + r)).min(1.0)
+}
+
+/// Samples a thin dielectric sheet: reflection with probability R' (`thin_reflectance`, chosen
+/// with `u`), or straight through (wi = -wo) with probability 1 - R'. Both weigh 1: the sheet
+/// has no radiance scaling, its two refractions undo each other, so the transport mode does
+/// not matter.
+pub fn sample_thin(ior: f32, wo: Vec3, u: f32) -> BsdfSample {
+    let r = thin_reflectance(wo.z, ior);
+    let (wi, pdf) = if u < r {
+        (Vec3::new(-wo.x, -wo.y, wo.z), r)
+    } else {
+        (-wo, 1.0 - r)
+    };
+    BsdfSample {
+        wi,
+        value: Vec3::splat(pdf / wi.z.abs().max(COS_FLOOR)),
+        pdf,
+        delta: true,
+    }
+}

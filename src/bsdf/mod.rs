@@ -2,7 +2,8 @@
 //!
 //! Conventions: `wo` and `wi` are unit vectors pointing away from the surface; `eval` returns
 //! f(wo, wi) without the cosine; `sample` returns a direction with its value and solid-angle pdf
-//! so that the path weight is `value * |wi.z| / pdf`. Delta lobes (the smooth dielectric) return
+//! so that the path weight is `value * |wi.z| / pdf`. Delta lobes (the smooth dielectric and
+//! the thin one) return
 //! `delta: true`, and for them `value * |wi.z| / pdf` is still the weight.
 
 pub mod conductor;
@@ -11,6 +12,7 @@ pub mod diffuse;
 pub mod microfacet;
 pub mod plastic;
 pub mod rough_dielectric;
+pub mod smooth_plastic;
 
 use glam::{Vec2, Vec3};
 
@@ -29,6 +31,13 @@ pub enum Material {
     RoughPlastic(plastic::RoughPlastic),
     /// Rough dielectric: microfacets that reflect and refract (see `rough_dielectric`).
     RoughDielectric(rough_dielectric::RoughDielectric),
+    /// Smooth plastic: a delta reflection off a smooth coat over a Lambertian base (see
+    /// `smooth_plastic`): a delta lobe and a non-delta one.
+    Plastic(smooth_plastic::SmoothPlastic),
+    /// Thin dielectric sheet (Mitsuba's `thindielectric`): reflects R' (the Fresnel term of
+    /// both faces and the light bouncing between them) and lets 1 - R' straight through.
+    /// `ior` is the sheet's index over its surroundings'; alike from both sides.
+    ThinDielectric { ior: f32 },
 }
 
 // Materials are copied by value into every shading point and visible point: keep them small
@@ -45,28 +54,46 @@ pub enum MaterialKind {
     Conductor = 1,
     RoughPlastic = 2,
     RoughDielectric = 3,
-    Dielectric = 4,
+    Plastic = 4,
+    Dielectric = 5,
+    ThinDielectric = 6,
 }
 
 impl MaterialKind {
     /// Every kind, in queue order.
-    pub const ALL: [MaterialKind; 5] = [
+    pub const ALL: [MaterialKind; 7] = [
         MaterialKind::Diffuse,
         MaterialKind::Conductor,
         MaterialKind::RoughPlastic,
         MaterialKind::RoughDielectric,
+        MaterialKind::Plastic,
         MaterialKind::Dielectric,
+        MaterialKind::ThinDielectric,
     ];
     pub const COUNT: usize = MaterialKind::ALL.len();
 
     /// Whether every lobe is a Dirac delta: light sampling and connections cannot reach it.
+    /// (The smooth plastic is not: its diffuse lobe is reached; see `has_delta_lobe`.)
     pub const fn is_delta(self) -> bool {
         match self {
             MaterialKind::Diffuse
             | MaterialKind::Conductor
             | MaterialKind::RoughPlastic
+            | MaterialKind::RoughDielectric
+            | MaterialKind::Plastic => false,
+            MaterialKind::Dielectric | MaterialKind::ThinDielectric => true,
+        }
+    }
+
+    /// Whether `sample` may return a delta lobe (`BsdfSample::delta`): the delta kinds, and
+    /// the smooth plastic, whose specular reflection is a delta beside its diffuse lobe.
+    pub const fn has_delta_lobe(self) -> bool {
+        match self {
+            MaterialKind::Diffuse
+            | MaterialKind::Conductor
+            | MaterialKind::RoughPlastic
             | MaterialKind::RoughDielectric => false,
-            MaterialKind::Dielectric => true,
+            MaterialKind::Plastic | MaterialKind::Dielectric | MaterialKind::ThinDielectric => true,
         }
     }
 
@@ -78,7 +105,9 @@ impl MaterialKind {
             MaterialKind::Diffuse
             | MaterialKind::Conductor
             | MaterialKind::RoughPlastic
-            | MaterialKind::Dielectric => false,
+            | MaterialKind::Plastic
+            | MaterialKind::Dielectric
+            | MaterialKind::ThinDielectric => false,
         }
     }
 
@@ -89,7 +118,9 @@ impl MaterialKind {
             MaterialKind::Conductor => "shade_conductor",
             MaterialKind::RoughPlastic => "shade_rough_plastic",
             MaterialKind::RoughDielectric => "shade_rough_dielectric",
+            MaterialKind::Plastic => "shade_plastic",
             MaterialKind::Dielectric => "shade_dielectric",
+            MaterialKind::ThinDielectric => "shade_thin_dielectric",
         }
     }
 }
@@ -113,7 +144,10 @@ impl Material {
             Material::Diffuse { .. } => true,
             Material::Conductor(c) => c.two_sided,
             Material::RoughPlastic(p) => p.two_sided,
-            Material::RoughDielectric(_) | Material::Dielectric { .. } => false,
+            Material::Plastic(p) => p.two_sided,
+            Material::RoughDielectric(_)
+            | Material::Dielectric { .. }
+            | Material::ThinDielectric { .. } => false,
         }
     }
 
@@ -124,6 +158,8 @@ impl Material {
             Material::Conductor(_) => MaterialKind::Conductor,
             Material::RoughPlastic(_) => MaterialKind::RoughPlastic,
             Material::RoughDielectric(_) => MaterialKind::RoughDielectric,
+            Material::Plastic(_) => MaterialKind::Plastic,
+            Material::ThinDielectric { .. } => MaterialKind::ThinDielectric,
         }
     }
 }
@@ -199,7 +235,8 @@ pub fn scatters_between(
 }
 
 impl Material {
-    /// f(wo, wi) without the cosine, for radiance; zero for delta materials.
+    /// f(wo, wi) without the cosine, for radiance; zero for delta materials (the smooth
+    /// plastic's diffuse lobe alone: its delta reflection only `sample` returns).
     pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
         self.eval_mode(wo, wi, TransportMode::Radiance)
     }
@@ -208,21 +245,24 @@ impl Material {
     pub fn eval_mode(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
         match *self {
             Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
-            Material::Dielectric { .. } => Vec3::ZERO,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
             Material::Conductor(c) => c.eval(wo, wi),
             Material::RoughPlastic(p) => p.eval(wo, wi),
             Material::RoughDielectric(d) => d.eval(wo, wi, mode),
+            Material::Plastic(p) => p.eval(wo, wi),
         }
     }
 
-    /// Solid-angle density with which `sample` returns `wi`; zero for delta materials.
+    /// Solid-angle density with which `sample` returns `wi`; zero for delta materials (the
+    /// smooth plastic's diffuse lobe's, times the probability of choosing that lobe).
     pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf(wo, wi),
-            Material::Dielectric { .. } => 0.0,
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
             Material::Conductor(c) => c.pdf(wo, wi),
             Material::RoughPlastic(p) => p.pdf(wo, wi),
             Material::RoughDielectric(d) => d.pdf(wo, wi),
+            Material::Plastic(p) => p.pdf(wo, wi),
         }
     }
 
@@ -235,8 +275,11 @@ impl Material {
             Material::Diffuse { reflectance } => {
                 diffuse::eval_cos(reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
             }
-            Material::Dielectric { .. } => Vec3::ZERO,
-            Material::Conductor(_) | Material::RoughPlastic(_) | Material::RoughDielectric(_) => {
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
+            Material::Conductor(_)
+            | Material::RoughPlastic(_)
+            | Material::RoughDielectric(_)
+            | Material::Plastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.eval_mode(frame.to_local(wo), frame.to_local(wi), mode)
             }
@@ -248,8 +291,11 @@ impl Material {
     pub fn pdf_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
         match *self {
             Material::Diffuse { .. } => diffuse::pdf_cos(wo.dot(ns), wi.dot(ns)),
-            Material::Dielectric { .. } => 0.0,
-            Material::Conductor(_) | Material::RoughPlastic(_) | Material::RoughDielectric(_) => {
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
+            Material::Conductor(_)
+            | Material::RoughPlastic(_)
+            | Material::RoughDielectric(_)
+            | Material::Plastic(_) => {
                 let frame = crate::math::Frame::from_normal(ns);
                 self.pdf(frame.to_local(wo), frame.to_local(wi))
             }
@@ -266,6 +312,8 @@ impl Material {
             Material::Conductor(c) => c.sample(wo, u),
             Material::RoughPlastic(p) => p.sample(wo, u),
             Material::RoughDielectric(d) => d.sample(wo, u, mode),
+            Material::Plastic(p) => p.sample(wo, u),
+            Material::ThinDielectric { ior } => Some(dielectric::sample_thin(ior, wo, u.x)),
         }
     }
 }

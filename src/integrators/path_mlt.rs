@@ -132,7 +132,11 @@ const DIRECT_DOMAIN: u64 = 0x6469_7265_6374_5f6c;
 
 /// The graph for a scene: the perturbations that can apply to its paths.
 pub fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState> {
-    let specular = data.scene.materials.iter().any(|m| m.kind().is_delta());
+    let specular = data
+        .scene
+        .materials
+        .iter()
+        .any(|m| m.kind().has_delta_lobe());
     let set = &settings.mutations;
     let mut step: Vec<Node<PathMltState>> = vec![Node::system(path_mutation::ChooseMutations)];
     if set.has(MutationKind::Bidirectional) {

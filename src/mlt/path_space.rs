@@ -16,7 +16,7 @@
 //! so an image is splats x pixels / mutations.
 
 use crate::accel::Accel;
-use crate::bsdf::dielectric::fresnel;
+use crate::bsdf::dielectric::{fresnel, thin_reflectance};
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::CAMERA_VERTEX;
 use crate::geometry::{offset_ray_origin, spawn_ray_to, surface_point};
@@ -100,13 +100,28 @@ impl<'a> PathSpace<'a> {
         }
     }
 
-    /// Whether `v` scatters only by a delta lobe.
+    /// Whether `v` scatters by a delta lobe in this path: at a delta material always; at a
+    /// material with a delta lobe beside a non-delta one (the smooth plastic) when the
+    /// vertex's `delta` says so. That flag is the vertex's role in the path: set where a
+    /// subpath sampled the delta lobe there, cleared at a joint (a connection evaluates the
+    /// non-delta lobe), kept by a perturbation's new vertex from the one it replaces
+    /// (`in_role_of`). The contribution, the densities and the specular chains all read it.
     #[inline]
     pub fn is_specular(&self, v: &Vertex) -> bool {
-        v.kind != VertexKind::Camera
-            && !v.is_point_light()
-            && !v.is_at_infinity()
-            && self.ctx.material(v).kind().is_delta()
+        if !v.is_on_surface() {
+            return false;
+        }
+        let kind = self.ctx.material(v).kind();
+        kind.is_delta() || (v.delta && kind.has_delta_lobe())
+    }
+
+    /// `hit`, a perturbation's new vertex in place of `old`, in `old`'s role (its lobe, delta
+    /// or not, where its material has both).
+    #[inline]
+    pub fn in_role_of(&self, mut hit: Vertex, old: &Vertex) -> Vertex {
+        hit.delta =
+            old.delta && hit.is_on_surface() && self.ctx.material(&hit).kind().has_delta_lobe();
+        hit
     }
 
     /// The surface vertex of a point on triangle `triangle` given its position (the light
@@ -226,6 +241,25 @@ impl<'a> PathSpace<'a> {
                 }
                 None => Vec3::ZERO,
             },
+            // The smooth plastic's reflection, in the delta role (`is_specular`).
+            Material::Plastic(p) if v.delta => {
+                // The cosine on the side the coat faces (either, inside `twosided`).
+                let cos = if p.two_sided {
+                    wo.dot(v.ns).abs()
+                } else {
+                    wo.dot(v.ns)
+                };
+                match specular_lobe(v, wo, wi) {
+                    Some(true) if cos > 0.0 => p.specular * fresnel(cos, p.eta),
+                    _ => Vec3::ZERO,
+                }
+            }
+            // Thin glass: R' back, 1 - R' straight on, in either mode (no index change).
+            Material::ThinDielectric { ior } => match specular_lobe(v, wo, wi) {
+                Some(true) => Vec3::splat(thin_reflectance(wo.dot(v.ns), ior)),
+                Some(false) => Vec3::splat(1.0 - thin_reflectance(wo.dot(v.ns), ior)),
+                None => Vec3::ZERO,
+            },
             _ => self.ctx.f(v, wo, wi, mode) * wi.dot(v.ns).abs(),
         }
     }
@@ -233,14 +267,32 @@ impl<'a> PathSpace<'a> {
     /// Solid-angle density with which a subpath at `v`, arrived from direction `wo` (towards
     /// its previous vertex), samples `wi`; at a specular vertex the lobe's probability.
     pub fn pdf_dir(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> f32 {
-        if v.kind == VertexKind::Surface
-            && let Material::Dielectric { ior } = self.ctx.material(v)
-        {
-            return match specular_lobe(v, wo, wi) {
-                Some(true) => fresnel(wo.dot(v.ns), ior),
-                Some(false) => 1.0 - fresnel(wo.dot(v.ns), ior),
-                None => 0.0,
+        if v.kind == VertexKind::Surface {
+            if let Material::Plastic(p) = self.ctx.material(v)
+                && v.delta
+            {
+                let cos = if p.two_sided {
+                    wo.dot(v.ns).abs()
+                } else {
+                    wo.dot(v.ns)
+                };
+                return match specular_lobe(v, wo, wi) {
+                    Some(true) if cos > 0.0 => p.specular_probability(cos),
+                    _ => 0.0,
+                };
+            }
+            let reflectance = match self.ctx.material(v) {
+                Material::Dielectric { ior } => Some(fresnel(wo.dot(v.ns), ior)),
+                Material::ThinDielectric { ior } => Some(thin_reflectance(wo.dot(v.ns), ior)),
+                _ => None,
             };
+            if let Some(r) = reflectance {
+                return match specular_lobe(v, wo, wi) {
+                    Some(true) => r,
+                    Some(false) => 1.0 - r,
+                    None => 0.0,
+                };
+            }
         }
         self.ctx.pdf_dir(v, wo, wi)
     }
@@ -281,8 +333,9 @@ impl<'a> PathSpace<'a> {
     pub fn split_density(&self, path: &[Vertex], lo: usize, count: usize, s: usize) -> f64 {
         let joint_light = (lo + s).checked_sub(1);
         let joint_camera = lo + s;
+        let joins = |v: &Vertex| self.ctx.is_connectible(v) && !self.is_specular(v);
         if let Some(a) = joint_light
-            && (!self.ctx.is_connectible(&path[a]) || !self.ctx.is_connectible(&path[joint_camera]))
+            && (!joins(&path[a]) || !joins(&path[joint_camera]))
         {
             return 0.0;
         }
@@ -423,28 +476,29 @@ impl<'a> PathSpace<'a> {
     }
 
     /// A direction out of `v` as a subpath would sample it (the camera's ray with the raster
-    /// position uniform, the light's cosine lobe, or the BSDF, arrived from `wo`) and the
-    /// solid-angle density the sampler reports for it (a delta lobe's probability).
+    /// position uniform, the light's cosine lobe, or the BSDF, arrived from `wo`), the
+    /// solid-angle density the sampler reports for it (a delta lobe's probability) and
+    /// whether a delta lobe made it (`v`'s role then: `is_specular`).
     pub fn sample_direction(
         &self,
         v: &Vertex,
         wo: Vec3,
         u: Vec2,
         mode: TransportMode,
-    ) -> Option<(Vec3, f32)> {
+    ) -> Option<(Vec3, f32, bool)> {
         match v.kind {
             VertexKind::Camera => {
                 let cam = &self.ctx.camera;
                 let raster = Vec2::new(u.x * cam.width as f32, u.y * cam.height as f32);
                 let w = cam.direction(raster);
-                Some((w, cam.pdf_dir(w)))
+                Some((w, cam.pdf_dir(w), false))
             }
             // Its paths leave a disk, not a point: `trace_from_infinity`.
             VertexKind::Light if v.is_at_infinity() => None,
             VertexKind::Light if v.is_point_light() => {
                 let profile = self.ctx.point_profile(v).unwrap_or(&None);
                 let (w, pdf) = crate::scene::lights::sample_direction(profile, u);
-                (pdf > 0.0).then_some((w, pdf))
+                (pdf > 0.0).then_some((w, pdf, false))
             }
             VertexKind::Light => {
                 let local = cosine_hemisphere(u);
@@ -452,6 +506,7 @@ impl<'a> PathSpace<'a> {
                     (
                         Frame::from_normal(v.ng).to_world(local).normalize(),
                         local.z * std::f32::consts::FRAC_1_PI,
+                        false,
                     )
                 })
             }
@@ -459,17 +514,27 @@ impl<'a> PathSpace<'a> {
                 let (material, frame, ng) = local_frame(self.ctx.scene, v, wo);
                 let (bs, wi) =
                     sample_direction(&material, &frame, ng, wo, frame.to_local(wo), u, mode)?;
-                (bs.value.max_element() > 0.0).then_some((wi, bs.pdf))
+                (bs.value.max_element() > 0.0).then_some((wi, bs.pdf, bs.delta))
             }
         }
     }
 
-    /// The direction a specular vertex sends `wo` to by reflection (`reflect`) or refraction;
-    /// `None` under total internal reflection or where the shading normal would send it
-    /// through the wrong geometric side.
+    /// The direction a specular vertex sends `wo` to by reflection (`reflect`) or refraction
+    /// (thin glass: straight through, `-wo`); `None` under total internal reflection (or where
+    /// thin glass reflects everything) or where the shading normal would send it through the
+    /// wrong geometric side.
     pub fn follow_specular(&self, v: &Vertex, wo: Vec3, reflect: bool) -> Option<Vec3> {
-        let Material::Dielectric { ior } = self.ctx.material(v) else {
-            return None;
+        let ior = match self.ctx.material(v) {
+            Material::Dielectric { ior } => ior,
+            // The plastic's delta lobe only reflects (its `eta` is not used below then).
+            Material::Plastic(p) if v.delta && reflect => p.eta,
+            Material::ThinDielectric { ior } if !reflect => {
+                // Straight on: -wo is on the other geometric side whatever the normals.
+                return (thin_reflectance(wo.dot(v.ns), ior) < 1.0 && wo.dot(v.ng) != 0.0)
+                    .then_some(-wo);
+            }
+            Material::ThinDielectric { ior } => ior,
+            _ => return None,
         };
         let frame = Frame::from_normal(v.ns);
         let w = frame.to_local(wo);

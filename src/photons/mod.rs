@@ -251,7 +251,7 @@ impl PhotonMaps {
 pub const FOLLOW_ALPHA: f32 = 0.2;
 
 /// Whether camera chains pass through `material` (sampling it) rather than gather photons on
-/// it: smooth and rough dielectrics, and conductors smoother than `FOLLOW_ALPHA`. Photons are not stored
+/// it: smooth dielectrics (thick or thin), rough dielectrics, and conductors smoother than `FOLLOW_ALPHA`. Photons are not stored
 /// there (nothing gathers them), and a photon path through them to a diffuse surface is a
 /// caustic (PM's caustic map).
 #[inline]
@@ -260,9 +260,13 @@ pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     match *material {
         // Rough glass at every roughness: a gather disc on a surface that transmits would
         // have to gather the photons of both its sides.
-        Material::Dielectric { .. } | Material::RoughDielectric(_) => true,
+        Material::Dielectric { .. }
+        | Material::ThinDielectric { .. }
+        | Material::RoughDielectric(_) => true,
         Material::Conductor(c) => c.max_alpha() < FOLLOW_ALPHA,
-        Material::Diffuse { .. } | Material::RoughPlastic(_) => false,
+        // The smooth plastic gathers on its diffuse lobe; camera chains follow its delta
+        // reflection by a per-chain choice (`extend_camera_chains`).
+        Material::Diffuse { .. } | Material::RoughPlastic(_) | Material::Plastic(_) => false,
     }
 }
 

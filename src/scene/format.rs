@@ -47,6 +47,10 @@ pub enum MaterialDesc {
     Dielectric {
         ior: Ior,
     },
+    /// Mitsuba's `thindielectric`: a thin sheet of index `ior` (relative to its surroundings).
+    ThinDielectric {
+        ior: Ior,
+    },
     Conductor {
         alpha: Alpha,
         reflectance: Reflectance,
@@ -64,6 +68,13 @@ pub enum MaterialDesc {
     RoughDielectric {
         alpha: Alpha,
         ior: Ior,
+    },
+    /// Mitsuba's smooth `plastic` on its defaults but `diffuse` (polypropylene's index 1.49
+    /// unless `ior` says otherwise, specular 1, linear).
+    Plastic {
+        diffuse: Reflectance,
+        #[serde(default)]
+        ior: Option<Ior>,
     },
 }
 

@@ -342,7 +342,12 @@ impl PreparedScene {
                     d.axis = self.uv_axis(tri, ns);
                 }
             }
-            Material::Dielectric { .. } => {}
+            Material::Plastic(plastic) => {
+                if let Some(t) = v.reflectance {
+                    plastic.diffuse = texture(t).eval(uv);
+                }
+            }
+            Material::Dielectric { .. } | Material::ThinDielectric { .. } => {}
         }
         material
     }

@@ -284,6 +284,7 @@ fn make_material(desc: &MaterialDesc) -> Material {
             reflectance: reflectance.0,
         },
         MaterialDesc::Dielectric { ior } => Material::Dielectric { ior: ior.0 },
+        MaterialDesc::ThinDielectric { ior } => Material::ThinDielectric { ior: ior.0 },
         MaterialDesc::RoughPlastic {
             diffuse,
             alpha,
@@ -302,6 +303,15 @@ fn make_material(desc: &MaterialDesc) -> Material {
                 crate::bsdf::conductor::Microfacet::Beckmann,
                 alpha.0,
                 ior.0,
+            ))
+        }
+        MaterialDesc::Plastic { diffuse, ior } => {
+            Material::Plastic(crate::bsdf::smooth_plastic::SmoothPlastic::new(
+                ior.map_or(1.49, |i| i.0),
+                diffuse.0,
+                diffuse.0.element_sum() / 3.0,
+                Vec3::ONE,
+                false,
             ))
         }
         MaterialDesc::Conductor { alpha, reflectance } => {

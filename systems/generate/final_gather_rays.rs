@@ -63,6 +63,13 @@ crate::system! {
                     ) else {
                         continue;
                     };
+                    if bs.delta {
+                        // A visible point gathers the diffuse lobe alone: a smooth plastic's
+                        // reflection is its camera chain's to follow. Dropping the delta choice
+                        // leaves the diffuse sample's weight (over its lobe's probability) an
+                        // unbiased estimate of that lobe.
+                        continue;
+                    }
                     let beta = visible.beta[pixel] * bs.value * (bs.wi.z.abs() / bs.pdf);
                     if beta.max_element() <= 0.0 {
                         continue;

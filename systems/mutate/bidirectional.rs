@@ -164,6 +164,8 @@ pub fn propose(
 
     let mut light: Path = x[..(l + 1) as usize].to_vec();
     for _ in 0..s {
+        // The lobe sampled at the vertex a new one is sampled from: its role in the path.
+        let mut role = None;
         let next = match light.last() {
             None => {
                 let v = ps.sample_light_origin(u.get(), u.get2())?;
@@ -180,12 +182,17 @@ pub fn propose(
                     .len()
                     .checked_sub(2)
                     .map_or(glam::Vec3::ZERO, |i| dir(v, &light[i]));
-                let (w, pdf) = ps.sample_direction(v, wo, u.get2(), TransportMode::Importance)?;
+                let (w, pdf, delta) =
+                    ps.sample_direction(v, wo, u.get2(), TransportMode::Importance)?;
                 let next = ps.trace(v, w)?;
                 sampled *= f64::from(to_area(pdf, v, &next));
+                role = Some(delta);
                 next
             }
         };
+        if let (Some(delta), Some(v)) = (role, light.last_mut()) {
+            v.delta = delta;
+        }
         light.push(next);
     }
     // The camera side, camera first; kept vertices are all surfaces there.
@@ -199,7 +206,10 @@ pub fn propose(
             .len()
             .checked_sub(2)
             .map_or(glam::Vec3::ZERO, |i| dir(&v, &camera[i]));
-        let (w, pdf) = ps.sample_direction(&v, wo, u.get2(), TransportMode::Radiance)?;
+        let (w, pdf, delta) = ps.sample_direction(&v, wo, u.get2(), TransportMode::Radiance)?;
+        if let Some(last) = camera.last_mut() {
+            last.delta = delta;
+        }
         // The new light vertex, when the camera side makes it, may be the environment.
         let next = if l == -1 && s == 0 && k + 1 == t {
             ps.trace_or_sky(&v, w)?
@@ -208,6 +218,10 @@ pub fn propose(
         };
         sampled *= f64::from(to_area(pdf, &v, &next));
         camera.push(next);
+    }
+    // The joint's two vertices scatter by their non-delta lobes (the connection).
+    for v in [light.last_mut(), camera.last_mut()].into_iter().flatten() {
+        v.delta = false;
     }
     if let Some(a) = light.last() {
         let c = camera.last().expect("the camera is kept");

@@ -51,7 +51,7 @@ pub fn propose(
         set.angle_max,
     );
     for i in b + 1..n - 1 {
-        let hit = ps.trace(&y[i - 1], w)?;
+        let hit = ps.in_role_of(ps.trace(&y[i - 1], w)?, &x[i]);
         if i < n - 2 {
             if !ps.is_specular(&hit) {
                 return None;

@@ -70,7 +70,7 @@ pub fn retrace_camera_chain(
         let hit = if i == 0 {
             ps.trace_or_sky(&y[i + 1], w)?
         } else {
-            ps.trace(&y[i + 1], w)?
+            ps.in_role_of(ps.trace(&y[i + 1], w)?, &x[i])
         };
         if i > c {
             if !ps.is_specular(&hit) {

@@ -47,7 +47,7 @@ pub fn propose(
             let hit = if j == 0 {
                 ps.trace_or_sky(&y[j + 1], w)?
             } else {
-                ps.trace(&y[j + 1], w)?
+                ps.in_role_of(ps.trace(&y[j + 1], w)?, &x[j])
             };
             if ps.is_specular(&x[j]) {
                 if !ps.is_specular(&hit) || j == 0 {

@@ -81,11 +81,16 @@ crate::system! {
                 path.extend((0..t).rev().map(|d| vertex(i, d)));
             }
             let mut path: Path = path.iter().map(|v| ps.reshade(v)).collect();
-            for v in path.iter_mut() {
+            for (k, v) in path.iter_mut().enumerate() {
                 v.beta = glam::Vec3::ZERO;
                 v.pdf_fwd = 0.0;
                 v.pdf_rev = 0.0;
-                v.delta = false;
+                // A subpath vertex's `delta` (its lobe going on was a delta) is its role in
+                // the path (`PathSpace::is_specular`), but at the joint, s - 1 and s, where
+                // the connection evaluated the non-delta lobe, and at the ends.
+                if v.kind != VertexKind::Surface || k + 1 == s || k == s {
+                    v.delta = false;
+                }
                 if v.kind == VertexKind::Light {
                     v.kind = VertexKind::Surface;
                 }

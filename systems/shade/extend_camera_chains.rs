@@ -4,8 +4,10 @@
 //! or ends on any other surface, which becomes the chain's gather point unless the chain is
 //! at the depth cap. Chains that leave the scene, reach the depth cap or lose the roulette
 //! (after `ROULETTE_DEPTH` bounces, by throughput) end with no gather point. In a ray tree
-//! (PPM) a chain at a dielectric follows both branches instead, the second as a new chain,
+//! (PPM) a chain at a dielectric (thick or thin) follows both branches instead, the second as a new chain,
 //! and at a followed conductor one sampled direction, with no roulette (see `camera_walk`).
+//! At a smooth plastic a chain follows the delta reflection or gathers on the diffuse lobe, by
+//! the choice its BSDF sampling makes (a tree: both); see the rule where it is applied.
 
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::CameraChains;
@@ -116,6 +118,80 @@ crate::system! {
                     // the frame of `ns`.
                     let material = scene.material_at(tri, sp.p, ns);
                     let depth = c.depth[i];
+                    if let Material::Plastic(plastic) = material
+                        && depth < max_depth
+                    {
+                        // The smooth plastic's rule: chains follow its delta reflection and
+                        // gather on its diffuse lobe (a visible point's `eval` is that lobe
+                        // alone). A tree takes both: the visible point here and the reflection
+                        // as a new chain, weighing specular F. A chain takes one, chosen as
+                        // `sample` chooses (the reflection with probability p): the reflection,
+                        // weighing specular F / p, or the visible point here, its throughput
+                        // over 1 - p. Both unbiased; photons are stored at plastics.
+                        let frame = Frame::from_normal(ns);
+                        let wo_local = frame.to_local(wo);
+                        let p = if wo_local.z > 0.0 {
+                            plastic.specular_probability(wo_local.z)
+                        } else {
+                            0.0
+                        };
+                        let reflect = |u: f32| {
+                            sample_direction(
+                                &material,
+                                &frame,
+                                ng,
+                                wo,
+                                wo_local,
+                                Vec2::new(u, 0.5),
+                                TransportMode::Radiance,
+                            )
+                            .filter(|(bs, _)| bs.delta)
+                        };
+                        if tree {
+                            if depth < TREE_DEPTH
+                                && p > 0.0
+                                && let Some((bs, wi)) = reflect(0.0)
+                            {
+                                let beta = c.beta[i] * bs.value * bs.wi.z.abs();
+                                let weight = beta.max_element();
+                                if !weight.is_nan() && weight >= MIN_BRANCH_WEIGHT {
+                                    out.push(Branch {
+                                        pixel: c.pixel[i],
+                                        key: c.key[i],
+                                        beta,
+                                        depth: depth + 1,
+                                        origin: offset_ray_origin(sp.p, sp.p_error, sp.ng, wi),
+                                        dir: wi,
+                                    });
+                                }
+                            }
+                        } else {
+                            let dim = bounce_dim(depth);
+                            let u = sampler.get(c.key[i], dim);
+                            if u < p {
+                                let Some((bs, wi)) = reflect(u) else {
+                                    continue;
+                                };
+                                let mut beta = c.beta[i] * bs.value * (bs.wi.z.abs() / bs.pdf);
+                                if depth + 1 >= ROULETTE_DEPTH {
+                                    let q = survival(beta, 1.0);
+                                    if !survives(q, sampler.get(c.key[i], dim + 2)) {
+                                        continue;
+                                    }
+                                    beta /= q;
+                                }
+                                c.beta[i] = beta;
+                                c.bsdf_pdf[i] = 0.0;
+                                c.depth[i] = depth + 1;
+                                c.alive[i] = true;
+                                r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, wi);
+                                r.dir[i] = wi;
+                                live += 1;
+                                continue;
+                            }
+                            c.beta[i] /= 1.0 - p;
+                        }
+                    }
                     if !chains_follow(&material) {
                         // At the depth cap every path through the point (light sampled there,
                         // photons gathered, a final gather) is a bounce too long: no gather
@@ -135,7 +211,12 @@ crate::system! {
                     }
                     let frame = Frame::from_normal(ns);
                     let wo_local = frame.to_local(wo);
-                    if tree && matches!(material, Material::Dielectric { .. }) {
+                    if tree
+                        && matches!(
+                            material,
+                            Material::Dielectric { .. } | Material::ThinDielectric { .. }
+                        )
+                    {
                         // Refraction (u = 1 is never below F), then reflection (u = 0 is
                         // below F unless F = 0); each weighs its Fresnel term: f cos, not
                         // divided by the probability of choosing it.

@@ -1,5 +1,5 @@
 //! Scatters the paths on one material kind: a BSDF sample per path (cosine-weighted at
-//! Lambertian surfaces, visible normals at conductors, Fresnel choice at glass). The graph
+//! Lambertian surfaces, visible normals at conductors, Fresnel choice at glass and thin glass). The graph
 //! holds one of these per material kind its scene uses, each over its kind's contiguous queue.
 
 use super::surface::scatter_paths;
@@ -39,6 +39,14 @@ crate::system! {
             ),
             MaterialKind::RoughDielectric => {
                 scatter_paths::<{ MaterialKind::RoughDielectric as u8 }>(
+                    data, sampler, *lanes, hits, surfaces, rays, paths, range,
+                )
+            }
+            MaterialKind::Plastic => scatter_paths::<{ MaterialKind::Plastic as u8 }>(
+                data, sampler, *lanes, hits, surfaces, rays, paths, range,
+            ),
+            MaterialKind::ThinDielectric => {
+                scatter_paths::<{ MaterialKind::ThinDielectric as u8 }>(
                     data, sampler, *lanes, hits, surfaces, rays, paths, range,
                 )
             }

@@ -129,7 +129,11 @@ crate::system! {
                     }
                     w.power[i] *= weight / q;
                     w.depth[i] = depth + 1;
-                    w.specular_chain[i] &= followed;
+                    // A delta lobe of a surface chains do not follow (the smooth plastic's
+                    // reflection, which camera chains take by a choice of their own) keeps
+                    // the photon a caustic one too: PM's final gathering never reads the
+                    // light it carries to a visible point.
+                    w.specular_chain[i] &= followed || bs.delta;
                     w.alive[i] = true;
                     r.origin[i] = offset_ray_origin(sp.p, sp.p_error, sp.ng, wi);
                     r.dir[i] = wi;

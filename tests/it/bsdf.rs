@@ -5,6 +5,9 @@
 use glam::{DVec3, Vec2, Vec3};
 use stagelight::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
 use stagelight::bsdf::plastic::RoughPlastic;
+use stagelight::bsdf::smooth_plastic::{
+    FIT_MAX_ETA, SmoothPlastic, fresnel_diffuse_reflectance, internal_reflectance,
+};
 use stagelight::bsdf::{Material, TransportMode, conductor, dielectric};
 use stagelight::sampling::SampleKey;
 use std::f64::consts::PI;
@@ -1624,6 +1627,402 @@ fn dielectric_generalised_reciprocity() {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Smooth plastic.
+
+/// Mitsuba 3.9.1's `plastic` on its defaults (polypropylene in air) over an orange base, and
+/// at int_ior 1.8, nonlinear, with a specular_reflectance over a blue one.
+fn smooth_plastics() -> [SmoothPlastic; 2] {
+    let orange = Vec3::new(0.6, 0.3, 0.1);
+    let blue = Vec3::new(0.2, 0.5, 0.9);
+    [
+        SmoothPlastic::new(
+            1.49 / 1.000_277,
+            orange,
+            orange.element_sum() / 3.0,
+            Vec3::ONE,
+            false,
+        ),
+        SmoothPlastic::new(
+            1.8 / 1.000_277,
+            blue,
+            blue.element_sum() / 3.0,
+            Vec3::new(0.9, 0.8, 0.7),
+            true,
+        ),
+    ]
+}
+
+/// The diffuse lobe's f and pdf against Mitsuba's `plastic` (scalar_rgb, `BSDF::eval` over the
+/// cosine and `BSDF::pdf`, si.wi our wo): the fit of the coat's internal reflectance, the two
+/// Fresnel factors and the lobe's share of the sampling as Mitsuba's.
+#[test]
+fn smooth_plastic_matches_mitsuba_eval_and_pdf() {
+    let [linear, nonlinear] = smooth_plastics();
+    let cases: [(SmoothPlastic, Vec<MitsubaPair>); 2] = [
+        (
+            linear,
+            vec![
+                (
+                    (0.0, 0.0),
+                    (10.0, 180.0),
+                    [0.194_235_6, 0.097_117_78, 0.032_372_59],
+                    0.279_716_3,
+                ),
+                (
+                    (30.0, 20.0),
+                    (40.0, 190.0),
+                    [0.192_794_1, 0.096_397_06, 0.032_132_35],
+                    0.216_637_8,
+                ),
+                (
+                    (60.0, 0.0),
+                    (55.0, 170.0),
+                    [0.178_736_8, 0.089_368_41, 0.029_789_47],
+                    0.141_805_9,
+                ),
+                (
+                    (80.0, 45.0),
+                    (70.0, 240.0),
+                    [0.107_246_4, 0.053_623_18, 0.017_874_39],
+                    0.037_731_71,
+                ),
+                (
+                    (45.0, 0.0),
+                    (45.0, 90.0),
+                    [0.190_172_8, 0.095_086_38, 0.031_695_46],
+                    0.195_064_6,
+                ),
+                (
+                    (20.0, 90.0),
+                    (75.0, 300.0),
+                    [0.151_280_7, 0.075_640_33, 0.025_213_44],
+                    0.073_456_95,
+                ),
+            ],
+        ),
+        (
+            nonlinear,
+            vec![
+                (
+                    (0.0, 0.0),
+                    (10.0, 180.0),
+                    [0.019_429_11, 0.065_411_07, 0.218_934_7],
+                    0.276_626_3,
+                ),
+                (
+                    (30.0, 20.0),
+                    (40.0, 190.0),
+                    [0.019_246_76, 0.064_797_14, 0.216_879_9],
+                    0.214_548_9,
+                ),
+                (
+                    (60.0, 0.0),
+                    (55.0, 170.0),
+                    [0.017_651_89, 0.059_427_76, 0.198_908_2],
+                    0.148_043_8,
+                ),
+                (
+                    (80.0, 45.0),
+                    (70.0, 240.0),
+                    [0.010_510_31, 0.035_384_57, 0.118_434_2],
+                    0.052_327_69,
+                ),
+                (
+                    (45.0, 0.0),
+                    (45.0, 90.0),
+                    [0.018_929_71, 0.063_729_74, 0.213_307_2],
+                    0.194_936_9,
+                ),
+                (
+                    (20.0, 90.0),
+                    (75.0, 300.0),
+                    [0.014_955_33, 0.050_349_38, 0.168_522_4],
+                    0.072_662_67,
+                ),
+            ],
+        ),
+    ];
+    for (m, pairs) in cases {
+        assert_matches_mitsuba(&Material::Plastic(m), 1e-4, &pairs);
+    }
+}
+
+/// The delta lobe against Mitsuba's `plastic` (`BSDF::sample` with sample1 = 0, si.wi our wo
+/// at azimuth 20 degrees): its probability and weight (specular F / probability) at five
+/// polar angles; the direction is the mirror's and the sample says `delta`.
+#[test]
+fn smooth_plastic_specular_lobe_matches_mitsuba() {
+    let [linear, nonlinear] = smooth_plastics();
+    // (wo's polar angle, the lobe's probability, its weight) per material.
+    type Lobe = (f64, f32, [f32; 3]);
+    let cases: [(SmoothPlastic, [Lobe; 5]); 2] = [
+        (
+            linear,
+            [
+                (0.0, 0.107_689_1, [0.359_115_2; 3]),
+                (30.0, 0.111_555_8, [0.360_115_35; 3]),
+                (60.0, 0.223_301_1, [0.391_634_97; 3]),
+                (85.0, 0.825_301_2, [0.741_071_4; 3]),
+                (89.0, 0.965_771_6, [0.935_929_3; 3]),
+            ],
+        ),
+        (
+            nonlinear,
+            [
+                (0.0, 0.117_546_4, [0.624_467_9, 0.555_082_6, 0.485_697_27]),
+                (30.0, 0.120_122_4, [0.625_026_5, 0.555_579_1, 0.486_131_73]),
+                (60.0, 0.189_134_3, [0.640_372_1, 0.569_219_65, 0.498_067_17]),
+                (85.0, 0.718_100_3, [0.788_816_4, 0.701_170_15, 0.613_523_9]),
+                (89.0, 0.936_058_3, [0.872_117_64, 0.775_215_7, 0.678_313_73]),
+            ],
+        ),
+    ];
+    for (m, by_theta) in cases {
+        let material = Material::Plastic(m);
+        for (theta, pdf, weight) in by_theta {
+            let wo = dir_deg(theta, 20.0);
+            let s = material
+                .sample(wo, Vec2::new(0.0, 0.5), TransportMode::Radiance)
+                .unwrap();
+            let w = s.value * s.wi.z.abs() / s.pdf;
+            assert!(s.delta, "theta {theta}: {s:?}");
+            assert!((s.wi - Vec3::new(-wo.x, -wo.y, wo.z)).length() < 1e-6);
+            assert!(
+                rel_close(s.pdf, pdf, 2e-4),
+                "theta {theta}: probability {}, Mitsuba's {pdf}",
+                s.pdf
+            );
+            for c in 0..3 {
+                assert!(
+                    rel_close(w[c], weight[c], 2e-4),
+                    "theta {theta}: weight {w}, Mitsuba's {weight:?}"
+                );
+            }
+            // The other choice is the diffuse lobe, as eval and pdf describe it.
+            let d = material
+                .sample(wo, Vec2::new(0.999_9, 0.3), TransportMode::Radiance)
+                .unwrap();
+            assert!(!d.delta);
+            assert!(rel_close(d.pdf, material.pdf(wo, d.wi), 1e-5));
+            assert!((d.value - material.eval(wo, d.wi)).abs().max_element() < 1e-6);
+        }
+    }
+}
+
+/// Albedo from sampling (100000 samples) against Mitsuba 3.9.1's (its own sample weights
+/// averaged over 40000 samples, base 0.8, int_ior over ext_ior 1) within 0.01, and against
+/// quadrature: specular F (the delta lobe's analytic part) plus the diffuse lobe's integral
+/// over the hemisphere, within 0.005.
+#[test]
+fn smooth_plastic_albedo() {
+    let mitsuba = [
+        (1.49f32, false, [0.808_42, 0.810_98, 0.878_12]),
+        (1.49, true, [0.636_66, 0.640_01, 0.766_96]),
+        (1.8, false, [0.815_9, 0.818_24, 0.883_41]),
+        (1.8, true, [0.556_1, 0.562_04, 0.718_37]),
+    ];
+    for (eta, nonlinear, by_theta) in mitsuba {
+        let p = SmoothPlastic::new(eta, Vec3::splat(0.8), 0.8, Vec3::ONE, nonlinear);
+        let m = Material::Plastic(p);
+        for (theta, want) in [0.0, 45.0, 80.0].into_iter().zip(by_theta) {
+            let wo = dir_deg(theta, 0.0);
+            let n = 100_000;
+            let mut sum = 0.0f64;
+            for i in 0..n {
+                if let Some(s) = m.sample(wo, u2(23, 0, i), TransportMode::Radiance) {
+                    sum += f64::from(s.value.x * s.wi.z / s.pdf);
+                }
+            }
+            let albedo = sum / n as f64;
+            // The diffuse lobe depends on wi's cosine alone: 2 pi int f(mu) mu dmu.
+            let k = 20_000;
+            let diffuse: f64 = (0..k)
+                .map(|j| {
+                    let mu = (j as f64 + 0.5) / k as f64;
+                    let wi = Vec3::new((1.0 - mu * mu).sqrt() as f32, 0.0, mu as f32);
+                    2.0 * PI * f64::from(m.eval(wo, wi).x) * mu / k as f64
+                })
+                .sum();
+            let quadrature = f64::from(dielectric::fresnel(wo.z, eta)) + diffuse;
+            println!(
+                "eta {eta} nonlinear {nonlinear} theta {theta}: albedo {albedo}, quadrature {quadrature}, Mitsuba's {want}"
+            );
+            assert!(
+                (albedo - want).abs() < 0.01 && (albedo - quadrature).abs() < 0.005,
+                "eta {eta} nonlinear {nonlinear} theta {theta}: albedo {albedo}, quadrature {quadrature}, Mitsuba's {want}"
+            );
+        }
+    }
+}
+
+/// The diffuse lobe's samples against its pdf; the delta lobe's samples are counted with
+/// those `sample` refuses, whose expected share is what the pdf leaves of 1: the probability
+/// of the reflection.
+#[test]
+fn chi2_smooth_plastic() {
+    for (k, m) in smooth_plastics().into_iter().enumerate() {
+        let m = Material::Plastic(m);
+        for (i, theta) in [0.0f64, 45.0, 85.0].into_iter().enumerate() {
+            let wo = dir_deg(theta, 10.0 + 97.0 * i as f64);
+            let binning = Binning::new(1.0, Vec3::Z, None);
+            let r = chi2_test(
+                &binning,
+                500 + 10 * k as u64 + i as u64,
+                &|u| {
+                    m.sample(wo, u, TransportMode::Radiance)
+                        .filter(|s| !s.delta)
+                        .map(|s| s.wi)
+                },
+                &|wi| m.pdf(wo, wi),
+            );
+            println!(
+                "smooth plastic {k} wo theta {theta}: chi2 {:.1} dof {} p {:.4} integral {:.6}",
+                r.chi2, r.dof, r.p_value, r.total_probability
+            );
+            assert!(r.total_probability <= 1.0 + 1e-4, "{}", r.total_probability);
+            assert!(r.dof >= 100, "too few populated cells ({})", r.dof);
+            assert!(
+                r.p_value > sidak_alpha(),
+                "smooth plastic {k} theta {theta}: chi2 {} dof {} p = {}",
+                r.chi2,
+                r.dof,
+                r.p_value
+            );
+        }
+    }
+}
+
+/// The coat's internal reflectance: Mitsuba's fit up to eta 3, the integral beyond (where the
+/// fit reaches 1 near 3.85 and Mitsuba's diffuse lobe turns negative), both close to the
+/// integral where the fit is good.
+#[test]
+fn smooth_plastic_internal_reflectance() {
+    // 2 int_0^1 F_inside(mu) mu dmu, by fine midpoints in f64 (Python, the exact Fresnel term).
+    for (eta, exact) in [
+        (1.49f32, 0.590_238_1f32),
+        (1.8, 0.732_710_2),
+        (2.4, 0.862_845_8),
+        (4.0, 0.960_336_4),
+    ] {
+        let got = internal_reflectance(eta);
+        let tolerance = if eta <= FIT_MAX_ETA { 0.005 } else { 2e-4 };
+        assert!(
+            (got - exact).abs() < tolerance,
+            "eta {eta}: {got}, exact {exact}"
+        );
+    }
+    assert_eq!(
+        internal_reflectance(1.49),
+        fresnel_diffuse_reflectance(1.0 / 1.49)
+    );
+    // Mitsuba's fit past its range: at 4 it exceeds 1.
+    assert!(fresnel_diffuse_reflectance(0.25) > 1.0);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Thin dielectric.
+
+/// Mitsuba 3.9.1's `thindielectric` (scalar_rgb, `BSDF::sample` with sample1 0 and 0.999, si.wi
+/// our wo at azimuth 20 degrees, int_ior bk7 and 1.33 over air): the reflection's probability
+/// at each polar angle of wo (from both sides); both lobes weigh 1 and the transmitted
+/// direction is -wo.
+#[test]
+fn thin_dielectric_matches_mitsuba_sample() {
+    let cases: [(f32, [(f64, f32); 6]); 2] = [
+        (
+            1.5046,
+            [
+                (0.0, 0.077_914_33),
+                (30.0, 0.080_739_05),
+                (60.0, 0.164_935_4),
+                (85.0, 0.760_275_5),
+                (120.0, 0.164_935_4),
+                (170.0, 0.077_943_13),
+            ],
+        ),
+        (
+            1.33,
+            [
+                (0.0, 0.039_255_84),
+                (30.0, 0.041_275_78),
+                (60.0, 0.111_525_9),
+                (85.0, 0.736_280_6),
+                (120.0, 0.111_525_9),
+                (170.0, 0.039_275_76),
+            ],
+        ),
+    ];
+    for (int_ior, by_theta) in cases {
+        let m = Material::ThinDielectric {
+            ior: int_ior / 1.000_277,
+        };
+        for (theta, r) in by_theta {
+            let wo = dir_deg(theta, 20.0);
+            for mode in [TransportMode::Radiance, TransportMode::Importance] {
+                let reflected = m.sample(wo, Vec2::new(0.0, 0.5), mode).unwrap();
+                let through = m.sample(wo, Vec2::new(0.999, 0.5), mode).unwrap();
+                assert!(reflected.delta && through.delta);
+                assert!(
+                    rel_close(reflected.pdf, r, 1e-4) && rel_close(through.pdf, 1.0 - r, 1e-4),
+                    "ior {int_ior} theta {theta}: R' {} and {}, Mitsuba's {r}",
+                    reflected.pdf,
+                    through.pdf
+                );
+                let mirror = Vec3::new(-wo.x, -wo.y, wo.z);
+                assert!((reflected.wi - mirror).length() < 1e-6, "{reflected:?}");
+                assert!((through.wi + wo).length() < 1e-6, "{through:?}");
+                for s in [reflected, through] {
+                    let weight = s.value * s.wi.z.abs() / s.pdf;
+                    assert!((weight - Vec3::ONE).abs().max_element() < 1e-5, "{s:?}");
+                }
+                // Not reachable by evaluation: a pure delta material.
+                assert_eq!(m.eval(wo, through.wi), Vec3::ZERO);
+                assert_eq!(m.pdf(wo, reflected.wi), 0.0);
+            }
+        }
+    }
+}
+
+/// R' is the sum of the sheet's internal bounces, R + T R T + T R^3 T + ..., summed here term
+/// by term from the single-face Fresnel term; lobe frequencies follow it.
+#[test]
+fn thin_dielectric_sums_its_internal_reflections() {
+    for ior in [1.0001f32, 1.33, 1.5, 2.4, 4.0] {
+        for theta in [0.0f64, 20.0, 45.0, 70.0, 85.0, 89.0] {
+            let cos = theta.to_radians().cos() as f32;
+            let r = f64::from(dielectric::fresnel(cos, ior));
+            let t = 1.0 - r;
+            let series: f64 = r + (0..200).map(|k| t * t * r.powi(2 * k + 1)).sum::<f64>();
+            let got = f64::from(dielectric::thin_reflectance(cos, ior));
+            let from_behind = f64::from(dielectric::thin_reflectance(-cos, ior));
+            assert!(
+                (got - series).abs() < 2e-6 && got == from_behind,
+                "ior {ior} theta {theta}: R' {got}, series {series}, from behind {from_behind}"
+            );
+            // One choice in [0, 1): reflection below R', straight through above.
+            let m = Material::ThinDielectric { ior };
+            let wo = dir_deg(theta, 0.0);
+            let n = 20_000u64;
+            let reflected = (0..n)
+                .filter(|&i| {
+                    let u = (i as f32 + 0.5) / n as f32;
+                    m.sample(wo, Vec2::new(u, 0.5), TransportMode::Radiance)
+                        .unwrap()
+                        .wi
+                        .z
+                        > 0.0
+                })
+                .count();
+            let frequency = reflected as f64 / n as f64;
+            assert!(
+                (frequency - got).abs() < 1e-4,
+                "ior {ior} theta {theta}: {frequency} against {got}"
+            );
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Stability.
 
 fn edge_directions() -> Vec<Vec3> {
@@ -1681,6 +2080,23 @@ fn stability_all_materials() {
     });
     for ior in [1.0f32, 1.5, 2.4, 1.0 / 1.5] {
         check_material_finite(Material::Dielectric { ior });
+    }
+    for ior in [1.0f32, 1.0001, 1.5, 4.0, 1.0 / 1.5] {
+        check_material_finite(Material::ThinDielectric { ior });
+    }
+    for eta in [1.0001f32, 1.49, 4.0, 1.0 / 1.5] {
+        for nonlinear in [false, true] {
+            for diffuse in [Vec3::ZERO, Vec3::new(1.0, 0.5, 0.0)] {
+                let p = SmoothPlastic::new(
+                    eta,
+                    diffuse,
+                    diffuse.element_sum() / 3.0,
+                    Vec3::ONE,
+                    nonlinear,
+                );
+                check_material_finite(Material::Plastic(p));
+            }
+        }
     }
     for alpha in [0.0f32, 1e-6, 1e-4, 1e-3, 0.01, 0.3, 1.0, 1e4] {
         for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {

@@ -14,6 +14,7 @@ use crate::bsdf::Material;
 use crate::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
 use crate::bsdf::plastic::RoughPlastic;
 use crate::bsdf::rough_dielectric::RoughDielectric;
+use crate::bsdf::smooth_plastic::SmoothPlastic;
 use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
@@ -50,8 +51,8 @@ pub struct FileSettings {
 pub const INTEGRATORS: &str = "path, direct, moment";
 pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
-pub const BSDFS: &str =
-    "diffuse, twosided, dielectric, roughdielectric, conductor, roughconductor, roughplastic";
+pub const BSDFS: &str = "diffuse, twosided, dielectric, thindielectric, roughdielectric, \
+     conductor, roughconductor, plastic, roughplastic";
 pub const EMITTERS: &str = "area, point, spot, directional, constant, envmap";
 pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
@@ -866,8 +867,13 @@ impl<'a> Builder<'a> {
                     ));
                 };
                 let inner = self.object(one.object);
-                const REFLECTORS: [&str; 4] =
-                    ["diffuse", "conductor", "roughconductor", "roughplastic"];
+                const REFLECTORS: [&str; 5] = [
+                    "diffuse",
+                    "conductor",
+                    "roughconductor",
+                    "plastic",
+                    "roughplastic",
+                ];
                 if inner.class != Class::Bsdf || !REFLECTORS.contains(&inner.kind.as_str()) {
                     return Err(XmlError::at(
                         &one.spot,
@@ -882,10 +888,12 @@ impl<'a> Builder<'a> {
                 match &mut material {
                     Material::Conductor(c) => c.two_sided = true,
                     Material::RoughPlastic(p) => p.two_sided = true,
+                    Material::Plastic(p) => p.two_sided = true,
                     // Lambertian reflection is two-sided in the engine already.
                     Material::Diffuse { .. }
                     | Material::Dielectric { .. }
-                    | Material::RoughDielectric(_) => {}
+                    | Material::RoughDielectric(_)
+                    | Material::ThinDielectric { .. } => {}
                 }
                 return Ok((material, Sides::Two));
             }
@@ -893,7 +901,8 @@ impl<'a> Builder<'a> {
                 drop(params);
                 return Ok((self.diffuse(object)?, Sides::One));
             }
-            "dielectric" => {
+            "dielectric" | "thindielectric" => {
+                let kind = object.kind.as_str();
                 no_children(object)?;
                 let int_ior = ior(&mut params, "int_ior", 1.5046)?;
                 let ext_ior = ior(&mut params, "ext_ior", 1.000277)?;
@@ -903,21 +912,32 @@ impl<'a> Builder<'a> {
                     {
                         return Err(XmlError::at(
                             &spot,
-                            format!("dielectric: {name} other than 1 is not supported yet"),
+                            format!("{kind}: {name} other than 1 is not supported yet"),
                         ));
                     }
                 }
                 params.finish()?;
                 let ratio = (int_ior / ext_ior) as f32;
-                if !(ratio.is_finite() && ratio > 0.0) || ratio == 1.0 {
-                    return Err(XmlError::at(
-                        &object.spot,
-                        format!(
-                            "dielectric: int_ior / ext_ior = {ratio} must be positive and not 1"
-                        ),
-                    ));
+                if kind == "thindielectric" {
+                    // Index-matched (ratio 1) is a valid, invisible, sheet.
+                    if !(ratio.is_finite() && ratio > 0.0) {
+                        return Err(XmlError::at(
+                            &object.spot,
+                            format!("thindielectric: int_ior / ext_ior = {ratio} must be positive"),
+                        ));
+                    }
+                    Material::ThinDielectric { ior: ratio }
+                } else {
+                    if !(ratio.is_finite() && ratio > 0.0) || ratio == 1.0 {
+                        return Err(XmlError::at(
+                            &object.spot,
+                            format!(
+                                "dielectric: int_ior / ext_ior = {ratio} must be positive and not 1"
+                            ),
+                        ));
+                    }
+                    Material::Dielectric { ior: ratio }
                 }
-                Material::Dielectric { ior: ratio }
             }
             "conductor" | "roughconductor" => {
                 let textured = self.microfacet_textures(object)?;
@@ -986,7 +1006,8 @@ impl<'a> Builder<'a> {
                     transmittance,
                 })
             }
-            "roughplastic" => {
+            "plastic" | "roughplastic" => {
+                let kind = object.kind.as_str();
                 let diffuse_texture = match object.children.first() {
                     Some(c)
                         if c.name.as_deref() == Some("diffuse_reflectance")
@@ -998,26 +1019,35 @@ impl<'a> Builder<'a> {
                     Some(c) => {
                         return Err(XmlError::at(
                             &c.spot,
-                            "roughplastic: only a texture named \"diffuse_reflectance\" may be nested",
+                            format!(
+                                "{kind}: only a texture named \"diffuse_reflectance\" may be nested"
+                            ),
                         ));
                     }
                     None => None,
                 };
                 let int_ior = ior(&mut params, "int_ior", 1.49)?;
                 let ext_ior = ior(&mut params, "ext_ior", 1.000277)?;
-                // Visible normals or not changes only noise (Mitsuba's default: visible).
-                params.boolean("sample_visible")?;
-                let distribution = microfacet(&mut params)?;
-                for name in ["alpha_u", "alpha_v"] {
-                    if let Some((_, spot)) = params.float(name)? {
-                        return Err(XmlError::at(
-                            &spot,
-                            "roughplastic: anisotropic roughness is not supported (Mitsuba's \
-                             roughplastic refuses it too): give alpha",
-                        ));
+                // The coat's microfacets (a smooth plastic has none: Mitsuba's `plastic`
+                // reads no roughness, and neither is taken here, so a stray one is an error).
+                let rough = if kind == "roughplastic" {
+                    // Visible normals or not changes only noise (Mitsuba's default: visible).
+                    params.boolean("sample_visible")?;
+                    let distribution = microfacet(&mut params)?;
+                    for name in ["alpha_u", "alpha_v"] {
+                        if let Some((_, spot)) = params.float(name)? {
+                            return Err(XmlError::at(
+                                &spot,
+                                "roughplastic: anisotropic roughness is not supported (Mitsuba's \
+                                 roughplastic refuses it too): give alpha",
+                            ));
+                        }
                     }
-                }
-                let (alpha, _) = roughness(&mut params, object, &[])?;
+                    let (alpha, _) = roughness(&mut params, object, &[])?;
+                    Some((distribution, alpha))
+                } else {
+                    None
+                };
                 let nonlinear = params.boolean("nonlinear")?.unwrap_or(false);
                 let diffuse = params
                     .color("diffuse_reflectance", Role::Reflectance)?
@@ -1030,28 +1060,36 @@ impl<'a> Builder<'a> {
                 if !(eta.is_finite() && eta > 0.0) || eta == 1.0 {
                     return Err(XmlError::at(
                         &object.spot,
-                        format!(
-                            "roughplastic: int_ior / ext_ior = {eta} must be positive and not 1"
-                        ),
+                        format!("{kind}: int_ior / ext_ior = {eta} must be positive and not 1"),
                     ));
                 }
                 let diffuse_mean = match &diffuse_texture {
                     Some(t) => t.mean(),
                     None => diffuse.element_sum() / 3.0,
                 };
-                Material::RoughPlastic(RoughPlastic::new(
-                    distribution,
-                    alpha,
-                    eta,
-                    diffuse,
-                    diffuse_mean,
-                    specular,
-                    nonlinear,
-                ))
+                match rough {
+                    Some((distribution, alpha)) => Material::RoughPlastic(RoughPlastic::new(
+                        distribution,
+                        alpha,
+                        eta,
+                        diffuse,
+                        diffuse_mean,
+                        specular,
+                        nonlinear,
+                    )),
+                    None => Material::Plastic(SmoothPlastic::new(
+                        eta,
+                        diffuse,
+                        diffuse_mean,
+                        specular,
+                        nonlinear,
+                    )),
+                }
             }
             _ => return Err(unsupported(object, BSDFS)),
         };
-        // Dielectrics refract on both sides; conductors and plastics reflect only on the front.
+        // Dielectrics (thick or thin) scatter on both sides; conductors and plastics reflect only
+        // on the front.
         Ok((material, Sides::One))
     }
 
@@ -1101,7 +1139,7 @@ impl<'a> Builder<'a> {
     }
 
     /// What a material reads at each shading point: a (twosided) diffuse's reflectance
-    /// texture, a conductor's textured parameters and whether its lobe is anisotropic; `None`
+    /// texture (a plastic's diffuse_reflectance), a conductor's textured parameters and whether its lobe is anisotropic; `None`
     /// for a material that is the same everywhere.
     fn varying_of(&mut self, object: &Object) -> Result<Option<SurfaceVarying>, XmlError> {
         let inner = match object.kind.as_str() {
@@ -1113,7 +1151,7 @@ impl<'a> Builder<'a> {
         };
         let mut varying = SurfaceVarying::default();
         match inner.kind.as_str() {
-            "diffuse" | "roughplastic" => {
+            "diffuse" | "plastic" | "roughplastic" => {
                 if let Some(c) = inner.children.first() {
                     varying.reflectance = Some(self.texture(c.object)?);
                 }

@@ -5,7 +5,7 @@
 //! (transformed, mirrored or flipped windings resolved, normals transformed and normalised), so
 //! reading the file back gives the RON scene's triangles bit for bit. Materials map as
 //! SCENES.md's Mitsuba renders do: Diffuse is `twosided(diffuse)`, Dielectric a `dielectric`
-//! with ext_ior 1, Conductor a `roughconductor` (material "none" for a Fresnel factor of 1, rgb
+//! with ext_ior 1 (ThinDielectric a `thindielectric`), Conductor a `roughconductor` (material "none" for a Fresnel factor of 1, rgb
 //! eta and k otherwise); lights are one-sided `area` emitters; the film has the box filter.
 
 use crate::bsdf::Material;
@@ -190,8 +190,24 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
             rgb(d.reflectance),
             rgb(d.transmittance)
         ),
+        Material::Plastic(p) => format!(
+            "    <bsdf type=\"plastic\" id=\"{id}\">\n        \
+             <float name=\"int_ior\" value=\"{}\"/>\n        <float name=\"ext_ior\" value=\"1\"/>\n        \
+             <rgb name=\"diffuse_reflectance\" value=\"{}\"/>\n        \
+             <rgb name=\"specular_reflectance\" value=\"{}\"/>\n        \
+             <boolean name=\"nonlinear\" value=\"{}\"/>\n    </bsdf>",
+            float(p.eta),
+            rgb(p.diffuse),
+            rgb(p.specular),
+            p.nonlinear
+        ),
         Material::Dielectric { ior } => format!(
             "    <bsdf type=\"dielectric\" id=\"{id}\">\n        <float name=\"int_ior\" value=\"{}\"/>\n        \
+             <float name=\"ext_ior\" value=\"1\"/>\n    </bsdf>",
+            float(ior)
+        ),
+        Material::ThinDielectric { ior } => format!(
+            "    <bsdf type=\"thindielectric\" id=\"{id}\">\n        <float name=\"int_ior\" value=\"{}\"/>\n        \
              <float name=\"ext_ior\" value=\"1\"/>\n    </bsdf>",
             float(ior)
         ),
