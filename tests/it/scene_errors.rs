@@ -167,13 +167,13 @@ fn unknown_variants() {
         None,
         &["variant", "Cylinder"],
     );
-    let material = "\"spare\": Plastic(reflectance: (0.2, 0.2, 0.2)),";
+    let material = "\"spare\": Velvet(reflectance: (0.2, 0.2, 0.2)),";
     expect(
         "unknown_material_kind",
         &scene(CAMERA, material, OBJECT),
         5,
         None,
-        &["variant", "Plastic"],
+        &["variant", "Velvet"],
     );
     let object = "(shape: Triangle((0, 0, 0), (1, 0, 0), (0, 1, 0)), material: \"spare\", transform: [Shear(1)]),";
     expect(
