@@ -949,7 +949,7 @@ impl<'a> Builder<'a> {
                 let mut conductor = if object.kind == "roughconductor" {
                     // Visible normals or not changes only noise (Mitsuba's default: visible).
                     params.boolean("sample_visible")?;
-                    let distribution = microfacet(&mut params)?;
+                    let distribution = microfacet(&mut params, &object.kind)?;
                     let (alpha_u, alpha_v) = roughness(&mut params, object, &textured)?;
                     let mut c = Conductor::isotropic(distribution, alpha_u, reflectance, ior);
                     c.alpha_v = alpha_v;
@@ -977,7 +977,7 @@ impl<'a> Builder<'a> {
                 let ext_ior = ior(&mut params, "ext_ior", 1.000277)?;
                 // Visible normals or not changes only noise (Mitsuba's default: visible).
                 params.boolean("sample_visible")?;
-                let distribution = microfacet(&mut params)?;
+                let distribution = microfacet(&mut params, &object.kind)?;
                 let (alpha_u, alpha_v) = roughness(&mut params, object, &textured)?;
                 let mut factor = |name: &str| -> Result<Vec3, XmlError> {
                     Ok(params
@@ -1033,7 +1033,7 @@ impl<'a> Builder<'a> {
                 let rough = if kind == "roughplastic" {
                     // Visible normals or not changes only noise (Mitsuba's default: visible).
                     params.boolean("sample_visible")?;
-                    let distribution = microfacet(&mut params)?;
+                    let distribution = microfacet(&mut params, &object.kind)?;
                     for name in ["alpha_u", "alpha_v"] {
                         if let Some((_, spot)) = params.float(name)? {
                             return Err(XmlError::at(
@@ -2096,7 +2096,7 @@ fn conductor_ior(params: &mut Params, object: &Object) -> Result<ComplexIor, Xml
 
 /// A roughconductor's `distribution`: beckmann (Mitsuba's default) or ggx, in any case, as
 /// Mitsuba lowercases the name.
-fn microfacet(params: &mut Params) -> Result<Microfacet, XmlError> {
+fn microfacet(params: &mut Params, bsdf: &str) -> Result<Microfacet, XmlError> {
     let Some((name, spot)) = params.string("distribution")? else {
         return Ok(Microfacet::Beckmann);
     };
@@ -2106,7 +2106,7 @@ fn microfacet(params: &mut Params) -> Result<Microfacet, XmlError> {
         _ => Err(XmlError::at(
             &spot,
             format!(
-                "microfacet distribution \"{}\" is not supported (supported: beckmann, ggx)",
+                "{bsdf} distribution \"{}\" is not supported (supported: beckmann, ggx)",
                 super::super::echo(name)
             ),
         )),
