@@ -566,6 +566,31 @@ fn assert_mean_agrees_with_mitsuba_at(
     reference: &Path,
     spp: u64,
 ) {
+    check_mean_against_mitsuba(&pt_renders(&scene, spp, max_depth), reference);
+}
+
+/// PT's renders of seeds 0-3 at `spp` samples per pixel.
+fn pt_renders(scene: &PreparedScene, spp: u64, max_depth: u32) -> Vec<stagelight::film::Image> {
+    (0..4)
+        .map(|seed| {
+            crate::common::render_pt(scene.clone(), spp, seed, max_depth)
+                .film
+                .image()
+        })
+        .collect()
+}
+
+/// `assert_blocks_agree_with_mitsuba` and `assert_mean_agrees_with_mitsuba_at` (max_depth 4)
+/// on one set of renders.
+fn assert_blocks_and_mean_agree_with_mitsuba(scene: &PreparedScene, spp: u64, reference: &Path) {
+    let renders = pt_renders(scene, spp, 4);
+    let expected = stagelight::film::Image::read_exr(reference).unwrap();
+    check_blocks_against_mitsuba(&renders, &expected);
+    check_mean_against_mitsuba(&renders, reference);
+}
+
+/// The mean check of `assert_mean_agrees_with_mitsuba_at` on four given renders.
+fn check_mean_against_mitsuba(renders: &[stagelight::film::Image], reference: &Path) {
     let reference = stagelight::film::Image::read_exr(reference).unwrap();
     let mean = |image: &stagelight::film::Image| -> [f64; 3] {
         let mut m = [0.0; 3];
@@ -576,15 +601,7 @@ fn assert_mean_agrees_with_mitsuba_at(
         }
         m
     };
-    let seeds: Vec<[f64; 3]> = (0..4)
-        .map(|seed| {
-            mean(
-                &crate::common::render_pt(scene.clone(), spp, seed, max_depth)
-                    .film
-                    .image(),
-            )
-        })
-        .collect();
+    let seeds: Vec<[f64; 3]> = renders.iter().map(mean).collect();
     let r = mean(&reference);
     for c in 0..3 {
         let m = seeds.iter().map(|s| s[c]).sum::<f64>() / 4.0;
@@ -772,13 +789,14 @@ fn assert_blocks_agree_with_mitsuba(
     spp: u64,
     expected: &stagelight::film::Image,
 ) {
-    let renders: Vec<_> = (0..4)
-        .map(|seed| {
-            crate::common::render_pt(scene.clone(), spp, seed, 4)
-                .film
-                .image()
-        })
-        .collect();
+    check_blocks_against_mitsuba(&pt_renders(scene, spp, 4), expected);
+}
+
+/// The block check of `assert_blocks_agree_with_mitsuba` on given renders.
+fn check_blocks_against_mitsuba(
+    renders: &[stagelight::film::Image],
+    expected: &stagelight::film::Image,
+) {
     let block = 6;
     let means = |images: &[&stagelight::film::Image]| -> Vec<[f64; 3]> {
         let (w, h) = (images[0].width, images[0].height);
@@ -1200,11 +1218,9 @@ fn thin_glass_agrees_with_mitsuba_in_every_integrator() {
     assert_eq!(sheets, 3);
     let reference =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/mitsuba/thin_glass_mitsuba.exr");
-    let expected = stagelight::film::Image::read_exr(&reference).unwrap();
-    assert_blocks_agree_with_mitsuba(&scene, 256, &expected);
     // The floor under the level pane is lit only by BSDF samples through it (light sampling
     // stops at glass): PT's mean needs 256 spp a seed to resolve 1%.
-    assert_mean_agrees_with_mitsuba_at(scene.clone(), 4, &reference, 256);
+    assert_blocks_and_mean_agree_with_mitsuba(&scene, 256, &reference);
     assert_these_agree_with_mitsuba(
         scene,
         "thin_glass_mitsuba.exr",
@@ -1266,11 +1282,9 @@ fn varying_rough_conductors_agree_with_mitsuba_in_every_integrator() {
     );
     let reference =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/mitsuba/anisotropic_mitsuba.exr");
-    let expected = stagelight::film::Image::read_exr(&reference).unwrap();
-    assert_blocks_agree_with_mitsuba(&scene, 256, &expected);
     // The near-mirror checkers' highlights are spiky: four times the usual samples keep three
     // standard errors of the mean under 1%.
-    assert_mean_agrees_with_mitsuba_at(scene.clone(), 4, &reference, 256);
+    assert_blocks_and_mean_agree_with_mitsuba(&scene, 256, &reference);
     assert_these_agree_with_mitsuba(
         scene,
         "anisotropic_mitsuba.exr",
@@ -1321,10 +1335,8 @@ fn rough_glass_agrees_with_mitsuba_in_every_integrator() {
     assert_eq!(glass, 4);
     let reference =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/scenes/mitsuba/rough_glass_mitsuba.exr");
-    let expected = stagelight::film::Image::read_exr(&reference).unwrap();
-    assert_blocks_agree_with_mitsuba(&scene, 256, &expected);
     // The caustics under the glass make 64 spp too noisy to see 1% in the mean.
-    assert_mean_agrees_with_mitsuba_at(scene.clone(), 4, &reference, 256);
+    assert_blocks_and_mean_agree_with_mitsuba(&scene, 256, &reference);
     assert_these_agree_with_mitsuba(
         scene,
         "rough_glass_mitsuba.exr",
