@@ -200,6 +200,15 @@ impl PathContext<'_> {
         (self.scene.material_seen(v.triangle, v.p, wo, v.ng, ns), ns)
     }
 
+    /// `material_seen` where the surface may scatter `wo` into `wi` (`scatters_between`: the
+    /// geometric surface and the shading frame agree on reflection or refraction), else None.
+    #[inline]
+    fn scattering(&self, v: &Vertex, wo: Vec3, wi: Vec3) -> Option<(Material, Vec3)> {
+        let (material, ns) = self.material_seen(v, wo);
+        let (wo_ng, wi_ng, wo_ns, wi_ns) = (wo.dot(v.ng), wi.dot(v.ng), wo.dot(ns), wi.dot(ns));
+        scatters_between(material.kind(), wo_ng, wi_ng, wo_ns, wi_ns).then_some((material, ns))
+    }
+
     /// Whether a strategy may join a subpath at this vertex: not at a delta surface.
     #[inline]
     pub fn is_connectible(&self, v: &Vertex) -> bool {
@@ -310,16 +319,9 @@ impl PathContext<'_> {
                 }
             }
             VertexKind::Surface => {
-                let (material, ns) = self.material_seen(v, wo);
-                if !scatters_between(
-                    material.kind(),
-                    wo.dot(v.ng),
-                    wi.dot(v.ng),
-                    wo.dot(ns),
-                    wi.dot(ns),
-                ) {
+                let Some((material, ns)) = self.scattering(v, wo, wi) else {
                     return Vec3::ZERO;
-                }
+                };
                 let f = material.eval_world(ns, wo, wi, mode);
                 match mode {
                     TransportMode::Radiance => f,
@@ -354,16 +356,9 @@ impl PathContext<'_> {
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
             VertexKind::Surface if !self.is_connectible(v) => 1.0,
             VertexKind::Surface => {
-                let (material, ns) = self.material_seen(v, wo);
-                if !scatters_between(
-                    material.kind(),
-                    wo.dot(v.ng),
-                    wi.dot(v.ng),
-                    wo.dot(ns),
-                    wi.dot(ns),
-                ) {
+                let Some((material, ns)) = self.scattering(v, wo, wi) else {
                     return 0.0;
-                }
+                };
                 material.pdf_world(ns, wo, wi)
             }
         }

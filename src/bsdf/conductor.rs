@@ -136,15 +136,7 @@ impl Conductor {
         let wi = off_axis(self.axis, wi.normalize());
         // Value and pdf from the same code as eval/pdf so that MIS sees identical densities.
         let (value, pdf) = self.eval_pdf(wo, wi);
-        if !(pdf > 0.0 && pdf.is_finite()) {
-            return None;
-        }
-        Some(BsdfSample {
-            wi,
-            value,
-            pdf,
-            delta: false,
-        })
+        BsdfSample::of_lobe(wi, value, pdf)
     }
 }
 

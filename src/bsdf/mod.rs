@@ -183,6 +183,21 @@ pub struct BsdfSample {
     pub delta: bool,
 }
 
+impl BsdfSample {
+    /// A sample of a non-delta lobe whose value and pdf `eval` and `pdf` give at `wi` (so
+    /// that MIS sees the same densities); None where the pdf is not positive and finite or
+    /// the value is zero.
+    #[inline]
+    pub fn of_lobe(wi: Vec3, value: Vec3, pdf: f32) -> Option<BsdfSample> {
+        (pdf > 0.0 && pdf.is_finite() && value != Vec3::ZERO).then_some(BsdfSample {
+            wi,
+            value,
+            pdf,
+            delta: false,
+        })
+    }
+}
+
 /// Samples `material` at a surface and turns the sample into a world direction `wi`: `frame`
 /// is the shading frame, `ng` the geometric normal (both on the side the caller shades), `wo`
 /// the direction back along the incoming ray and `wo_local` the same in `frame`. `None` when

@@ -159,15 +159,7 @@ impl RoughPlastic {
             return None;
         }
         let (value, pdf) = self.eval_pdf(wo, wi);
-        if !(pdf > 0.0 && pdf.is_finite()) {
-            return None;
-        }
-        Some(BsdfSample {
-            wi,
-            value,
-            pdf,
-            delta: false,
-        })
+        BsdfSample::of_lobe(wi, value, pdf)
     }
 }
 

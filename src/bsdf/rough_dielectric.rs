@@ -186,14 +186,6 @@ impl RoughDielectric {
         let wi = off_axis(self.axis, wi);
         // Value and pdf from the same code as eval/pdf so that MIS sees identical densities.
         let (value, pdf) = self.eval_pdf(wo, wi, mode);
-        if !(pdf > 0.0 && pdf.is_finite()) || value == Vec3::ZERO {
-            return None;
-        }
-        Some(BsdfSample {
-            wi,
-            value,
-            pdf,
-            delta: false,
-        })
+        BsdfSample::of_lobe(wi, value, pdf)
     }
 }
