@@ -280,7 +280,8 @@ mod bindings {
             write radiance = paths.radiance;
         }
         connect::sample_lights::SampleLights {
-            read data, sampler, lanes = settings.lanes, hits, rays, paths, surfaces, ranges;
+            read data, sampler, lanes = settings.lanes, triangles = hits.triangle, dirs = rays.dir,
+                paths, surfaces, ranges;
             write shadow, shadow_len;
         }
         gather::film::AccumulateFilm {
@@ -296,7 +297,7 @@ mod bindings {
             write paths;
         }
         shade::material::ShadeMaterial {
-            read data, sampler, lanes = settings.lanes, hits, surfaces, ranges;
+            read data, sampler, lanes = settings.lanes, triangles = hits.triangle, surfaces, ranges;
             write rays, paths;
         }
         shade::russian_roulette::RussianRoulette {

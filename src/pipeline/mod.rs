@@ -29,6 +29,11 @@ impl Flow {
 pub struct Access {
     pub reads: &'static [&'static str],
     pub writes: &'static [&'static str],
+    /// The write columns' names in the system (`writes` holds their paths in the state).
+    pub write_columns: &'static [&'static str],
+    /// Write columns whose slots the system moves while moving only some of their fields:
+    /// (column, fields moved). The fields left behind are stale after it.
+    pub reorders: &'static [(&'static str, &'static [&'static str])],
 }
 
 /// One step of an integrator over the wavefront state `S`: a system (`system!`) bound to the
@@ -49,6 +54,8 @@ pub trait Declared: Send + Sync {
     type Columns<'a>;
     const READS: &'static [&'static str];
     const WRITES: &'static [&'static str];
+    /// See `Access::reorders`.
+    const REORDERS: &'static [(&'static str, &'static [&'static str])] = &[];
     fn name(&self) -> &'static str;
     fn run_columns(&self, columns: Self::Columns<'_>) -> Flow;
 }
@@ -71,6 +78,12 @@ pub trait Declared: Send + Sync {
 ///
 /// A system with fields names its `self` in the body and, if its name depends on them, in the
 /// name: `name(this) = this.kind.system_name();` and `run(this) { ... this.kind ... }`.
+///
+/// A system that moves the slots of a write column but only some of its fields says which:
+/// `reorder rays[dir], hits[triangle];` after its writes (`hits[]`: none moved, the slots
+/// only reserved). The graph check then counts the
+/// column's other fields as unwritten after it, so a later system that reads them (or the
+/// whole column) is named, not handed stale data.
 #[macro_export]
 macro_rules! system {
     (
@@ -89,20 +102,32 @@ macro_rules! system {
     (@columns $system:ty, ($nthis:ident) $label:expr;
         $(read $($r:ident : $rt:ty),+ ;)?
         $(write $($w:ident : $wt:ty),+ ;)?
+        $(reorder $($o:ident [$($of:ident),*]),+ ;)?
         run $body:block
     ) => {
         $crate::system!(@columns $system, ($nthis) $label;
-            $(read $($r : $rt),+ ;)? $(write $($w : $wt),+ ;)? run (_this) $body);
+            $(read $($r : $rt),+ ;)? $(write $($w : $wt),+ ;)?
+            $(reorder $($o [$($of),*]),+ ;)? run (_this) $body);
     };
     (@columns $system:ty, ($nthis:ident) $label:expr;
         $(read $($r:ident : $rt:ty),+ ;)?
         $(write $($w:ident : $wt:ty),+ ;)?
+        $(reorder $($o:ident [$($of:ident),*]),+ ;)?
         run ($this:ident) $body:block
     ) => {
+        const _: () = assert!(
+            $crate::pipeline::reorders_written(
+                <$system as $crate::pipeline::Declared>::WRITES,
+                <$system as $crate::pipeline::Declared>::REORDERS,
+            ),
+            "a system reorders a column it does not write",
+        );
         impl $crate::pipeline::Declared for $system {
             type Columns<'a> = ($($(&'a $rt,)+)? $($(&'a mut $wt,)+)?);
             const READS: &'static [&'static str] = &[$($(stringify!($r)),+)?];
             const WRITES: &'static [&'static str] = &[$($(stringify!($w)),+)?];
+            const REORDERS: &'static [(&'static str, &'static [&'static str])] =
+                &[$($((stringify!($o), &[$(stringify!($of)),*])),+)?];
             fn name(&self) -> &'static str {
                 let $nthis = self;
                 let _ = $nthis;
@@ -157,6 +182,8 @@ macro_rules! bind {
                     $crate::pipeline::Access {
                         reads: &[$($($crate::__column_name!($r $(= $($rp).+)?)),+)?],
                         writes: &[$($($crate::__column_name!($w $(= $($wp).+)?)),+)?],
+                        write_columns: <$system as $crate::pipeline::Declared>::WRITES,
+                        reorders: <$system as $crate::pipeline::Declared>::REORDERS,
                     }
                 }
                 fn run(&self, state: &mut $state) -> $crate::pipeline::Flow {
@@ -180,18 +207,43 @@ pub const fn same_names(a: &[&str], b: &[&str]) -> bool {
     }
     let mut i = 0;
     while i < a.len() {
-        let (x, y) = (a[i].as_bytes(), b[i].as_bytes());
-        if x.len() != y.len() {
+        if !same_name(a[i], b[i]) {
             return false;
         }
+        i += 1;
+    }
+    true
+}
+
+/// Whether every column a system reorders is one it writes (for `system!`, at compile time).
+pub const fn reorders_written(writes: &[&str], reorders: &[(&str, &[&str])]) -> bool {
+    let mut i = 0;
+    while i < reorders.len() {
+        let mut found = false;
         let mut k = 0;
-        while k < x.len() {
-            if x[k] != y[k] {
-                return false;
-            }
+        while k < writes.len() {
+            found |= same_name(writes[k], reorders[i].0);
             k += 1;
         }
+        if !found {
+            return false;
+        }
         i += 1;
+    }
+    true
+}
+
+const fn same_name(a: &str, b: &str) -> bool {
+    let (x, y) = (a.as_bytes(), b.as_bytes());
+    if x.len() != y.len() {
+        return false;
+    }
+    let mut k = 0;
+    while k < x.len() {
+        if x[k] != y[k] {
+            return false;
+        }
+        k += 1;
     }
     true
 }
@@ -392,12 +444,13 @@ impl<S> Graph<S> {
 
     /// Checks the graph's data flow in the order it runs: every column a system reads must be
     /// written by an earlier system (a loop's body counts in order, once) or be one of
-    /// `inputs` (columns set before the graph runs). A path covers its columns and its
-    /// parents (`paths` covers `paths.depth` and the other way round). Nested graphs are
-    /// checked against their own inputs, and count as writing their part. Returns one line per
-    /// problem.
+    /// `inputs` (columns set before the graph runs). A write of a store covers its fields
+    /// (`paths` covers `paths.depth`), a write of a field only that field; a system that
+    /// reorders a store moving only some fields leaves the others unwritten. Nested graphs
+    /// are checked against their own inputs, and count as writing their part. Returns one
+    /// line per problem.
     pub fn check(&self, inputs: &[&str]) -> Vec<String> {
-        let mut written: Vec<&str> = inputs.to_vec();
+        let mut written: Vec<String> = inputs.iter().map(|s| s.to_string()).collect();
         let mut problems = Vec::new();
         check_nodes(&self.nodes, &mut written, &mut problems);
         problems
@@ -423,17 +476,13 @@ impl<S> Graph<S> {
     }
 }
 
+/// Whether a write of `w` makes a read of `r` valid: `w` is `r` or a store that holds it
+/// (`paths` covers `paths.depth`). A write of one field is not a write of its store.
 fn covers(w: &str, r: &str) -> bool {
-    w == r
-        || r.strip_prefix(w).is_some_and(|rest| rest.starts_with('.'))
-        || w.strip_prefix(r).is_some_and(|rest| rest.starts_with('.'))
+    w == r || r.strip_prefix(w).is_some_and(|rest| rest.starts_with('.'))
 }
 
-fn check_nodes<'a, S>(
-    nodes: &'a [Node<S>],
-    written: &mut Vec<&'a str>,
-    problems: &mut Vec<String>,
-) {
+fn check_nodes<S>(nodes: &[Node<S>], written: &mut Vec<String>, problems: &mut Vec<String>) {
     for node in nodes {
         match node {
             Node::System(s) => {
@@ -443,14 +492,22 @@ fn check_nodes<'a, S>(
                         problems.push(format!("{} reads {r} before anything writes it", s.name()));
                     }
                 }
-                written.extend(access.writes);
+                for (path, column) in access.writes.iter().zip(access.write_columns) {
+                    match access.reorders.iter().find(|(c, _)| c == column) {
+                        Some((_, moved)) => {
+                            written.retain(|w| !covers(path, w));
+                            written.extend(moved.iter().map(|f| format!("{path}.{f}")));
+                        }
+                        None => written.push(path.to_string()),
+                    }
+                }
             }
             Node::Loop { body, .. } | Node::Once { body, .. } => {
                 check_nodes(body, written, problems)
             }
             Node::Nested(g) => {
                 problems.extend(g.check());
-                written.push(g.part_name());
+                written.push(g.part_name().to_string());
             }
             Node::StopPoint => {}
         }
@@ -469,7 +526,7 @@ fn describe_nodes<S>(nodes: &[Node<S>], indent: usize, out: &mut String) {
                     "{pad}{:<w$} reads {}; writes {}",
                     s.name(),
                     list(a.reads),
-                    list(a.writes),
+                    writes_list(&a),
                     w = 28usize.saturating_sub(pad.len()),
                 );
             }
@@ -488,6 +545,23 @@ fn describe_nodes<S>(nodes: &[Node<S>], indent: usize, out: &mut String) {
             Node::StopPoint => {}
         }
     }
+}
+
+/// A system's writes, a reordered column with the fields it moves: `rays[dir]`.
+fn writes_list(a: &Access) -> String {
+    let columns: Vec<String> = a
+        .writes
+        .iter()
+        .zip(a.write_columns)
+        .map(
+            |(path, column)| match a.reorders.iter().find(|(c, _)| c == column) {
+                Some((_, moved)) => format!("{path}[{}]", moved.join(", ")),
+                None => path.to_string(),
+            },
+        )
+        .collect();
+    let columns: Vec<&str> = columns.iter().map(String::as_str).collect();
+    list(&columns)
 }
 
 fn list(columns: &[&str]) -> String {
@@ -599,6 +673,144 @@ mod tests {
         Report { read decrements; }
     }
 
+    /// A store of two columns, `keys` and `values`, for the reorder check.
+    #[derive(Default)]
+    struct Pairs {
+        keys: Vec<u32>,
+        values: Vec<u32>,
+    }
+
+    #[derive(Default)]
+    struct Sorting {
+        pairs: Pairs,
+    }
+
+    /// Sorts the keys without moving the values: the values are stale after it.
+    struct SortKeysOnly;
+    system! {
+        SortKeysOnly = "sort_keys_only";
+        write pairs: Pairs;
+        reorder pairs[keys];
+        run {
+            pairs.keys.sort_unstable();
+            Flow::new(pairs.keys.len(), pairs.keys.len())
+        }
+    }
+
+    struct ReadColumn;
+    system! {
+        ReadColumn = "read_column";
+        read column: Vec<u32>;
+        run {
+            Flow::new(column.len(), 0)
+        }
+    }
+
+    struct FillPairs;
+    system! {
+        FillPairs = "fill_pairs";
+        write pairs: Pairs;
+        run {
+            Flow::new(0, pairs.keys.len())
+        }
+    }
+
+    struct FillKeys;
+    system! {
+        FillKeys = "fill_keys";
+        write keys: Vec<u32>;
+        run {
+            Flow::new(0, keys.len())
+        }
+    }
+
+    struct ReadPairs;
+    system! {
+        ReadPairs = "read_pairs";
+        read pairs: Pairs;
+        run {
+            Flow::new(pairs.keys.len(), 0)
+        }
+    }
+
+    mod pair_bindings {
+        use super::*;
+        bind! {
+            Sorting:
+            SortKeysOnly { write pairs; }
+            FillPairs { write pairs; }
+            FillKeys { write keys = pairs.keys; }
+            ReadPairs { read pairs; }
+        }
+    }
+
+    /// `ReadColumn` bound to `pairs.values`, and the same system bound to `pairs.keys`.
+    struct ReadValues;
+    struct ReadKeys;
+    impl System<Sorting> for ReadValues {
+        fn name(&self) -> &'static str {
+            "read_values"
+        }
+        fn access(&self) -> Access {
+            Access {
+                reads: &["pairs.values"],
+                ..Access::default()
+            }
+        }
+        fn run(&self, s: &mut Sorting) -> Flow {
+            ReadColumn.run_columns((&s.pairs.values,))
+        }
+    }
+    impl System<Sorting> for ReadKeys {
+        fn name(&self) -> &'static str {
+            "read_keys"
+        }
+        fn access(&self) -> Access {
+            Access {
+                reads: &["pairs.keys"],
+                ..Access::default()
+            }
+        }
+        fn run(&self, s: &mut Sorting) -> Flow {
+            ReadColumn.run_columns((&s.pairs.keys,))
+        }
+    }
+
+    #[test]
+    fn a_reorder_that_moves_some_fields_leaves_the_others_unwritten() {
+        let graph = Graph::new(
+            "sorting",
+            vec![
+                Node::system(FillPairs),
+                Node::system(SortKeysOnly),
+                Node::system(ReadKeys),
+                Node::system(ReadValues),
+                Node::system(ReadPairs),
+            ],
+        );
+        assert_eq!(
+            graph.check(&[]),
+            vec![
+                "read_values reads pairs.values before anything writes it".to_string(),
+                "read_pairs reads pairs before anything writes it".to_string(),
+            ]
+        );
+        assert!(graph.describe().contains("writes pairs[keys]"));
+        // A write of one field covers that field only, not its store.
+        let one_field = Graph::new(
+            "one field",
+            vec![
+                Node::system(FillKeys),
+                Node::system(ReadKeys),
+                Node::system(ReadPairs),
+            ],
+        );
+        assert_eq!(
+            one_field.check(&[]),
+            vec!["read_pairs reads pairs before anything writes it".to_string()]
+        );
+    }
+
     fn countdown_graph() -> Graph<Counters> {
         Graph::new(
             "test",
@@ -673,7 +885,9 @@ mod tests {
             System::<Counters>::access(&Countdown),
             Access {
                 reads: &[],
-                writes: &["values", "decrements"]
+                writes: &["values", "decrements"],
+                write_columns: &["values", "decrements"],
+                reorders: &[],
             }
         );
         assert!(graph.check(&[]).is_empty());

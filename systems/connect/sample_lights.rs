@@ -8,7 +8,7 @@ use crate::components::path_tracing::DIM_LIGHT_PICK;
 use crate::components::path_tracing::DIM_LIGHT_POINT;
 use crate::components::path_tracing::MaterialRanges;
 use crate::components::path_tracing::bounce_dim;
-use crate::components::{Hits, Paths, Rays, ShadowRaysChunk, Surfaces};
+use crate::components::{Paths, ShadowRaysChunk, Surfaces};
 use crate::lanes::{F, LaneKernel, LaneWidth, M, Real, V3, lanes_of, run_lanes};
 use crate::math::gamma;
 use crate::pipeline::Flow;
@@ -26,8 +26,9 @@ pub struct SampleLights;
 
 crate::system! {
     SampleLights = "sample_lights";
-    read data: Arc<SceneData>, sampler: Sampler<'static>, lanes: LaneWidth, hits: Hits,
-        rays: Rays, paths: Paths, surfaces: Surfaces, ranges: MaterialRanges;
+    read data: Arc<SceneData>, sampler: Sampler<'static>, lanes: LaneWidth,
+        triangles: Vec<u32>, dirs: Vec<Vec3>, paths: Paths, surfaces: Surfaces,
+        ranges: MaterialRanges;
     write shadow: ShadowRays, shadow_len: usize;
     run {
         let data: &SceneData = data;
@@ -38,7 +39,7 @@ crate::system! {
             .chunks_mut(range)
             .into_par_iter()
             .map(|c| {
-                let chunk = SampleChunk { data, sampler, hits, rays, paths, surfaces, c };
+                let chunk = SampleChunk { data, sampler, triangles, dirs, paths, surfaces, c };
                 run_lanes(*lanes, chunk)
             })
             .sum();
@@ -50,8 +51,8 @@ crate::system! {
 struct SampleChunk<'a> {
     data: &'a SceneData,
     sampler: &'a Sampler<'a>,
-    hits: &'a Hits,
-    rays: &'a Rays,
+    triangles: &'a [u32],
+    dirs: &'a [Vec3],
     paths: &'a Paths,
     surfaces: &'a Surfaces,
     c: ShadowRaysChunk<'a>,
@@ -64,13 +65,13 @@ impl LaneKernel for SampleChunk<'_> {
         let SampleChunk {
             data,
             sampler,
-            hits,
-            rays,
+            triangles,
+            dirs,
             paths,
             surfaces,
             c,
         } = self;
-        sample_chunk::<N>(data, sampler, hits, rays, paths, surfaces, c)
+        sample_chunk::<N>(data, sampler, triangles, dirs, paths, surfaces, c)
     }
 }
 
@@ -79,21 +80,20 @@ impl LaneKernel for SampleChunk<'_> {
 fn sample_chunk<const N: usize>(
     data: &SceneData,
     sampler: &Sampler,
-    hits: &Hits,
-    rays: &Rays,
+    triangles: &[u32],
+    dirs: &[Vec3],
     paths: &Paths,
     surfaces: &Surfaces,
     mut c: ShadowRaysChunk,
 ) -> usize {
     let mut cast = 0;
     let range = c.start..c.start + c.len();
-    let hits = hits.view(range.clone());
-    let rays = rays.view(range.clone());
+    let (triangles, dirs) = (&triangles[range.clone()], &dirs[range.clone()]);
     let paths = paths.view(range.clone());
     let surfaces = surfaces.view(range);
     let one = |c: &mut ShadowRaysChunk, i: usize| {
         c.t_max[i] = 0.0;
-        let surf = Surface::at(data, &surfaces, hits.triangle[i], i, rays.dir[i]);
+        let surf = Surface::at(data, &surfaces, triangles[i], i, dirs[i]);
         if let Some(light) = light_sample(
             data,
             sampler,
@@ -117,7 +117,7 @@ fn sample_chunk<const N: usize>(
     let lanes = data.scene.emitters.only_triangles();
     let mut i = 0;
     while lanes && i + N <= c.len() {
-        match DiffuseLanes::<N>::at(data, &surfaces, hits.triangle, rays.dir, i) {
+        match DiffuseLanes::<N>::at(data, &surfaces, triangles, dirs, i) {
             Some(surf) => {
                 let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
                 let depths: &[u32; N] = paths.depth[i..i + N].try_into().unwrap();

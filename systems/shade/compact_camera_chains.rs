@@ -24,6 +24,7 @@ crate::system! {
         points: usize, spawned: Vec<Vec<Branch>>, order: Vec<u32>, scratch_chains: CameraChains,
         scratch_rays: Rays, glossy: VisiblePoints, glossy_points: usize, glossy_rank: Vec<u32>,
         met_glossy: Vec<Vec<VisiblePoint>>;
+    reorder hits[];
     run {
         use std::mem::swap;
         let n = *active;

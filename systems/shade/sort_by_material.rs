@@ -36,6 +36,7 @@ crate::system! {
     read scene: PreparedScene, max_depth: u32;
     write hits: Hits, paths: Paths, rays: Rays, sample_radiance: Vec<Vec3>, ranges: MaterialRanges,
         active: usize, scratch: Scratch, surfaces: Surfaces;
+    reorder rays[dir], hits[triangle];
     run {
         let taken = *active;
         let max_depth = *max_depth;

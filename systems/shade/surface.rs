@@ -5,9 +5,7 @@ use super::lanes::{DiffuseLanes, draw2, offset_origin};
 use crate::bsdf::{Material, MaterialKind, TransportMode, diffuse, sample_direction};
 use crate::components::path_tracing::DIM_BSDF;
 use crate::components::path_tracing::bounce_dim;
-use crate::components::{
-    Hits, PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView,
-};
+use crate::components::{PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView};
 use crate::geometry::{SurfacePoint, offset_ray_origin};
 use crate::lanes::{F, LaneKernel, LaneWidth, M, Real, V3, lanes_of, run_lanes};
 use crate::math::Frame;
@@ -99,7 +97,7 @@ pub fn scatter_paths<const KIND: u8>(
     data: &SceneData,
     sampler: &Sampler,
     lanes: LaneWidth,
-    hits: &Hits,
+    triangles: &[u32],
     surfaces: &Surfaces,
     rays: &mut Rays,
     paths: &mut Paths,
@@ -115,7 +113,7 @@ pub fn scatter_paths<const KIND: u8>(
             let chunk = ScatterChunk::<KIND> {
                 data,
                 sampler,
-                hits,
+                triangles,
                 surfaces,
                 r,
                 p,
@@ -130,7 +128,7 @@ pub fn scatter_paths<const KIND: u8>(
 struct ScatterChunk<'a, const KIND: u8> {
     data: &'a SceneData,
     sampler: &'a Sampler<'a>,
-    hits: &'a Hits,
+    triangles: &'a [u32],
     surfaces: &'a Surfaces,
     r: RaysChunk<'a>,
     p: PathsChunk<'a>,
@@ -143,12 +141,12 @@ impl<const KIND: u8> LaneKernel for ScatterChunk<'_, KIND> {
         let ScatterChunk {
             data,
             sampler,
-            hits,
+            triangles,
             surfaces,
             r,
             p,
         } = self;
-        scatter_chunk::<KIND, N>(data, sampler, hits, surfaces, r, p)
+        scatter_chunk::<KIND, N>(data, sampler, triangles, surfaces, r, p)
     }
 }
 
@@ -157,20 +155,20 @@ impl<const KIND: u8> LaneKernel for ScatterChunk<'_, KIND> {
 fn scatter_chunk<const KIND: u8, const N: usize>(
     data: &SceneData,
     sampler: &Sampler,
-    hits: &Hits,
+    triangles: &[u32],
     surfaces: &Surfaces,
     r: RaysChunk,
     p: PathsChunk,
 ) -> usize {
     let mut scattered = 0;
     let range = p.start..p.start + p.len();
-    let (hits, surfaces) = (hits.view(range.clone()), surfaces.view(range));
+    let (triangles, surfaces) = (&triangles[range.clone()], surfaces.view(range));
     // Lambertian paths N at a time (the rest one by one, below).
     let mut first = 0;
     if KIND == MaterialKind::Diffuse as u8 {
         while first + N <= p.len() {
             let i = first;
-            let Some(surf) = DiffuseLanes::<N>::at(data, &surfaces, hits.triangle, r.dir, i) else {
+            let Some(surf) = DiffuseLanes::<N>::at(data, &surfaces, triangles, r.dir, i) else {
                 break;
             };
             let keys: &[SampleKey; N] = p.key[i..i + N].try_into().unwrap();
@@ -194,8 +192,8 @@ fn scatter_chunk<const KIND: u8, const N: usize>(
             first += N;
         }
     }
-    for i in first..p.len() {
-        let surf = Surface::at(data, &surfaces, hits.triangle[i], i, r.dir[i]);
+    for (i, &triangle) in triangles.iter().enumerate().skip(first) {
+        let surf = Surface::at(data, &surfaces, triangle, i, r.dir[i]);
         // The material queue holds only this kind; saying so lets the compiler drop the
         // other kinds' arms of the inlined BSDF sample.
         if surf.material.kind() as u8 != KIND {

@@ -74,7 +74,7 @@ stagelight::bind! {
         write hits, paths, rays, sample_radiance, ranges, active, scratch, surfaces;
     }
     shade::material::ShadeMaterial {
-        read data, sampler, lanes = settings.lanes, hits, surfaces, ranges;
+        read data, sampler, lanes = settings.lanes, triangles = hits.triangle, surfaces, ranges;
         write rays, paths;
     }
     CountEmissionWhole {
