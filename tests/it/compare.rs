@@ -399,6 +399,11 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         "256",
         "--thesis-photons",
         "2000,4000",
+        // At 8x8 the default radius, 1.5 pixel footprints, spans the scenes: VCM and BPM
+        // then merge every camera vertex with every light vertex (minutes). About twice a
+        // 256-px render's radius on torus_glass and door_ajar keeps the merges local.
+        "--radius",
+        "0.05",
         "--quiet",
         "-o",
         out.to_str().unwrap(),
