@@ -555,6 +555,12 @@ pub(crate) fn by_spp_plan(o: &ThesisOptions) -> ComparePlan {
         settings: RenderSettings {
             seed: o.seed,
             max_depth: o.max_depth,
+            // VCM's and BPM's merges take the given radius and alpha, as the photon mappers do.
+            photons: PhotonSettings {
+                radius: o.photons.radius,
+                alpha: o.photons.alpha,
+                ..PhotonSettings::default()
+            },
             ..RenderSettings::default()
         },
     }
