@@ -141,7 +141,7 @@ impl SlurmArgs {
 }
 
 impl RenderArgs {
-    pub(super) fn options(&self) -> RenderOptions {
+    pub fn options(&self) -> RenderOptions {
         let budget = match (self.spp, self.time) {
             (_, Some(t)) => Budget::Seconds(t),
             (Some(spp), None) => Budget::SamplesPerPixel(spp),
@@ -181,7 +181,7 @@ impl RenderArgs {
 }
 
 impl ReferenceArgs {
-    pub(super) fn options(&self) -> ReferenceOptions {
+    pub fn options(&self) -> ReferenceOptions {
         let output = self.output.clone().unwrap_or_else(|| {
             PathBuf::from("reference").join(format!(
                 "{}_{}.exr",
@@ -218,7 +218,7 @@ impl ReferenceArgs {
 }
 
 impl CompareArgs {
-    pub(super) fn options(&self) -> Result<CompareOptions> {
+    pub fn options(&self) -> Result<CompareOptions> {
         let scene = self
             .scene
             .clone()

@@ -37,6 +37,17 @@ pub struct ReferenceOptions {
 /// Makes, resumes or extends a reference and prints what it did. Returns the exit code: 0,
 /// or `EXIT_INTERRUPTED` when Ctrl-C stopped it (the checkpoint holds the passes done).
 pub fn reference(o: &ReferenceOptions) -> Result<i32> {
+    check_reference_options(o)?;
+    let data = load_scene(&o.scene)?;
+    let stop = stop_on_ctrl_c()?;
+    let (outcome, report) = reference_of(o, data, &stop)?;
+    print_out(&report);
+    Ok(exit_code(outcome.interrupted))
+}
+
+/// The checks of a reference's options before its scene is read (the command line and the
+/// Python module make the same ones).
+pub fn check_reference_options(o: &ReferenceOptions) -> Result<()> {
     if !o.integrator.resumes() {
         bail!(
             "--integrator {}: a reference needs an integrator that resumes from a checkpoint \
@@ -44,16 +55,24 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
             o.integrator
         );
     }
-    let output = &o.output;
-    if output
+    if o.output
         .extension()
         .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
     {
-        bail!("{}: the output must be an .exr file", output.display());
+        bail!("{}: the output must be an .exr file", o.output.display());
     }
     check_threads(o.threads)?;
-    super::check_kernel(o.integrator, &o.settings)?;
-    let data = load_scene(&o.scene)?;
+    super::check_kernel(o.integrator, &o.settings)
+}
+
+/// Makes, resumes or extends the reference of a loaded scene until its budget is met or
+/// `stop` is set; returns what it did and the report the command prints.
+pub fn reference_of(
+    o: &ReferenceOptions,
+    data: std::sync::Arc<crate::integrators::SceneData>,
+    stop: &AtomicBool,
+) -> Result<(ReferenceOutcome, String)> {
+    let output = &o.output;
     if let ReferenceBudget::SamplesPerPixel(spp) = o.budget {
         check_samples("--spp", spp, &data)?;
     }
@@ -65,7 +84,6 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
         }
     };
     check_reference_outputs(output, &[&o.scene])?;
-    let stop = stop_on_ctrl_c()?;
     let pool = thread_pool(o.threads)?;
     super::check_render_memory(o.integrator, &o.settings, &data, pool.current_num_threads())?;
     let job = ReferenceJob {
@@ -78,7 +96,7 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
         checkpoint_every: o.checkpoint_every,
         shard,
     };
-    let outcome = make_reference(&job, &stop, &pool, o.quiet)?;
+    let outcome = make_reference(&job, stop, &pool, o.quiet)?;
     let mut report = describe_reference(&job, &outcome) + "\n";
     report += &format!(
         "  {} threads, {:.1} s this run, {} NaN/Inf samples; checkpoint {}\n",
@@ -95,8 +113,7 @@ pub fn reference(o: &ReferenceOptions) -> Result<i32> {
             outcome.passes
         );
     }
-    print_out(&report);
-    Ok(exit_code(outcome.interrupted))
+    Ok((outcome, report))
 }
 
 /// Checks the files a reference writes (the EXR, its PNG preview and its checkpoint) before

@@ -34,17 +34,9 @@ pub struct RenderOptions {
     pub quiet: bool,
 }
 
-/// Renders, writes the EXR, its preview and any strategy images, prints the report. Returns
-/// the exit code: 0, or `EXIT_INTERRUPTED` when Ctrl-C stopped it (the finished passes are
-/// written).
-pub fn render(o: &RenderOptions) -> Result<i32> {
-    let output = &o.output;
-    if output
-        .extension()
-        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
-    {
-        bail!("{}: the output must be an .exr file", output.display());
-    }
+/// The checks of a render's options against its integrator, before the scene is read (the
+/// command line and the Python module make the same ones, with the same messages).
+pub fn check_integrator_options(o: &RenderOptions) -> Result<()> {
     if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
         bail!("--strategy-images needs --integrator bdpt or mmlt");
     }
@@ -60,14 +52,30 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
             o.integrator
         );
     }
+    if o.variance.is_some() && o.integrator.as_str() != "pt" {
+        bail!(
+            "--variance: a pixel's sample variance is that of pt's per-sample estimates; {} \
+             has no such samples (its pixels mix light-path splats or density estimates)",
+            o.integrator
+        );
+    }
+    check_threads(o.threads)?;
+    check_kernel(o.integrator, &o.settings)
+}
+
+/// Renders, writes the EXR, its preview and any strategy images, prints the report. Returns
+/// the exit code: 0, or `EXIT_INTERRUPTED` when Ctrl-C stopped it (the finished passes are
+/// written).
+pub fn render(o: &RenderOptions) -> Result<i32> {
+    let output = &o.output;
+    if output
+        .extension()
+        .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
+    {
+        bail!("{}: the output must be an .exr file", output.display());
+    }
+    check_integrator_options(o)?;
     if let Some(path) = &o.variance {
-        if o.integrator.as_str() != "pt" {
-            bail!(
-                "--variance: a pixel's sample variance is that of pt's per-sample estimates; {} \
-                 has no such samples (its pixels mix light-path splats or density estimates)",
-                o.integrator
-            );
-        }
         if path
             .extension()
             .is_none_or(|e| !e.eq_ignore_ascii_case("exr"))
@@ -80,8 +88,6 @@ pub fn render(o: &RenderOptions) -> Result<i32> {
             );
         }
     }
-    check_threads(o.threads)?;
-    check_kernel(o.integrator, &o.settings)?;
     let data = load_scene(&o.scene)?;
     if let Budget::SamplesPerPixel(spp) = o.budget {
         check_samples("--spp", spp, &data)?;

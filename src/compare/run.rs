@@ -37,7 +37,7 @@ pub struct CompareOptions {
 }
 
 /// The checked settings of a comparison.
-pub(crate) struct ComparePlan {
+pub struct ComparePlan {
     pub integrators: Vec<IntegratorKind>,
     pub unit: BudgetUnit,
     pub budgets: Vec<f64>,
@@ -46,7 +46,7 @@ pub(crate) struct ComparePlan {
 
 impl ComparePlan {
     /// Checks the budgets and the integrator list (the messages name the option).
-    pub(crate) fn new(o: &CompareOptions) -> Result<ComparePlan> {
+    pub fn new(o: &CompareOptions) -> Result<ComparePlan> {
         super::validate_budgets(&o.budgets, o.unit)
             .map_err(|e| anyhow::anyhow!("--budgets: {e}"))?;
         let mut integrators: Vec<IntegratorKind> = Vec::new();
