@@ -528,8 +528,8 @@ pub const TAKE_ORTHOGRAPHIC: [&str; 9] = [
 /// The integrators that reconstruct with the gaussian filter: camera-side samples land where
 /// their rays left the film, splats (light tracing, Metropolis) spread over the filter's
 /// footprint from where they land, normalised as the camera's samples are.
-pub const TAKE_GAUSSIAN: [&str; 9] = [
-    "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt",
+pub const TAKE_GAUSSIAN: [&str; 10] = [
+    "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt", "mlt",
 ];
 
 /// Refuses a camera the integrator cannot render as the scene asks: an orthographic camera
@@ -574,7 +574,6 @@ fn orthographic_reason(name: &str) -> &'static str {
 /// Why an integrator that `TAKE_GAUSSIAN` leaves out cannot take the filter.
 fn gaussian_reason(name: &str) -> &'static str {
     match name {
-        "mlt" => "its splats do not yet carry where in their pixel they landed",
         _ => "its camera pass keeps one estimate per pixel, not where each sample fell",
     }
 }

@@ -301,7 +301,15 @@ impl PassState for PathMltState {
         } else {
             self.pixels as f64 / self.step as f64
         };
-        let mut sums: Vec<DVec3> = self.splat_sums.iter().map(|v| *v * scale).collect();
+        // Under the gaussian each pixel is divided by the filter's integral about it: the
+        // splats were spread over their footprints (`Film::splat_normalisations`).
+        let norm = Film::splat_normalisations(self.data.scene.camera.filter, w, h);
+        let mut sums: Vec<DVec3> = self
+            .splat_sums
+            .iter()
+            .zip(&norm)
+            .map(|(v, d)| *v * (scale / d))
+            .collect();
         let mut nonfinite = self.nonfinite;
         if let Some(direct) = &self.direct {
             let image = direct.image();
@@ -360,7 +368,7 @@ mod bindings {
             write chains, counts;
         }
         mutate::path_accept::SplatPathExpectedValues {
-            read chains, splat_scale;
+            read chains, splat_scale, camera = data.scene.camera;
             write splats, splat_sums, nonfinite;
         }
         mutate::path_accept::CommitPathProposals {

@@ -51,8 +51,8 @@ pub mod path_space;
 mod seeds;
 
 pub use accept::{
-    ChainSplats, Splat, accept_or_reject, acceptance_probability, add_splats, commit_accepted,
-    large_step_targets, splat_expected_values, splat_strategies,
+    ChainSplats, Splat, accept_or_reject, acceptance_probability, add_splats, add_splats_filtered,
+    commit_accepted, large_step_targets, splat_expected_values, splat_strategies,
 };
 pub use chains::{ChainStates, Contributions, ContributionsChunk, MltCounters};
 pub use mutate::{MutationSettings, SmallStep, propose_mutations, step_key, wrap_unit};

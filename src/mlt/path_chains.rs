@@ -9,7 +9,7 @@
 //! `proposal_overflow`, which are chain-indexed like every other column, so the chunks of
 //! chains the systems work on in parallel own their overflow too.
 
-use super::path_space::{Path, PathSpace};
+use super::path_space::{Landing, Path, PathSpace};
 use crate::components::{PathVertex, PathVertices, PathVerticesChunk, PathVerticesView};
 use crate::path::Vertex;
 use crate::sampling::SampleKey;
@@ -120,13 +120,14 @@ pub struct PathChains {
     /// Vertices per path (any number).
     pub current_len: Vec<u32>,
     pub current_f: Vec<DVec3>,
-    pub current_pixel: Vec<u32>,
+    /// Where the current path lands on the film.
+    pub current_landing: Vec<Landing>,
     pub current_target: Vec<f64>,
     pub proposal: PathVertices,
     pub proposal_overflow: Vec<Vec<PathVertex>>,
     pub proposal_len: Vec<u32>,
     pub proposal_f: Vec<DVec3>,
-    pub proposal_pixel: Vec<u32>,
+    pub proposal_landing: Vec<Landing>,
     pub proposal_target: Vec<f64>,
     /// T(y -> x) / T(x -> y) of the proposal (0 for no proposal).
     pub ratio: Vec<f64>,
@@ -145,13 +146,13 @@ impl PathChains {
             current_overflow: vec![Vec::new(); chains],
             current_len: vec![0; chains],
             current_f: vec![DVec3::ZERO; chains],
-            current_pixel: vec![0; chains],
+            current_landing: vec![Landing::default(); chains],
             current_target: vec![0.0; chains],
             proposal: PathVertices::new(chains * INLINE_VERTICES),
             proposal_overflow: vec![Vec::new(); chains],
             proposal_len: vec![0; chains],
             proposal_f: vec![DVec3::ZERO; chains],
-            proposal_pixel: vec![0; chains],
+            proposal_landing: vec![Landing::default(); chains],
             proposal_target: vec![0.0; chains],
             ratio: vec![0.0; chains],
             kind: vec![MutationKind::Bidirectional; chains],
@@ -169,7 +170,7 @@ impl PathChains {
     /// Bytes per chain (the overflow lists' vertices not counted: most chains have none).
     pub fn bytes_per_chain() -> usize {
         2 * INLINE_VERTICES * PathVertices::bytes_per_item()
-            + 2 * (std::mem::size_of::<Vec<PathVertex>>() + 4 + 24 + 4 + 8)
+            + 2 * (std::mem::size_of::<Vec<PathVertex>>() + 4 + 24 + 12 + 8)
             + 8
             + 1
             + 1

@@ -32,6 +32,14 @@ use std::f32::consts::PI;
 pub type Path = Vec<Vertex>;
 
 /// Random numbers of one chain's step: dimension after dimension of its key.
+/// Where a path lands on the film: its pixel and its raster position there (the gaussian
+/// filter spreads its splats from that point).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Landing {
+    pub pixel: u32,
+    pub at: glam::Vec2,
+}
+
 pub struct StepNumbers {
     key: SampleKey,
     next: u32,
@@ -164,11 +172,11 @@ impl<'a> PathSpace<'a> {
         }
     }
 
-    /// f(x) and the pixel the path lands in; `None` when it carries nothing (or leaves the
-    /// image). Visibility is not tested here: every edge of a path a mutation makes was traced
+    /// f(x) and where on the film the path lands; `None` when it carries nothing (or leaves
+    /// the image). Visibility is not tested here: every edge of a path a mutation makes was traced
     /// or tested when made.
     /// f is kept in f64: a product of many 1 / d^2 (scenes in millimetres) leaves f32's range.
-    pub fn contribution(&self, path: &[Vertex]) -> Option<(DVec3, u32)> {
+    pub fn contribution(&self, path: &[Vertex]) -> Option<(DVec3, Landing)> {
         let n = path.len();
         if n < 2 || path[n - 1].kind != VertexKind::Camera || path[0].kind != VertexKind::Light {
             return None;
@@ -178,7 +186,7 @@ impl<'a> PathSpace<'a> {
             return None;
         }
         let cam = &path[n - 1];
-        let (pixel, _, importance) = self.ctx.camera.project(dir(cam, &path[n - 2]))?;
+        let (pixel, at, importance) = self.ctx.camera.project(dir(cam, &path[n - 2]))?;
         let le = self.ctx.emitted(&path[0], dir(&path[0], &path[1]));
         let mut f = le.as_dvec3() * f64::from(importance);
         if f == DVec3::ZERO {
@@ -218,7 +226,13 @@ impl<'a> PathSpace<'a> {
                 return None;
             }
         }
-        (f.is_finite() && f.max_element() > 0.0).then_some((f, pixel as u32))
+        (f.is_finite() && f.max_element() > 0.0).then_some((
+            f,
+            Landing {
+                pixel: pixel as u32,
+                at,
+            },
+        ))
     }
 
     /// fs(wo, wi) |wi . ns| at a surface vertex (`wo` towards the camera side for radiance),

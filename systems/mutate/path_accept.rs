@@ -9,7 +9,9 @@ use crate::components::metropolis::MutationCounts;
 use crate::mlt::Splat;
 use crate::mlt::path_chains::PathChains;
 use crate::mlt::path_chains::{INLINE_VERTICES, chunk_starts, copy_path};
+use crate::mlt::path_space::Landing;
 use crate::pipeline::Flow;
+use crate::scene::Camera;
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -64,7 +66,7 @@ pub struct SplatPathExpectedValues;
 
 crate::system! {
     SplatPathExpectedValues = "splat_path_expected_values";
-    read chains: PathChains, splat_scale: f32;
+    read chains: PathChains, splat_scale: f32, camera: Camera;
     write splats: Vec<Vec<Splat>>, splat_sums: Vec<DVec3>, nonfinite: u64;
     run {
         let n = chains.chains();
@@ -77,16 +79,25 @@ crate::system! {
                 let a = chains.acceptance[i];
                 if a > 0.0 {
                     let w = f64::from(scale) * a / chains.proposal_target[i];
-                    out.push(Splat { pixel: chains.proposal_pixel[i], value: (chains.proposal_f[i] * w).as_vec3(), at: glam::Vec2::NAN });
+                    let Landing { pixel, at } = chains.proposal_landing[i];
+                    out.push(Splat { pixel, value: (chains.proposal_f[i] * w).as_vec3(), at });
                 }
                 let t = chains.current_target[i];
                 if a < 1.0 && t.is_finite() && t > 0.0 {
                     let w = f64::from(scale) * (1.0 - a) / t;
-                    out.push(Splat { pixel: chains.current_pixel[i], value: (chains.current_f[i] * w).as_vec3(), at: glam::Vec2::NAN });
+                    let Landing { pixel, at } = chains.current_landing[i];
+                    out.push(Splat { pixel, value: (chains.current_f[i] * w).as_vec3(), at });
                 }
             }
         });
-        let (made, dropped) = crate::mlt::add_splats(splats, splat_sums);
+        // Under the gaussian each splat spreads over its footprint from where it landed.
+        let (made, dropped) = match camera.filter {
+            crate::film::PixelFilter::Box => crate::mlt::add_splats(splats, splat_sums),
+            crate::film::PixelFilter::Gaussian(g) => {
+                let size = (camera.width as usize, camera.height as usize);
+                crate::mlt::add_splats_filtered(splats, splat_sums, g, size)
+            }
+        };
         let made = made as usize;
         *nonfinite += dropped;
         Flow::new(n, made)
@@ -107,14 +118,14 @@ crate::system! {
         let current = chains.current.split_mut(&starts, end);
         let proposal = chains.proposal.split_mut(&starts, end);
         let accepted = &chains.accepted;
-        let (plen, pf, ppix, ptarget, poverflow) = (&chains.proposal_len, &chains.proposal_f, &chains.proposal_pixel, &chains.proposal_target, &chains.proposal_overflow);
+        let (plen, pf, ppix, ptarget, poverflow) = (&chains.proposal_len, &chains.proposal_f, &chains.proposal_landing, &chains.proposal_target, &chains.proposal_overflow);
         let taken: usize = current
             .into_par_iter()
             .zip(proposal)
             .zip(chains.current_overflow.par_chunks_mut(CHUNK))
             .zip(chains.current_len.par_chunks_mut(CHUNK))
             .zip(chains.current_f.par_chunks_mut(CHUNK))
-            .zip(chains.current_pixel.par_chunks_mut(CHUNK))
+            .zip(chains.current_landing.par_chunks_mut(CHUNK))
             .zip(chains.current_target.par_chunks_mut(CHUNK))
             .enumerate()
             .map(|(c, ((((((mut cur, prop), overflow), len), f), pix), target))| {

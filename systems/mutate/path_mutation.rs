@@ -131,7 +131,7 @@ pub fn run(
         .zip(chains.proposal_overflow.par_chunks_mut(CHUNK))
         .zip(chains.proposal_len.par_chunks_mut(CHUNK))
         .zip(chains.proposal_f.par_chunks_mut(CHUNK))
-        .zip(chains.proposal_pixel.par_chunks_mut(CHUNK))
+        .zip(chains.proposal_landing.par_chunks_mut(CHUNK))
         .zip(chains.proposal_target.par_chunks_mut(CHUNK))
         .zip(chains.ratio.par_chunks_mut(CHUNK))
         .enumerate()
@@ -160,7 +160,7 @@ pub fn run(
                     let Some(p) = propose_by(&ps, set, &x, &mut u) else {
                         continue;
                     };
-                    let Some((f, pixel)) = ps.contribution(&p.path) else {
+                    let Some((f, landing)) = ps.contribution(&p.path) else {
                         continue;
                     };
                     let back = suitable(&ps, set, &p.path).len();
@@ -170,7 +170,7 @@ pub fn run(
                     store_path(&mut prop, &mut poverflow[local], local, &p.path);
                     plen[local] = path_len(p.path.len());
                     pf[local] = f;
-                    ppix[local] = pixel;
+                    ppix[local] = landing;
                     ptarget[local] = PathSpace::target(f);
                     // P(choose kind | x) / P(choose kind | y) = |suitable(y)| / |suitable(x)|,
                     // inverted: T carries 1 / |suitable|.

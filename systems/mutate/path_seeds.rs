@@ -112,9 +112,9 @@ crate::system! {
             store_path(&mut stores[c], &mut chains.current_overflow[i], local, path);
             chains.current_len[i] = path_len(path.len());
             match ps.contribution(path) {
-                Some((f, pixel)) => {
+                Some((f, landing)) => {
                     chains.current_f[i] = f;
-                    chains.current_pixel[i] = pixel;
+                    chains.current_landing[i] = landing;
                     chains.current_target[i] = PathSpace::target(f);
                     live += 1;
                 }

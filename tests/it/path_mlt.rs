@@ -331,11 +331,11 @@ fn check_stored_paths(state: &PathMltState) -> usize {
         let x = chains.current_path(i);
         assert_eq!(x.len(), len);
         long += (len > INLINE_VERTICES) as usize;
-        let (f, pixel) = ps
+        let (f, landing) = ps
             .contribution(&x)
             .unwrap_or_else(|| panic!("chain {i}: its path of {len} carries nothing"));
         assert_eq!(f, chains.current_f[i], "chain {i}: f of a path of {len}");
-        assert_eq!(pixel, chains.current_pixel[i], "chain {i}");
+        assert_eq!(landing, chains.current_landing[i], "chain {i}");
     }
     long
 }
