@@ -525,17 +525,11 @@ pub const TAKE_ORTHOGRAPHIC: [&str; 9] = [
     "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt",
 ];
 
-/// The integrators that reconstruct with the gaussian filter: camera-side samples land where
-/// their rays left the film, splats (light tracing, Metropolis) spread over the filter's
-/// footprint from where they land, normalised as the camera's samples are.
-pub const TAKE_GAUSSIAN: [&str; 10] = [
-    "pt", "bdpt", "vcm", "bpm", "pm", "ppm", "sppm", "pssmlt", "mmlt", "mlt",
-];
-
 /// Refuses a camera the integrator cannot render as the scene asks: an orthographic camera
-/// where `TAKE_ORTHOGRAPHIC` does not list the integrator, and a filter wider than a pixel
-/// where `TAKE_GAUSSIAN` does not. The message names the integrator, the camera, the reason
-/// and what works.
+/// where `TAKE_ORTHOGRAPHIC` does not list the integrator. (Every integrator takes the
+/// gaussian filter: camera-side samples land where their rays left the film, splats spread
+/// over the filter's footprint from where they land, normalised as the camera's samples
+/// are.) The message names the integrator, the camera, the reason and what works.
 pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Result<(), String> {
     let name = kind.as_str();
     if !camera.is_pinhole() && !TAKE_ORTHOGRAPHIC.contains(&name) {
@@ -543,16 +537,6 @@ pub fn check_camera(kind: IntegratorKind, camera: &crate::scene::Camera) -> Resu
             "{kind} cannot render an orthographic sensor: {}; {} render it",
             orthographic_reason(name),
             TAKE_ORTHOGRAPHIC.join(", ")
-        ));
-    }
-    if let crate::film::PixelFilter::Gaussian(_) = camera.filter
-        && !TAKE_GAUSSIAN.contains(&name)
-    {
-        return Err(format!(
-            "{kind} cannot reconstruct with the gaussian rfilter (Mitsuba's default when a film \
-             has none): {}; {} render it, or add <rfilter type=\"box\"/> to the film",
-            gaussian_reason(name),
-            TAKE_GAUSSIAN.join(", ")
         ));
     }
     Ok(())
@@ -568,13 +552,6 @@ fn orthographic_reason(name: &str) -> &'static str {
              vertex can be projected through"
         }
         _ => "its rays all have one direction, a delta it does not model",
-    }
-}
-
-/// Why an integrator that `TAKE_GAUSSIAN` leaves out cannot take the filter.
-fn gaussian_reason(name: &str) -> &'static str {
-    match name {
-        _ => "its camera pass keeps one estimate per pixel, not where each sample fell",
     }
 }
 
