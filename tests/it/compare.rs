@@ -521,6 +521,9 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
             references.to_str().unwrap(),
             "--thesis-photons",
             "2000",
+            // As above: local merges for VCM and BPM at 8x8.
+            "--radius",
+            "0.05",
             "--quiet",
             "-o",
             out.to_str().unwrap(),
@@ -584,6 +587,8 @@ fn the_thesis_preset_runs_on_shrunken_scenes_and_fills_its_tables() {
         &s(&given),
         "--thesis-photons",
         "2000",
+        "--radius",
+        "0.05",
         "-o",
         &s(&sharded),
     ]);
