@@ -4,8 +4,8 @@
     python benches/python_overhead.py [SCENE] [SPP] [ROUNDS] [THREADS]
 
 Each round runs `stagelight render` (its report's samples/s: samples over the render's wall
-time, scene loading excluded) and then stagelight.render on a scene loaded once (the same
-measure, and samples over the whole Python call, conversion to NumPy included).
+time, scene loading excluded) and stagelight.render on a scene loaded once (the same measure,
+and samples over the whole Python call, conversion to NumPy included), in alternating order.
 """
 
 import re
@@ -34,13 +34,20 @@ stagelight.render(scene, spp=1, threads=int(threads))  # warm-up
 print(f"{scene_path}, {spp} spp, {threads} threads; samples/s")
 print("round  cli_engine  python_engine  python_call")
 for i in range(rounds):
+    # The order alternates too, so neither side always runs on a machine the other warmed.
+    first_python = i % 2 == 1
+    if first_python:
+        start = time.perf_counter()
+        r = stagelight.render(scene, spp=spp, threads=int(threads))
+        call = r.samples / (time.perf_counter() - start)
     out = subprocess.run(
         [str(binary), "render", scene_path, "--spp", str(spp), "--threads", threads,
          "--quiet", "-o", "/tmp/stagelight_overhead.exr"],
         capture_output=True, text=True, check=True,
     ).stdout
     cli = mega(out)
-    start = time.perf_counter()
-    r = stagelight.render(scene, spp=spp, threads=int(threads))
-    call = r.samples / (time.perf_counter() - start)
+    if not first_python:
+        start = time.perf_counter()
+        r = stagelight.render(scene, spp=spp, threads=int(threads))
+        call = r.samples / (time.perf_counter() - start)
     print(f"{i + 1:>5}  {cli / 1e6:>10.3f}M  {r.stats.samples_per_second / 1e6:>12.3f}M  {call / 1e6:>10.3f}M")
