@@ -114,14 +114,17 @@ impl PtState {
     }
 }
 
-/// Which material kinds the scene's surfaces use.
+/// Which material kinds the scene's surfaces use (a twosided's back material's too).
 pub fn used_kinds(data: &SceneData) -> Vec<MaterialKind> {
-    let mut used: Vec<MaterialKind> = data
-        .scene
+    let scene = &data.scene;
+    let mut used: Vec<MaterialKind> = scene
         .triangles
         .material
         .iter()
-        .map(|&m| data.scene.materials[m as usize].kind())
+        .flat_map(|&m| {
+            let back = scene.back[m as usize].map(|b| scene.materials[b as usize].kind());
+            std::iter::once(scene.materials[m as usize].kind()).chain(back)
+        })
         .collect();
     used.sort();
     used.dedup();

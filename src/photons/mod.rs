@@ -286,6 +286,10 @@ fn used_materials(data: &SceneData) -> impl Iterator<Item = &crate::bsdf::Materi
     let mut used = vec![false; scene.materials.len()];
     for &m in &scene.triangles.material {
         used[m as usize] = true;
+        // A twosided's back material is seen where the triangle is seen from behind.
+        if let Some(back) = scene.back[m as usize] {
+            used[back as usize] = true;
+        }
     }
     scene
         .materials
@@ -377,7 +381,7 @@ impl<'a> GatherPoint<'a> {
             ng,
             frame,
             wo_local: frame.to_local(visible.wo[i]),
-            material: scene.material_at(tri, p, visible.ns[i]),
+            material: scene.material_facing(tri, p, visible.wo[i], visible.ns[i]),
             max_photon_depth,
             accel: &data.accel,
         })

@@ -197,6 +197,9 @@ pub struct PreparedScene {
     pub materials: Vec<Material>,
     /// Per material: black when seen from behind its geometric normal (see `material_seen`).
     pub black_behind: Vec<bool>,
+    /// Per material: the material seen from behind its geometric normal where it is a twosided
+    /// of two BSDFs (its back's index), else `None` (see `material_seen`).
+    pub back: Vec<Option<u32>>,
     /// Per material: what it reads at each shading point (textures, the uv tangent), or
     /// `None` for a material that is the same everywhere (see `material_at`).
     pub varying: Vec<Option<Varying>>,
@@ -279,7 +282,34 @@ impl PreparedScene {
         if self.seen_from_behind(tri, wo, ng) {
             BLACK
         } else {
-            self.material_at(tri, p, ns)
+            self.material_facing(tri, p, wo, ns)
+        }
+    }
+
+    /// `material_at` on the side `wo` (pointing away from the surface) lies: behind the
+    /// triangle's normal, a twosided of two BSDFs' back material; else the triangle's own.
+    /// (Not black from behind: callers that need that ask `seen_from_behind`.)
+    #[inline(always)]
+    pub fn material_facing(&self, tri: u32, p: Vec3, wo: Vec3, ns: Vec3) -> Material {
+        let m = self.triangles.material[tri as usize] as usize;
+        match self.back[m] {
+            Some(back) if wo.dot(self.triangles.normal[tri as usize]) < 0.0 => {
+                self.material_of(back as usize, tri, p, ns)
+            }
+            _ => self.material_of(m, tri, p, ns),
+        }
+    }
+
+    /// The kind of the material a ray travelling along `dir` sees on triangle `tri`
+    /// (`material_seen`'s, without its textures; a black back is the front's kind).
+    #[inline(always)]
+    pub fn kind_seen(&self, tri: u32, dir: Vec3) -> crate::bsdf::MaterialKind {
+        let m = self.triangles.material[tri as usize] as usize;
+        match self.back[m] {
+            Some(back) if dir.dot(self.triangles.normal[tri as usize]) > 0.0 => {
+                self.materials[back as usize].kind()
+            }
+            _ => self.materials[m].kind(),
         }
     }
 
@@ -289,12 +319,18 @@ impl PreparedScene {
         self.materials[self.triangles.material[tri as usize] as usize].is_two_sided()
     }
 
-    /// The material of triangle `tri` at point `p` on it, its textures looked up there. `ns` is
+    /// The material of triangle `tri` at point `p` on it, its textures looked up there (the
+    /// front's, for a twosided of two BSDFs: `material_facing` takes the side). `ns` is
     /// the normal of the shading frame the caller evaluates the material in
     /// (`Frame::from_normal(ns)`): an anisotropic lobe's axis is given in that frame.
     #[inline(always)]
     pub fn material_at(&self, tri: u32, p: Vec3, ns: Vec3) -> Material {
-        let m = self.triangles.material[tri as usize] as usize;
+        self.material_of(self.triangles.material[tri as usize] as usize, tri, p, ns)
+    }
+
+    /// Material `m` at point `p` of triangle `tri`, its textures looked up there.
+    #[inline(always)]
+    fn material_of(&self, m: usize, tri: u32, p: Vec3, ns: Vec3) -> Material {
         match &self.varying[m] {
             None => self.materials[m],
             Some(varying) => self.vary(self.materials[m], varying, tri, p, ns),

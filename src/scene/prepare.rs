@@ -57,17 +57,24 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         &Material,
         Option<&super::world::OneSided>,
         Option<&super::world::SurfaceVarying>,
+        Option<&super::world::BackMaterial>,
     )>();
     let mut declared: Vec<_> = material_query.iter().collect();
     declared.sort_by_key(|m| m.1.order);
-    let used: HashSet<Entity> = objects.iter().map(|o| o.4.0).collect();
+    let mut used: HashSet<Entity> = objects.iter().map(|o| o.4.0).collect();
+    // A used twosided's back material is used too.
+    for &(entity, _, _, _, _, back) in &declared {
+        if let (true, Some(back)) = (used.contains(&entity), back) {
+            used.insert(back.0);
+        }
+    }
     let mut materials = Vec::new();
     let mut black_behind = Vec::new();
     let mut varying = Vec::new();
     let mut textures = Vec::new();
     let mut material_index = HashMap::new(); // entity -> index into `materials`
     let mut warnings = scene.warnings.clone();
-    for &(entity, info, material, one_sided, varies) in &declared {
+    for &(entity, info, material, one_sided, varies, _) in &declared {
         if used.contains(&entity) {
             varying.push(varies.and_then(|v| {
                 let mut add = |t: &Option<super::textures::Texture>| {
@@ -114,6 +121,12 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
             ));
         }
     }
+    // Per material, the material seen from behind (a twosided of two BSDFs' back).
+    let back: Vec<Option<u32>> = declared
+        .iter()
+        .filter(|m| material_index.contains_key(&m.0))
+        .map(|m| m.5.map(|b| material_index[&b.0]))
+        .collect();
     let mut power = DVec3::ZERO;
     let mut triangle_uvs = Vec::new();
 
@@ -441,6 +454,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         triangles,
         materials,
         black_behind,
+        back,
         varying,
         textures,
         triangle_uvs,

@@ -77,6 +77,11 @@ pub struct SurfaceVarying {
 #[derive(Clone, Copy, Debug)]
 pub struct OneSided;
 
+/// On a twosided material of two BSDFs (the front's entity): the material seen from behind
+/// the surface's normal.
+#[derive(Clone, Copy, Debug)]
+pub struct BackMaterial(pub hecs::Entity);
+
 /// A material entity's name and declaration order.
 #[derive(Clone, Debug)]
 pub struct MaterialInfo {

@@ -61,7 +61,7 @@ crate::system! {
                     // A pixel's points draw from its key's dimensions in turn.
                     let key = sampler.key(Stream::DirectLight, at.pixel[k] as u64, index);
                     let wo = at.wo[k];
-                    let material = scene.material_at(tri, at.p[k], at.ns[k]);
+                    let material = scene.material_facing(tri, at.p[k], wo, at.ns[k]);
                     let kind = material.kind();
                     let Some(light) = scene.sample_light_from(
                         at.p[k],

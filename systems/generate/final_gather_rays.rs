@@ -47,8 +47,9 @@ crate::system! {
                     }
                     let key = sampler.key(Stream::FinalGather, pixel as u64, pass);
                     c.key[i] = key;
-                    let material = scene.material_at(tri, visible.p[pixel], visible.ns[pixel]);
                     let (ng, wo) = (visible.ng[pixel], visible.wo[pixel]);
+                    let material =
+                        scene.material_facing(tri, visible.p[pixel], wo, visible.ns[pixel]);
                     let frame = Frame::from_normal(visible.ns[pixel]);
                     let wo_local = frame.to_local(wo);
                     // Visible points lie on surfaces that only reflect.

@@ -116,7 +116,7 @@ crate::system! {
                     }
                     // Read after the normals settle: an anisotropic lobe's axis is given in
                     // the frame of `ns`.
-                    let material = scene.material_at(tri, sp.p, ns);
+                    let material = scene.material_facing(tri, sp.p, wo, ns);
                     let depth = c.depth[i];
                     if let Material::Plastic(plastic) = material
                         && depth < max_depth

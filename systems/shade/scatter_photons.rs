@@ -62,7 +62,7 @@ crate::system! {
                         // a photon here and none leaves.
                         continue;
                     }
-                    let material = scene.material_at(tri, sp.p, ns);
+                    let material = scene.material_facing(tri, sp.p, wo, ns);
                     let depth = w.depth[i];
                     // Nothing gathers on surfaces camera chains follow.
                     let followed = chains_follow(&material);

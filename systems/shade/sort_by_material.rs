@@ -50,7 +50,7 @@ crate::system! {
         });
         // Pass 1, per chunk in parallel: each slot's queue and the chunk's count per queue.
         {
-            let (hits, depth) = (&*hits, &paths.depth);
+            let (hits, depth, dirs) = (&*hits, &paths.depth, &rays.dir);
             scratch.queue[..taken]
                 .par_chunks_mut(CHUNK)
                 .zip(scratch.chunk_counts.par_iter_mut())
@@ -64,8 +64,8 @@ crate::system! {
                         } else if let Some(kind) = only_kind {
                             queue_of(kind)
                         } else {
-                            let material = scene.triangles.material[tri as usize];
-                            queue_of(scene.materials[material as usize].kind())
+                            // The side matters where a twosided has two BSDFs.
+                            queue_of(scene.kind_seen(tri, dirs[slot]))
                         };
                         counts[*q as usize] += 1;
                     }

@@ -19,9 +19,9 @@ use crate::scene::filter::{Gaussian, PixelFilter};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
-    DeclaredIn, DirectionalLight, Emission, EnvironmentLight, FlipNormals, MaterialInfo,
-    MaterialRef, ObjectInfo, OneSided, PointLight, SceneWorld, Shape, SourceSpot, SpotTexture,
-    SurfaceVarying, Transform,
+    BackMaterial, DeclaredIn, DirectionalLight, Emission, EnvironmentLight, FlipNormals,
+    MaterialInfo, MaterialRef, ObjectInfo, OneSided, PointLight, SceneWorld, Shape, SourceSpot,
+    SpotTexture, SurfaceVarying, Transform,
 };
 use crate::scene::{Camera, Crop, Limits, Projection, SceneError};
 
@@ -813,17 +813,62 @@ impl<'a> Builder<'a> {
         if let Some(&e) = self.materials.get(&id) {
             return Ok(e);
         }
-        let object = self.object(id);
-        let (material, sides) = self.material_of(object)?;
-        let varying = self.varying_of(object)?;
+        let object = self.object(id).clone();
         let name = match &object.id {
             Some(id) => id.clone(),
             None => format!("{} at line {}", object.kind, object.spot.line),
         };
-        let info = MaterialInfo {
-            name,
-            order: self.materials.len() as u32 + 1,
-        };
+        // Orders leave room for a twosided's back material right after its front.
+        let order = 2 * (self.materials.len() as u32 + 1);
+        if object.kind == "twosided" && object.children.len() == 2 {
+            // Mitsuba's twosided of two BSDFs: the first where the surface is seen from the
+            // side its normal points to, the second from the other; each reflects on the side
+            // it is seen from.
+            Params::new(&object).finish()?;
+            let (front, back) = (&object.children[0], &object.children[1]);
+            for side in [front, back] {
+                let inner = self.object(side.object);
+                if inner.class == Class::Bsdf && inner.kind == "plastic" {
+                    // Each side's kind decides delta tests that know the triangle, not the
+                    // side: a delta lobe on one side only is not modelled.
+                    return Err(XmlError::at(
+                        &side.spot,
+                        "twosided of two BSDFs: \"plastic\" (smooth, a delta lobe) is not \
+                         supported on one side only (supported: diffuse, conductor, \
+                         roughconductor, roughplastic; or one plastic for both sides)",
+                    ));
+                }
+            }
+            let back_material = self.twosided_side(back)?;
+            let back_varying = self.varying_of(&self.object(back.object).clone())?;
+            let back_info = MaterialInfo {
+                name: format!("{name} (back)"),
+                order: order + 1,
+            };
+            let back_entity = self.world.spawn((back_info, back_material));
+            if let Some(varying) = back_varying {
+                self.world
+                    .insert_one(back_entity, varying)
+                    .expect("just spawned");
+            }
+            let front_material = self.twosided_side(front)?;
+            let front_varying = self.varying_of(&self.object(front.object).clone())?;
+            let info = MaterialInfo { name, order };
+            let entity = self
+                .world
+                .spawn((info, front_material, BackMaterial(back_entity)));
+            if let Some(varying) = front_varying {
+                self.world
+                    .insert_one(entity, varying)
+                    .expect("just spawned");
+            }
+            self.materials.insert(id, entity);
+            return Ok(entity);
+        }
+        let object = &object;
+        let (material, sides) = self.material_of(object)?;
+        let varying = self.varying_of(object)?;
+        let info = MaterialInfo { name, order };
         let entity = self.world.spawn((info, material));
         if sides == Sides::One {
             self.world
@@ -837,6 +882,41 @@ impl<'a> Builder<'a> {
         }
         self.materials.insert(id, entity);
         Ok(entity)
+    }
+
+    /// The material of a BSDF inside `twosided`, made to reflect on whichever side it is seen
+    /// from (only non-transmissive BSDFs, as Mitsuba's twosided takes).
+    fn twosided_side(&self, child: &Child) -> Result<Material, XmlError> {
+        let inner = self.object(child.object);
+        const REFLECTORS: [&str; 5] = [
+            "diffuse",
+            "conductor",
+            "roughconductor",
+            "plastic",
+            "roughplastic",
+        ];
+        if inner.class != Class::Bsdf || !REFLECTORS.contains(&inner.kind.as_str()) {
+            return Err(XmlError::at(
+                &child.spot,
+                format!(
+                    "twosided of \"{}\" is not supported (supported: twosided of {})",
+                    super::super::echo(&inner.kind),
+                    REFLECTORS.join(", ")
+                ),
+            ));
+        }
+        let (mut material, _) = self.material_of(inner)?;
+        match &mut material {
+            Material::Conductor(c) => c.two_sided = true,
+            Material::RoughPlastic(p) => p.two_sided = true,
+            Material::Plastic(p) => p.two_sided = true,
+            // Lambertian reflection is two-sided in the engine already.
+            Material::Diffuse { .. }
+            | Material::Dielectric { .. }
+            | Material::RoughDielectric(_)
+            | Material::ThinDielectric { .. } => {}
+        }
+        Ok(material)
     }
 
     /// The material of a BSDF object and whether it reflects on one side or both.
@@ -863,39 +943,10 @@ impl<'a> Builder<'a> {
                 let [one] = inner[..] else {
                     return Err(XmlError::at(
                         &object.spot,
-                        "twosided with two different BSDFs is not supported yet (give one BSDF)",
+                        "twosided takes one BSDF (both sides) or two (front, back)",
                     ));
                 };
-                let inner = self.object(one.object);
-                const REFLECTORS: [&str; 5] = [
-                    "diffuse",
-                    "conductor",
-                    "roughconductor",
-                    "plastic",
-                    "roughplastic",
-                ];
-                if inner.class != Class::Bsdf || !REFLECTORS.contains(&inner.kind.as_str()) {
-                    return Err(XmlError::at(
-                        &one.spot,
-                        format!(
-                            "twosided of \"{}\" is not supported (supported: twosided of {})",
-                            super::super::echo(&inner.kind),
-                            REFLECTORS.join(", ")
-                        ),
-                    ));
-                }
-                let (mut material, _) = self.material_of(inner)?;
-                match &mut material {
-                    Material::Conductor(c) => c.two_sided = true,
-                    Material::RoughPlastic(p) => p.two_sided = true,
-                    Material::Plastic(p) => p.two_sided = true,
-                    // Lambertian reflection is two-sided in the engine already.
-                    Material::Diffuse { .. }
-                    | Material::Dielectric { .. }
-                    | Material::RoughDielectric(_)
-                    | Material::ThinDielectric { .. } => {}
-                }
-                return Ok((material, Sides::Two));
+                return Ok((self.twosided_side(one)?, Sides::Two));
             }
             "diffuse" => {
                 drop(params);
