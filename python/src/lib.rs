@@ -6,7 +6,6 @@
 //! messages are the CLI's. The package's Python half (python/stagelight/) turns keywords into
 //! those arguments and the raw float buffers returned here into NumPy arrays.
 
-use anyhow::Context;
 use clap::Parser;
 use pyo3::create_exception;
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyTypeError, PyValueError};
@@ -62,6 +61,17 @@ fn parse(args: Vec<String>) -> PyResult<Cli> {
             _ => PyValueError::new_err(first),
         }
     })
+}
+
+/// `stagelight COMMAND SCENE ARGS... --quiet EXTRA...` parsed as the command line parses it
+/// (`parse`): the scene's path stands where the CLI takes a file, though the loaded scene is
+/// what renders.
+fn command(name: &str, scene: &Scene, args: Vec<String>, extra: &[&str]) -> PyResult<Command> {
+    let mut line = vec![name.to_string(), scene.path.display().to_string()];
+    line.extend(args);
+    line.push("--quiet".to_string());
+    line.extend(extra.iter().map(|s| s.to_string()));
+    Ok(parse(line)?.command)
 }
 
 /// A scene loaded and prepared (its acceleration structure built), ready to render many times.
@@ -339,15 +349,8 @@ fn render<'py>(
     scene: PyRef<'_, Scene>,
     args: Vec<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let mut line = vec!["render".to_string(), scene.path.display().to_string()];
-    line.extend(args);
     // Files are never written: the output only satisfies the parser.
-    line.extend([
-        "--quiet".to_string(),
-        "-o".to_string(),
-        "python.exr".to_string(),
-    ]);
-    let Command::Render(mut args) = parse(line)?.command else {
+    let Command::Render(mut args) = command("render", &scene, args, &["-o", "python.exr"])? else {
         unreachable!("a render command line parses as one")
     };
     // As the CLI: --spp beats the file's sample count, --max-depth the file's.
@@ -419,17 +422,15 @@ fn render<'py>(
 }
 
 /// Makes, resumes or extends a checkpointed reference with the `reference` command's
-/// arguments; returns (its image bytes, width, height, passes, seconds, report).
+/// arguments; returns a dict: its image (as the EXR holds it) and size, passes and render
+/// seconds over all its runs, whether Ctrl-C stopped it, the report and the EXR's path.
 #[pyfunction]
 fn reference<'py>(
     py: Python<'py>,
     scene: PyRef<'_, Scene>,
     args: Vec<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let mut line = vec!["reference".to_string(), scene.path.display().to_string()];
-    line.extend(args);
-    line.push("--quiet".to_string());
-    let Command::Reference(mut args) = parse(line)?.command else {
+    let Command::Reference(mut args) = command("reference", &scene, args, &[])? else {
         unreachable!("a reference command line parses as one")
     };
     args.max_depth = args.max_depth.or(scene.max_depth);
@@ -469,14 +470,7 @@ fn compare<'py>(
     reference: &[u8],
     args: Vec<String>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let mut line = vec!["compare".to_string(), scene.path.display().to_string()];
-    line.extend(args);
-    line.extend([
-        "--quiet".to_string(),
-        "-o".to_string(),
-        "python".to_string(),
-    ]);
-    let Command::Compare(mut args) = parse(line)?.command else {
+    let Command::Compare(mut args) = command("compare", &scene, args, &["-o", "python"])? else {
         unreachable!("a compare command line parses as one")
     };
     args.max_depth = args.max_depth.or(scene.max_depth);
@@ -586,8 +580,7 @@ fn write_exr(path: PathBuf, image: &[u8], width: usize, height: usize) -> PyResu
     let image = image_from_bytes(image, width, height, "image")?;
     image
         .write_exr(&path)
-        .with_context(|| "write_exr".to_string())
-        .map_err(|e| PyValueError::new_err(message(&e)))
+        .map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
 /// The integrators built in, in registry order: name, description, whether unbiased, whether
@@ -607,16 +600,6 @@ fn integrators<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
     Ok(list)
 }
 
-/// The `--help` of a command (`render`, `reference`, `compare`), for the Python docstrings'
-/// list of options.
-#[pyfunction]
-fn command_help(command: &str) -> PyResult<String> {
-    match Cli::try_parse_from(["stagelight", command, "--help"]) {
-        Err(e) if e.kind() == clap::error::ErrorKind::DisplayHelp => Ok(e.render().to_string()),
-        _ => Err(PyValueError::new_err(format!("no command {command}"))),
-    }
-}
-
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Scene>()?;
@@ -630,6 +613,5 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read_exr, m)?)?;
     m.add_function(wrap_pyfunction!(write_exr, m)?)?;
     m.add_function(wrap_pyfunction!(integrators, m)?)?;
-    m.add_function(wrap_pyfunction!(command_help, m)?)?;
     Ok(())
 }

@@ -19,11 +19,13 @@ from __future__ import annotations
 import os
 import warnings
 from dataclasses import dataclass, field
-from typing import Any, Dict, Iterable, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Mapping, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
 from . import _native, metrics
+from ._arrays import float_bytes as _float_bytes
+from ._arrays import view as _image
 from ._native import RenderError, Scene, SceneError
 
 __all__ = [
@@ -93,18 +95,6 @@ def _arguments(options: Mapping[str, Any], function: str) -> List[str]:
         else:
             args += [flag, str(value)]
     return args
-
-
-def _image(raw: Any, width: int, height: int) -> np.ndarray:
-    # A view of the bytearray the engine filled: no copy.
-    return np.frombuffer(raw, dtype=np.float32).reshape(height, width, 3)
-
-
-def _float_bytes(image: Any, what: str) -> Tuple[bytes, int, int]:
-    a = np.ascontiguousarray(image, dtype=np.float32)
-    if a.ndim != 3 or a.shape[2] != 3:
-        raise ValueError(f"{what}: an image is height x width x 3, not {a.shape}")
-    return a.tobytes(), a.shape[1], a.shape[0]
 
 
 @dataclass(frozen=True)
@@ -246,19 +236,17 @@ def render(
     same scene, seed and options give the command line's image bit for bit.
     """
     scene = _as_scene(scene)
-    args = ["--integrator", integrator, "--seed", str(seed)]
-    if spp is not None:
-        args += ["--spp", str(spp)]
-    if time is not None:
-        args += ["--time", str(time)]
-    if threads is not None:
-        args += ["--threads", str(threads)]
     options = dict(options)
+    # These write files on the command line; here their images come back in the Render.
+    args = []
     if options.pop("strategy_images", False):
         args += ["--strategy-images", "strategies"]
     if options.pop("variance", False):
         args += ["--variance", "variance.exr"]
-    args += _arguments(options, "render")
+    args += _arguments(
+        dict(integrator=integrator, seed=seed, spp=spp, time=time, threads=threads, **options),
+        "render",
+    )
     try:
         return Render._from(_native.render(scene, args))
     except KeyboardInterrupt as e:
@@ -302,16 +290,10 @@ def reference(
     continues from the passes it holds. Ctrl-C keeps the finished passes on disk.
     """
     scene = _as_scene(scene)
-    args = ["--integrator", integrator, "-o", os.fspath(checkpoint)]
-    if spp is not None:
-        args += ["--spp", str(spp)]
-    if time is not None:
-        args += ["--time", str(time)]
-    if seed is not None:
-        args += ["--seed", str(seed)]
-    if threads is not None:
-        args += ["--threads", str(threads)]
-    args += _arguments(options, "reference")
+    args = ["-o", os.fspath(checkpoint)] + _arguments(
+        dict(integrator=integrator, spp=spp, time=time, seed=seed, threads=threads, **options),
+        "reference",
+    )
     try:
         return Reference._from(_native.reference(scene, args))
     except KeyboardInterrupt as e:
@@ -340,19 +322,17 @@ def compare(
     scene = _as_scene(scene)
     ref = read_exr(reference) if not isinstance(reference, np.ndarray) else reference
     ref_bytes, _, _ = _float_bytes(ref, "reference")
-    args = [
-        "--integrators",
-        ",".join(integrators),
-        "--budgets",
-        ",".join(repr(float(b)) for b in budgets),
-        "--budget-unit",
-        unit,
-        "--seed",
-        str(seed),
-    ]
-    if threads is not None:
-        args += ["--threads", str(threads)]
-    args += _arguments(options, "compare")
+    args = _arguments(
+        dict(
+            integrators=list(integrators),
+            budgets=[repr(float(b)) for b in budgets],
+            budget_unit=unit,
+            seed=seed,
+            threads=threads,
+            **options,
+        ),
+        "compare",
+    )
     width, height = scene.size
 
     def rows_of(raw: List[Dict[str, Any]]) -> Any:

@@ -5,25 +5,17 @@ from __future__ import annotations
 
 from typing import Any, Dict
 
-import numpy as np
-
 from . import _native
+from ._arrays import float_bytes
 
 __all__ = ["errors", "relmse", "rmse", "mae"]
-
-
-def _bytes(image: Any, what: str) -> "tuple[bytes, int, int]":
-    a = np.ascontiguousarray(image, dtype=np.float32)
-    if a.ndim != 3 or a.shape[2] != 3:
-        raise ValueError(f"{what}: an image is height x width x 3, not {a.shape}")
-    return a.tobytes(), a.shape[1], a.shape[0]
 
 
 def errors(image: Any, reference: Any) -> Dict[str, Any]:
     """relmse, rmse, mae, and both images' channel means. Images of different sizes, or with
     NaN or infinite values, raise ValueError."""
-    a, w, h = _bytes(image, "image")
-    b, rw, rh = _bytes(reference, "reference")
+    a, w, h = float_bytes(image, "image")
+    b, rw, rh = float_bytes(reference, "reference")
     if (w, h) != (rw, rh):
         raise ValueError(f"images differ in size: {w}x{h} against a reference of {rw}x{rh}")
     return dict(_native.metrics(a, b, w, h))
