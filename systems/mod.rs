@@ -28,13 +28,14 @@ pub mod shade {
     pub mod extend_camera_chains;
     pub mod extend_subpaths;
     pub mod lanes;
+    pub mod look_up_textures;
     pub mod material;
     pub mod order_hit_points;
     pub mod russian_roulette;
     pub mod scatter_photons;
     pub mod sort_by_material;
     mod surface;
-    pub use surface::{Scattered, Surface, scatter};
+    pub use surface::{Scattered, Surface, material_looked_up, scatter};
 }
 
 /// Joining paths to lights: light sampling and the shadow rays' contributions.

@@ -5,7 +5,7 @@
 //! Its graph, built from the scene: `stagelight graph SCENE --integrator pt` prints it with
 //! each system's columns, and docs/architecture.md shows it for `door_ajar`.
 
-use crate::bsdf::MaterialKind;
+use crate::bsdf::{Material, MaterialKind};
 use crate::components::ray_record::RayRecord;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};
 use crate::film::{Film, Image};
@@ -46,6 +46,9 @@ pub struct PtState {
     pub paths: Paths,
     pub shadow: ShadowRays,
     pub surfaces: Surfaces,
+    /// The material at each live path's hit with its textures looked up
+    /// (`look_up_textures`); empty in scenes without textures.
+    pub materials: Vec<Material>,
     /// Live paths occupy slots `0..active`.
     pub active: usize,
     pub ranges: MaterialRanges,
@@ -86,6 +89,7 @@ impl PtState {
             paths: Paths::new(capacity),
             shadow: ShadowRays::new(capacity),
             surfaces: Surfaces::new(capacity),
+            materials: Vec::new(),
             active: 0,
             ranges: MaterialRanges::default(),
             shadow_len: 0,
@@ -156,6 +160,9 @@ fn graph_of(data: &SceneData, record: bool) -> Graph<PtState> {
         bounce.push(Node::system(shade::emitted_light::AddEmittedLight));
     }
     bounce.push(Node::system(shade::sort_by_material::SortByMaterial));
+    if data.scene.has_textures() {
+        bounce.push(Node::system(shade::look_up_textures::LookUpTextures));
+    }
     if light_sampling {
         bounce.push(Node::system(connect::sample_lights::SampleLights));
     }
@@ -190,7 +197,14 @@ fn graph_of(data: &SceneData, record: bool) -> Graph<PtState> {
 impl IntegratorState for PtState {
     type Settings = PtSettings;
     const INPUTS: &'static [&'static str] = &[
-        "data", "settings", "sampler", "pixels", "wave", "film", "scratch",
+        "data",
+        "settings",
+        "sampler",
+        "pixels",
+        "wave",
+        "film",
+        "scratch",
+        "materials",
     ];
     fn graph(data: &SceneData, _: &PtSettings) -> Graph<PtState> {
         graph(data)
@@ -284,7 +298,7 @@ mod bindings {
         }
         connect::sample_lights::SampleLights {
             read data, sampler, lanes = settings.lanes, triangles = hits.triangle, dirs = rays.dir,
-                paths, surfaces, ranges;
+                paths, surfaces, materials, ranges;
             write shadow, shadow_len;
         }
         gather::film::AccumulateFilm {
@@ -299,8 +313,13 @@ mod bindings {
             read data, hits, rays, live = active;
             write paths;
         }
+        shade::look_up_textures::LookUpTextures {
+            read data, triangles = hits.triangle, dirs = rays.dir, surfaces, live = active;
+            write materials;
+        }
         shade::material::ShadeMaterial {
-            read data, sampler, lanes = settings.lanes, triangles = hits.triangle, surfaces, ranges;
+            read data, sampler, lanes = settings.lanes, triangles = hits.triangle, surfaces,
+                materials, ranges;
             write rays, paths;
         }
         shade::russian_roulette::RussianRoulette {

@@ -286,6 +286,41 @@ impl PreparedScene {
         }
     }
 
+    /// `material_seen` of a material that does not vary over its surface (`varying` is
+    /// `None`: no texture to look up, so neither the point nor the shading normal matters).
+    /// The wavefront reads materials this way; scenes with textures look theirs up once per
+    /// hit first (`systems/shade/look_up_textures.rs`).
+    #[inline(always)]
+    pub fn uniform_material_seen(&self, tri: u32, wo: Vec3, ng: Vec3) -> Material {
+        if self.seen_from_behind(tri, wo, ng) {
+            return BLACK;
+        }
+        let m = self.triangles.material[tri as usize] as usize;
+        debug_assert!(
+            self.varying[m].is_none(),
+            "a textured material read as uniform"
+        );
+        match self.back[m] {
+            Some(back) if wo.dot(self.triangles.normal[tri as usize]) < 0.0 => {
+                self.materials[back as usize]
+            }
+            _ => self.materials[m],
+        }
+    }
+
+    /// Whether a material some triangle uses (or its back) varies over its surface: the
+    /// wavefront then holds `look_up_textures`.
+    pub fn has_textures(&self) -> bool {
+        let varies = |m: usize| self.varying[m].is_some();
+        let mut used = vec![false; self.materials.len()];
+        for &m in &self.triangles.material {
+            used[m as usize] = true;
+        }
+        used.iter()
+            .enumerate()
+            .any(|(m, &u)| u && (varies(m) || self.back[m].is_some_and(|b| varies(b as usize))))
+    }
+
     /// `material_at` on the side `wo` (pointing away from the surface) lies: behind the
     /// triangle's normal, a twosided of two BSDFs' back material; else the triangle's own.
     /// (Not black from behind: callers that need that ask `seen_from_behind`.)

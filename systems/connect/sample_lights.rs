@@ -2,7 +2,7 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
-use crate::bsdf::{diffuse, scatters_between};
+use crate::bsdf::{Material, diffuse, scatters_between};
 use crate::components::ShadowRays;
 use crate::components::path_tracing::DIM_LIGHT_PICK;
 use crate::components::path_tracing::DIM_LIGHT_POINT;
@@ -28,7 +28,7 @@ crate::system! {
     SampleLights = "sample_lights";
     read data: Arc<SceneData>, sampler: Sampler<'static>, lanes: LaneWidth,
         triangles: Vec<u32>, dirs: Vec<Vec3>, paths: Paths, surfaces: Surfaces,
-        ranges: MaterialRanges;
+        materials: Vec<Material>, ranges: MaterialRanges;
     write shadow: ShadowRays, shadow_len: usize;
     run {
         let data: &SceneData = data;
@@ -39,7 +39,9 @@ crate::system! {
             .chunks_mut(range)
             .into_par_iter()
             .map(|c| {
-                let chunk = SampleChunk { data, sampler, triangles, dirs, paths, surfaces, c };
+                let chunk = SampleChunk {
+                    data, sampler, triangles, dirs, paths, surfaces, materials, c,
+                };
                 run_lanes(*lanes, chunk)
             })
             .sum();
@@ -55,6 +57,7 @@ struct SampleChunk<'a> {
     dirs: &'a [Vec3],
     paths: &'a Paths,
     surfaces: &'a Surfaces,
+    materials: &'a [Material],
     c: ShadowRaysChunk<'a>,
 }
 
@@ -69,9 +72,12 @@ impl LaneKernel for SampleChunk<'_> {
             dirs,
             paths,
             surfaces,
+            materials,
             c,
         } = self;
-        sample_chunk::<N>(data, sampler, triangles, dirs, paths, surfaces, c)
+        sample_chunk::<N>(
+            data, sampler, triangles, dirs, paths, surfaces, materials, c,
+        )
     }
 }
 
@@ -84,16 +90,18 @@ fn sample_chunk<const N: usize>(
     dirs: &[Vec3],
     paths: &Paths,
     surfaces: &Surfaces,
+    looked_up: &[Material],
     mut c: ShadowRaysChunk,
 ) -> usize {
     let mut cast = 0;
     let range = c.start..c.start + c.len();
+    let looked_up = looked_up.get(range.clone()).unwrap_or_default();
     let (triangles, dirs) = (&triangles[range.clone()], &dirs[range.clone()]);
     let paths = paths.view(range.clone());
     let surfaces = surfaces.view(range);
     let one = |c: &mut ShadowRaysChunk, i: usize| {
         c.t_max[i] = 0.0;
-        let surf = Surface::at(data, &surfaces, triangles[i], i, dirs[i]);
+        let surf = Surface::at(data, &surfaces, looked_up, triangles[i], i, dirs[i]);
         if let Some(light) = light_sample(
             data,
             sampler,
@@ -117,7 +125,7 @@ fn sample_chunk<const N: usize>(
     let lanes = data.scene.emitters.only_triangles();
     let mut i = 0;
     while lanes && i + N <= c.len() {
-        match DiffuseLanes::<N>::at(data, &surfaces, triangles, dirs, i) {
+        match DiffuseLanes::<N>::at(data, &surfaces, looked_up, triangles, dirs, i) {
             Some(surf) => {
                 let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
                 let depths: &[u32; N] = paths.depth[i..i + N].try_into().unwrap();

@@ -156,6 +156,7 @@ impl<const N: usize> DiffuseLanes<N> {
     pub fn at(
         data: &crate::scene::SceneData,
         surfaces: &crate::components::SurfacesView,
+        looked_up: &[crate::bsdf::Material],
         triangles: &[u32],
         dirs: &[Vec3],
         i: usize,
@@ -164,13 +165,11 @@ impl<const N: usize> DiffuseLanes<N> {
         let mut reflectance = [Vec3::ZERO; N];
         for (l, r) in reflectance.iter_mut().enumerate() {
             let k = i + l;
-            match scene.material_seen(
-                triangles[k],
-                surfaces.p[k],
-                -dirs[k],
-                surfaces.ng[k],
-                surfaces.ns[k],
-            ) {
+            let material = match looked_up.get(k) {
+                Some(&material) => material,
+                None => scene.uniform_material_seen(triangles[k], -dirs[k], surfaces.ng[k]),
+            };
+            match material {
                 crate::bsdf::Material::Diffuse { reflectance } => *r = reflectance,
                 _ => return None,
             }

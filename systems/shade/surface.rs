@@ -31,11 +31,13 @@ pub struct Surface {
 
 impl Surface {
     /// The shading point of item `i` of a chunk's view of the surfaces (its hit's triangle
-    /// given), seen along `dir`.
+    /// given), seen along `dir`; its material is `looked_up[i]` where the scene has textures
+    /// (`look_up_textures` wrote the chunk's column), else the scene's (`looked_up` empty).
     #[inline(always)]
     pub fn at(
         data: &SceneData,
         surfaces: &SurfacesView,
+        looked_up: &[Material],
         triangle: u32,
         i: usize,
         dir: Vec3,
@@ -46,26 +48,32 @@ impl Surface {
             ng: surfaces.ng[i],
             ns: surfaces.ns[i],
         };
-        Surface::new(data, triangle, &point, dir)
+        let material = match looked_up.get(i) {
+            Some(&material) => material,
+            None => data.scene.uniform_material_seen(triangle, -dir, point.ng),
+        };
+        Surface::with_material(data, triangle, &point, dir, material)
     }
 
     /// The shading point at `point` on `triangle` (its shading normal in the hemisphere of
     /// its geometric one, as `sort_by_material::shading_point` makes it), seen along
-    /// `dir`.
+    /// `dir`, its textures looked up here (the megakernel's way).
     #[inline(always)]
     pub fn new(data: &SceneData, triangle: u32, point: &SurfacePoint, dir: Vec3) -> Surface {
+        let material = material_looked_up(data, triangle, point, dir);
+        Surface::with_material(data, triangle, point, dir, material)
+    }
+
+    #[inline(always)]
+    fn with_material(
+        data: &SceneData,
+        triangle: u32,
+        point: &SurfacePoint,
+        dir: Vec3,
+        material: Material,
+    ) -> Surface {
         let wo = -dir;
-        let mut ng = point.ng;
-        let mut ns = point.ns;
-        // Lambertian surfaces (and two-sided others) reflect on both sides: shade from the
-        // side the ray came from, the material read in that frame.
-        if wo.dot(ng) < 0.0 && data.scene.reflects_on_both_sides(triangle) {
-            ng = -ng;
-            ns = -ns;
-        }
-        let material = data
-            .scene
-            .material_seen(triangle, point.p, wo, point.ng, ns);
+        let (ng, ns) = facing_normals(data, triangle, point, wo);
         let frame = Frame::from_normal(ns);
         Surface {
             p: point.p,
@@ -85,6 +93,33 @@ impl Surface {
     }
 }
 
+/// The geometric and shading normals a shading point uses, seen from `wo`: Lambertian
+/// surfaces (and two-sided others) reflect on both sides, so they shade from the side the
+/// ray came from, the material read in that frame.
+#[inline(always)]
+fn facing_normals(data: &SceneData, triangle: u32, point: &SurfacePoint, wo: Vec3) -> (Vec3, Vec3) {
+    if wo.dot(point.ng) < 0.0 && data.scene.reflects_on_both_sides(triangle) {
+        (-point.ng, -point.ns)
+    } else {
+        (point.ng, point.ns)
+    }
+}
+
+/// The material a ray along `dir` sees at `point` on `triangle`, its textures looked up there
+/// (in the shading frame `Surface` builds).
+#[inline(always)]
+pub fn material_looked_up(
+    data: &SceneData,
+    triangle: u32,
+    point: &SurfacePoint,
+    dir: Vec3,
+) -> Material {
+    let wo = -dir;
+    let (_, ns) = facing_normals(data, triangle, point, wo);
+    data.scene
+        .material_seen(triangle, point.p, wo, point.ng, ns)
+}
+
 /// The scattering step every shading system shares, compiled once per material kind `KIND`
 /// (a `MaterialKind as u8`) so that each loop holds only its kind's BSDF code (about 1% of a
 /// PT render's instructions): at each path of `range` (all on materials of that kind) the
@@ -99,6 +134,7 @@ pub fn scatter_paths<const KIND: u8>(
     lanes: LaneWidth,
     triangles: &[u32],
     surfaces: &Surfaces,
+    looked_up: &[Material],
     rays: &mut Rays,
     paths: &mut Paths,
     range: Range<usize>,
@@ -115,6 +151,7 @@ pub fn scatter_paths<const KIND: u8>(
                 sampler,
                 triangles,
                 surfaces,
+                looked_up,
                 r,
                 p,
             };
@@ -130,6 +167,7 @@ struct ScatterChunk<'a, const KIND: u8> {
     sampler: &'a Sampler<'a>,
     triangles: &'a [u32],
     surfaces: &'a Surfaces,
+    looked_up: &'a [Material],
     r: RaysChunk<'a>,
     p: PathsChunk<'a>,
 }
@@ -143,10 +181,11 @@ impl<const KIND: u8> LaneKernel for ScatterChunk<'_, KIND> {
             sampler,
             triangles,
             surfaces,
+            looked_up,
             r,
             p,
         } = self;
-        scatter_chunk::<KIND, N>(data, sampler, triangles, surfaces, r, p)
+        scatter_chunk::<KIND, N>(data, sampler, triangles, surfaces, looked_up, r, p)
     }
 }
 
@@ -157,18 +196,21 @@ fn scatter_chunk<const KIND: u8, const N: usize>(
     sampler: &Sampler,
     triangles: &[u32],
     surfaces: &Surfaces,
+    looked_up: &[Material],
     r: RaysChunk,
     p: PathsChunk,
 ) -> usize {
     let mut scattered = 0;
     let range = p.start..p.start + p.len();
+    let looked_up = looked_up.get(range.clone()).unwrap_or_default();
     let (triangles, surfaces) = (&triangles[range.clone()], surfaces.view(range));
     // Lambertian paths N at a time (the rest one by one, below).
     let mut first = 0;
     if KIND == MaterialKind::Diffuse as u8 {
         while first + N <= p.len() {
             let i = first;
-            let Some(surf) = DiffuseLanes::<N>::at(data, &surfaces, triangles, r.dir, i) else {
+            let Some(surf) = DiffuseLanes::<N>::at(data, &surfaces, looked_up, triangles, r.dir, i)
+            else {
                 break;
             };
             let keys: &[SampleKey; N] = p.key[i..i + N].try_into().unwrap();
@@ -193,7 +235,7 @@ fn scatter_chunk<const KIND: u8, const N: usize>(
         }
     }
     for (i, &triangle) in triangles.iter().enumerate().skip(first) {
-        let surf = Surface::at(data, &surfaces, triangle, i, r.dir[i]);
+        let surf = Surface::at(data, &surfaces, looked_up, triangle, i, r.dir[i]);
         // The material queue holds only this kind; saying so lets the compiler drop the
         // other kinds' arms of the inlined BSDF sample.
         if surf.material.kind() as u8 != KIND {

@@ -7,6 +7,7 @@
 
 use crate::common::{assert_blocks_agree, block_luminance_stats, load_small, render_pt};
 use glam::Vec3;
+use stagelight::bsdf::Material;
 use stagelight::components::path_tracing::{MaterialRanges, PtSettings, Scratch};
 use stagelight::components::{CHUNK, Hits, PathFlags, Paths, Rays, Surfaces, Wave};
 use stagelight::film::{Film, Image};
@@ -31,6 +32,8 @@ struct BsdfOnlyState {
     hits: Hits,
     paths: Paths,
     surfaces: Surfaces,
+    /// The materials `look_up_textures` looks up, in scenes with textures.
+    materials: Vec<Material>,
     active: usize,
     ranges: MaterialRanges,
     sample_radiance: Vec<Vec3>,
@@ -73,8 +76,13 @@ stagelight::bind! {
         read scene = data.scene, max_depth = settings.max_depth;
         write hits, paths, rays, sample_radiance, ranges, active, scratch, surfaces;
     }
+    shade::look_up_textures::LookUpTextures {
+        read data, triangles = hits.triangle, dirs = rays.dir, surfaces, live = active;
+        write materials;
+    }
     shade::material::ShadeMaterial {
-        read data, sampler, lanes = settings.lanes, triangles = hits.triangle, surfaces, ranges;
+        read data, sampler, lanes = settings.lanes, triangles = hits.triangle, surfaces,
+            materials, ranges;
         write rays, paths;
     }
     CountEmissionWhole {
@@ -94,7 +102,14 @@ stagelight::bind! {
 impl IntegratorState for BsdfOnlyState {
     type Settings = PtSettings;
     const INPUTS: &'static [&'static str] = &[
-        "data", "settings", "sampler", "pixels", "wave", "film", "scratch",
+        "data",
+        "settings",
+        "sampler",
+        "pixels",
+        "wave",
+        "film",
+        "scratch",
+        "materials",
     ];
     fn graph(data: &SceneData, _: &PtSettings) -> Graph<BsdfOnlyState> {
         let mut bounce = vec![
@@ -102,6 +117,9 @@ impl IntegratorState for BsdfOnlyState {
             Node::system(shade::emitted_light::AddEmittedLight),
             Node::system(shade::sort_by_material::SortByMaterial),
         ];
+        if data.scene.has_textures() {
+            bounce.push(Node::system(shade::look_up_textures::LookUpTextures));
+        }
         for kind in pt::used_kinds(data) {
             bounce.push(Node::system(shade::material::ShadeMaterial(kind)));
         }
@@ -137,6 +155,7 @@ impl WaveState for BsdfOnlyState {
             hits: Hits::new(capacity),
             paths: Paths::new(capacity),
             surfaces: Surfaces::new(capacity),
+            materials: Vec::new(),
             active: 0,
             ranges: MaterialRanges::default(),
             sample_radiance: vec![Vec3::ZERO; capacity],

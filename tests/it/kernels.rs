@@ -111,6 +111,41 @@ fn the_megakernel_renders_the_wavefront_image_bit_for_bit() {
     }
 }
 
+/// Textures are looked up by a system of their own, once per hit, and only in the graphs of
+/// scenes that have them: its column gives the shading and light-sampling systems the very
+/// material the megakernel looks up inline, so the images stay the same bit for bit.
+#[test]
+fn textures_are_looked_up_by_their_own_system_only_where_a_scene_has_them() {
+    let graph_of = |data: &SceneData| stagelight::integrators::pt::graph(data).system_names();
+    let plain = SceneData::new(load_small("cornell_box.ron", 8));
+    assert!(!plain.scene.has_textures());
+    assert!(!graph_of(&plain).iter().any(|&s| s == "look_up_textures"));
+    // Textured diffuse, plastics' textured bases, textured anisotropic roughness (its axis
+    // follows the uvs), a textured twosided back.
+    for name in [
+        "textured.xml",
+        "plastics.xml",
+        "anisotropic.xml",
+        "twosided_two.xml",
+    ] {
+        let mut scene = crate::common::load_test_scene(&format!("mitsuba/{name}"));
+        scene.camera.resize(24, 24);
+        let data = Arc::new(SceneData::new(scene));
+        assert!(data.scene.has_textures(), "{name}");
+        assert!(
+            graph_of(&data).iter().any(|&s| s == "look_up_textures"),
+            "{name}: {:?}",
+            graph_of(&data)
+        );
+        let settings = RenderSettings {
+            seed: 3,
+            ..RenderSettings::default()
+        };
+        let film = |kernel| render(&data, "pt", RenderSettings { kernel, ..settings }, 4).film;
+        assert_same_film(&film(Kernel::Wavefront), &film(Kernel::Megakernel), name);
+    }
+}
+
 #[test]
 fn images_do_not_depend_on_the_wavefront() {
     // 20 x 20 = 400 pixels: waves of 3, 400 and 1000 paths split passes, hold one pass, and
