@@ -65,34 +65,23 @@ impl LaneKernel for SampleChunk<'_> {
     type Output = usize;
     #[inline(always)]
     fn run<const N: usize>(self) -> usize {
-        let SampleChunk {
-            data,
-            sampler,
-            triangles,
-            dirs,
-            paths,
-            surfaces,
-            materials,
-            c,
-        } = self;
-        sample_chunk::<N>(
-            data, sampler, triangles, dirs, paths, surfaces, materials, c,
-        )
+        sample_chunk::<N>(self)
     }
 }
 
 /// Light sampling at the paths of one chunk; returns the number of shadow rays cast.
 #[inline(always)]
-fn sample_chunk<const N: usize>(
-    data: &SceneData,
-    sampler: &Sampler,
-    triangles: &[u32],
-    dirs: &[Vec3],
-    paths: &Paths,
-    surfaces: &Surfaces,
-    looked_up: &[Material],
-    mut c: ShadowRaysChunk,
-) -> usize {
+fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
+    let SampleChunk {
+        data,
+        sampler,
+        triangles,
+        dirs,
+        paths,
+        surfaces,
+        materials: looked_up,
+        mut c,
+    } = chunk;
     let mut cast = 0;
     let range = c.start..c.start + c.len();
     let looked_up = looked_up.get(range.clone()).unwrap_or_default();

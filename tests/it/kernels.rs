@@ -119,7 +119,7 @@ fn textures_are_looked_up_by_their_own_system_only_where_a_scene_has_them() {
     let graph_of = |data: &SceneData| stagelight::integrators::pt::graph(data).system_names();
     let plain = SceneData::new(load_small("cornell_box.ron", 8));
     assert!(!plain.scene.has_textures());
-    assert!(!graph_of(&plain).iter().any(|&s| s == "look_up_textures"));
+    assert!(!graph_of(&plain).contains(&"look_up_textures"));
     // Textured diffuse, plastics' textured bases, textured anisotropic roughness (its axis
     // follows the uvs), a textured twosided back.
     for name in [
@@ -133,7 +133,7 @@ fn textures_are_looked_up_by_their_own_system_only_where_a_scene_has_them() {
         let data = Arc::new(SceneData::new(scene));
         assert!(data.scene.has_textures(), "{name}");
         assert!(
-            graph_of(&data).iter().any(|&s| s == "look_up_textures"),
+            graph_of(&data).contains(&"look_up_textures"),
             "{name}: {:?}",
             graph_of(&data)
         );
