@@ -350,9 +350,11 @@ impl PathContext<'_> {
                     0.0
                 }
             }
-            VertexKind::Light if v.is_point_light() => {
-                lights::pdf_direction(self.point_profile(v).unwrap_or(&None), wi)
-            }
+            VertexKind::Light if v.is_point_light() => lights::pdf_direction(
+                self.point_profile(v)
+                    .unwrap_or(&lights::PointProfile::Uniform),
+                wi,
+            ),
             VertexKind::Light => wi.dot(v.ng).max(0.0) * FRAC_1_PI,
             VertexKind::Surface if !self.is_connectible(v) => 1.0,
             VertexKind::Surface => {

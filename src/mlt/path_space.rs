@@ -510,7 +510,10 @@ impl<'a> PathSpace<'a> {
             // Its paths leave a disk, not a point: `trace_from_infinity`.
             VertexKind::Light if v.is_at_infinity() => None,
             VertexKind::Light if v.is_point_light() => {
-                let profile = self.ctx.point_profile(v).unwrap_or(&None);
+                let profile = self
+                    .ctx
+                    .point_profile(v)
+                    .unwrap_or(&crate::scene::lights::PointProfile::Uniform);
                 let (w, pdf) = crate::scene::lights::sample_direction(profile, u);
                 (pdf > 0.0).then_some((w, pdf, false))
             }

@@ -1,6 +1,7 @@
 //! Point lights' emission: a plain point sends its intensity alike in every direction; a spot
 //! (Mitsuba's `spot`) only within a cone, at full intensity inside its beam and ramping down
-//! linearly in angle to zero at the cutoff.
+//! linearly in angle to zero at the cutoff; a projector (Mitsuba's `projector`) through a
+//! pinhole frustum, an image's irradiance on the plane one unit in front of it.
 
 use crate::sampling::{UNIFORM_SPHERE_PDF, uniform_sphere};
 use glam::{Vec2, Vec3};
@@ -29,7 +30,7 @@ pub struct SpotProjection {
     pub to_local: glam::Mat3,
     /// tan(cutoff).
     pub uv_factor: f32,
-    /// Index into `Emitters::spot_textures`.
+    /// Index into `Emitters::projected_textures`.
     pub texture: u32,
 }
 
@@ -107,31 +108,119 @@ fn any_perpendicular(axis: Vec3) -> Vec3 {
     crate::math::Frame::from_normal(axis).s
 }
 
-/// How a point light sends its intensity out: `None` alike everywhere, or a spot.
-pub type PointProfile = Option<Spot>;
+/// A projector (Mitsuba's `projector`): a pinhole that casts an image, as a perspective camera
+/// sees one, onto the plane one unit in front of it, so that the image's texel is the
+/// irradiance there (times the light's intensity, pi x scale). Towards a direction at angle
+/// theta off its axis it sends the texel there over cos^3 theta: the plane at distance
+/// 1 / cos theta, tilted by theta.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Projector {
+    /// World to the projector's frame (+z forward; a rotation: to_world is rigid) and back.
+    pub to_local: glam::Mat3,
+    pub to_world: glam::Mat3,
+    /// Half the image's width and height on the plane z = 1: tan of half the fields of view.
+    pub tan_x: f32,
+    pub tan_y: f32,
+    /// Index into `Emitters::projected_textures`.
+    pub texture: u32,
+}
 
-/// The fraction of a point light's intensity towards unit direction `w`.
-#[inline]
-pub fn falloff(profile: &PointProfile, w: Vec3) -> f32 {
-    match profile {
-        None => 1.0,
-        Some(spot) => spot.falloff(w),
+impl Projector {
+    /// The image's area on the plane z = 1: the integral of 1 / cos^3 over the frustum's
+    /// solid angle, so power = intensity x this x the image's mean.
+    pub fn image_area(&self) -> f32 {
+        4.0 * self.tan_x * self.tan_y
+    }
+
+    /// Where unit direction `w` crosses the image (Mitsuba's sample space: u grows towards the
+    /// frame's -x, v towards its -y, as its perspective camera's pixels) and its cos theta, or
+    /// None outside the frustum.
+    #[inline]
+    pub fn uv(&self, w: Vec3) -> Option<(Vec2, f32)> {
+        let local = self.to_local * w;
+        if local.z <= 0.0 {
+            return None;
+        }
+        let (x, y) = (local.x / local.z, local.y / local.z);
+        let uv = Vec2::new(0.5 - 0.5 * x / self.tan_x, 0.5 - 0.5 * y / self.tan_y);
+        let inside = (0.0..=1.0).contains(&uv.x) && (0.0..=1.0).contains(&uv.y);
+        inside.then(|| (uv, local.z / local.length()))
     }
 }
 
+/// How a point light sends its intensity out.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub enum PointProfile {
+    /// Alike in every direction (and every emitter that is not a point light).
+    #[default]
+    Uniform,
+    Spot(Spot),
+    Projector(Projector),
+}
+
+impl PointProfile {
+    /// The fraction of the intensity sent towards unit direction `w`, and where a projected
+    /// texture is looked up for it (its index and uv), if the light projects one.
+    #[inline]
+    pub fn towards(&self, w: Vec3) -> (f32, Option<(u32, Vec2)>) {
+        match self {
+            PointProfile::Uniform => (1.0, None),
+            PointProfile::Spot(spot) => {
+                let falloff = spot.falloff(w);
+                match spot.projection {
+                    Some(p) if falloff > 0.0 => (falloff, Some((p.texture, p.uv(w)))),
+                    _ => (falloff, None),
+                }
+            }
+            PointProfile::Projector(projector) => match projector.uv(w) {
+                Some((uv, cos)) => (1.0 / (cos * cos * cos), Some((projector.texture, uv))),
+                None => (0.0, None),
+            },
+        }
+    }
+
+    /// The solid angle the intensity covers, weighted by the fraction `towards` gives (the
+    /// texture aside): power = intensity x this x the texture's mean.
+    pub fn weighted_solid_angle(&self) -> f64 {
+        match self {
+            PointProfile::Uniform => 4.0 * std::f64::consts::PI,
+            PointProfile::Spot(spot) => spot.weighted_solid_angle(),
+            PointProfile::Projector(projector) => f64::from(projector.image_area()),
+        }
+    }
+}
+
+/// The fraction of a point light's intensity towards unit direction `w` (its texture aside).
+#[inline]
+pub fn falloff(profile: &PointProfile, w: Vec3) -> f32 {
+    profile.towards(w).0
+}
+
 /// A direction a point light's photon or light subpath leaves by, with its solid-angle density:
-/// uniform over the sphere, or over a spot's cone.
+/// uniform over the sphere, over a spot's cone, or over a projector's image (uniform in area on
+/// its plane, so the density follows 1 / cos^3 as its intensity does).
 #[inline]
 pub fn sample_direction(profile: &PointProfile, u: Vec2) -> (Vec3, f32) {
     match profile {
-        None => (uniform_sphere(u), UNIFORM_SPHERE_PDF),
-        Some(spot) => {
+        PointProfile::Uniform => (uniform_sphere(u), UNIFORM_SPHERE_PDF),
+        PointProfile::Spot(spot) => {
             let cos = 1.0 - u.x * (1.0 - spot.cos_cutoff);
             let sin = (1.0 - cos * cos).max(0.0).sqrt();
             let phi = 2.0 * PI * u.y;
             let frame = crate::math::Frame::from_normal(spot.axis);
             let local = Vec3::new(sin * phi.cos(), sin * phi.sin(), cos);
             (frame.to_world(local).normalize(), spot.cone_pdf())
+        }
+        PointProfile::Projector(projector) => {
+            let on_plane = Vec3::new(
+                projector.tan_x * (1.0 - 2.0 * u.x),
+                projector.tan_y * (1.0 - 2.0 * u.y),
+                1.0,
+            );
+            let length = on_plane.length();
+            let cos = 1.0 / length;
+            let w = (projector.to_world * (on_plane / length)).normalize();
+            (w, 1.0 / (projector.image_area() * cos * cos * cos))
         }
     }
 }
@@ -140,9 +229,13 @@ pub fn sample_direction(profile: &PointProfile, u: Vec2) -> (Vec3, f32) {
 #[inline]
 pub fn pdf_direction(profile: &PointProfile, w: Vec3) -> f32 {
     match profile {
-        None => UNIFORM_SPHERE_PDF,
-        Some(spot) if w.dot(spot.axis) > spot.cos_cutoff => spot.cone_pdf(),
-        Some(_) => 0.0,
+        PointProfile::Uniform => UNIFORM_SPHERE_PDF,
+        PointProfile::Spot(spot) if w.dot(spot.axis) > spot.cos_cutoff => spot.cone_pdf(),
+        PointProfile::Spot(_) => 0.0,
+        PointProfile::Projector(projector) => match projector.uv(w) {
+            Some((_, cos)) => 1.0 / (projector.image_area() * cos * cos * cos),
+            None => 0.0,
+        },
     }
 }
 
@@ -189,7 +282,7 @@ mod tests {
     #[test]
     fn cone_samples_lie_in_the_cone_with_the_density_they_report() {
         let spot = Spot::new(Vec3::new(1.0, 1.0, 0.0), 25.0, 10.0).unwrap();
-        let profile = Some(spot);
+        let profile = PointProfile::Spot(spot);
         for i in 0..64 {
             let u = Vec2::new((i as f32 + 0.5) / 64.0, ((i * 37) % 64) as f32 / 64.0);
             let (w, pdf) = sample_direction(&profile, u);
@@ -197,5 +290,75 @@ mod tests {
             assert!(w.dot(spot.axis) >= spot.cos_cutoff - 1e-6);
             assert_eq!(pdf, pdf_direction(&profile, w));
         }
+    }
+
+    /// A projector turned so that its +z is world (1, 1, 1) / sqrt 3.
+    fn projector() -> Projector {
+        let frame = crate::math::Frame::from_normal(Vec3::ONE.normalize());
+        let to_world = glam::Mat3::from_cols(frame.s, frame.t, frame.n);
+        Projector {
+            to_local: to_world.transpose(),
+            to_world,
+            tan_x: 1.2,
+            tan_y: 0.7,
+            texture: 0,
+        }
+    }
+
+    #[test]
+    fn projector_samples_lie_in_its_frustum_with_the_density_they_report() {
+        let p = projector();
+        let profile = PointProfile::Projector(p);
+        for i in 0..256 {
+            let u = Vec2::new(
+                (i as f32 + 0.5) / 256.0,
+                ((i * 97) % 256) as f32 / 256.0 + 1e-3,
+            );
+            let (w, pdf) = sample_direction(&profile, u);
+            assert!((w.length() - 1.0).abs() < 1e-5);
+            let (uv, _) = p.uv(w).expect("in the frustum");
+            // The sample's image position is its uv (u runs against the frame's x).
+            assert!((uv - u).abs().max_element() < 1e-4, "{uv} vs {u}");
+            let expected = pdf_direction(&profile, w);
+            assert!(
+                (pdf - expected).abs() < 1e-4 * expected,
+                "{pdf} vs {expected}"
+            );
+        }
+        // Behind the pinhole and beside the frustum: nothing.
+        assert_eq!(pdf_direction(&profile, -p.to_world.z_axis), 0.0);
+        let beside = (p.to_world * Vec3::new(1.3, 0.0, 1.0)).normalize();
+        assert_eq!(profile.towards(beside).0, 0.0);
+        assert_eq!(
+            profile.towards(p.to_world.z_axis),
+            (1.0, Some((0, Vec2::splat(0.5))))
+        );
+    }
+
+    /// The 1 / cos^3 profile integrates over the sphere to the image's area on the plane z = 1
+    /// (Monte Carlo over uniform directions, an estimator independent of the frustum sampling).
+    #[test]
+    fn projector_profile_integrates_to_its_image_area() {
+        let profile = PointProfile::Projector(projector());
+        let n = 1 << 20;
+        let mut sum = 0.0f64;
+        let mut sum2 = 0.0f64;
+        for i in 0..n {
+            let u = Vec2::new(
+                (i as f32 + 0.5) / n as f32,
+                ((i as u64 * 2_654_435_761) % n as u64) as f32 / n as f32,
+            );
+            let f = f64::from(profile.towards(uniform_sphere(u)).0) / f64::from(UNIFORM_SPHERE_PDF);
+            sum += f;
+            sum2 += f * f;
+        }
+        let mean = sum / n as f64;
+        let se = ((sum2 / n as f64 - mean * mean) / n as f64).sqrt();
+        let area = profile.weighted_solid_angle();
+        assert!((area - 4.0 * 1.2 * 0.7).abs() < 1e-5);
+        assert!(
+            (mean - area).abs() < 4.0 * se + 1e-3 * area,
+            "{mean} +- {se} vs {area}"
+        );
     }
 }

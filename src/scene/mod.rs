@@ -110,8 +110,8 @@ pub struct Emitters {
     pub cdf: Vec<f32>,
     /// Total emitted power, sum of pi * area * radiance (RGB).
     pub total_power: Vec3,
-    /// The textures spots project (`lights::SpotProjection::texture` indexes them).
-    pub spot_textures: Vec<textures::Texture>,
+    /// The textures spots and projectors project (their `texture` fields index them).
+    pub projected_textures: Vec<textures::Texture>,
     /// Where light paths from lights at infinity start (set where the scene has one).
     pub disk: environment::SceneDisk,
     /// The light at infinity, if the scene has one: the last emitter, its `triangle`
@@ -159,20 +159,34 @@ impl Emitters {
         self.radiance[e] * self.profile_towards(e, w)
     }
 
+    /// The solid angle point light `e` covers, weighted by its profile and by the mean of the
+    /// texture it projects: its power is its intensity times this.
+    pub fn weighted_solid_angle(&self, e: usize) -> f64 {
+        let profile = &self.profile[e];
+        let projected = match profile {
+            lights::PointProfile::Spot(lights::Spot {
+                projection: Some(p),
+                ..
+            }) => Some(p.texture),
+            lights::PointProfile::Projector(p) => Some(p.texture),
+            _ => None,
+        };
+        let mean = projected
+            .and_then(|t| self.projected_textures.get(t as usize))
+            .map_or(1.0, |t| f64::from(t.mean()));
+        profile.weighted_solid_angle() * mean
+    }
+
     /// The fraction of point light `e`'s intensity it sends towards unit direction `w`, per
-    /// channel: its spot's falloff times the texture it projects there.
+    /// channel: its profile's (a spot's falloff, a projector's 1 / cos^3) times the texture it
+    /// projects there.
     #[inline]
     pub fn profile_towards(&self, e: usize, w: Vec3) -> Vec3 {
-        let profile = &self.profile[e];
-        let falloff = lights::falloff(profile, w);
-        match profile {
-            Some(lights::Spot {
-                projection: Some(projection),
-                ..
-            }) if falloff > 0.0 => {
-                self.spot_textures[projection.texture as usize].eval(projection.uv(w)) * falloff
+        match self.profile[e].towards(w) {
+            (fraction, Some((texture, uv))) if fraction > 0.0 => {
+                self.projected_textures[texture as usize].eval(uv) * fraction
             }
-            _ => Vec3::splat(falloff),
+            (fraction, _) => Vec3::splat(fraction),
         }
     }
 }

@@ -1,5 +1,6 @@
 //! "prepare": reads the scene world once into the flat columns the renderer uses.
 
+use super::lights::{PointProfile, Spot};
 use super::world::{
     DeclaredIn, Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape,
     SourceSpot, Transform,
@@ -252,7 +253,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
                     emitters.radiance.push(*radiance);
                     emitters.area.push(area);
                     emitters.position.push(Vec3::ZERO);
-                    emitters.profile.push(None);
+                    emitters.profile.push(PointProfile::Uniform);
                     power += PI * area as f64 * radiance.as_dvec3();
                     emitting += 1;
                 }
@@ -296,17 +297,24 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         &super::world::PointLight,
         &SourceSpot,
         Option<&DeclaredIn>,
-        Option<&super::world::SpotTexture>,
+        Option<&super::world::ProjectedTexture>,
     )>();
     let mut points: Vec<_> = point_query.iter().collect();
     points.sort_by_key(|p| p.0.order);
     for (light, spot, declared_in, texture) in points {
         let mut light = *light;
-        if let (Some(texture), Some(cone)) = (texture, light.spot.as_mut())
-            && let Some(projection) = cone.projection.as_mut()
-        {
-            projection.texture = emitters.spot_textures.len() as u32;
-            emitters.spot_textures.push(texture.0.clone());
+        let index = emitters.projected_textures.len() as u32;
+        let projects = match &mut light.profile {
+            PointProfile::Spot(Spot {
+                projection: Some(projection),
+                ..
+            }) => Some(&mut projection.texture),
+            PointProfile::Projector(projector) => Some(&mut projector.texture),
+            _ => None,
+        };
+        if let (Some(texture), Some(slot)) = (texture, projects) {
+            *slot = index;
+            emitters.projected_textures.push(texture.0.clone());
         }
         let position = light.position.as_vec3();
         if !position.is_finite() || light.position.abs().max_element() >= super::MAX_COORDINATE {
@@ -320,8 +328,8 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         emitters.radiance.push(light.intensity);
         emitters.area.push(1.0);
         emitters.position.push(position);
-        emitters.profile.push(light.spot);
-        let solid_angle = light.spot.map_or(4.0 * PI, |s| s.weighted_solid_angle());
+        emitters.profile.push(light.profile);
+        let solid_angle = emitters.weighted_solid_angle(emitters.profile.len() - 1);
         power += solid_angle * light.intensity.as_dvec3();
         if power.max_element() > super::MAX_POWER {
             return Err(error(
@@ -412,7 +420,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         emitters.radiance.push(light.irradiance);
         emitters.area.push(1.0);
         emitters.position.push(direction);
-        emitters.profile.push(None);
+        emitters.profile.push(PointProfile::Uniform);
         power += 0.25 * receiving_area * light.irradiance.as_dvec3();
         if power.is_nan() || power.max_element() > super::MAX_POWER {
             return Err(too_bright(power, spot, declared_in));
@@ -429,7 +437,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         emitters.radiance.push(env.peak_radiance());
         emitters.area.push(1.0);
         emitters.position.push(Vec3::ZERO);
-        emitters.profile.push(None);
+        emitters.profile.push(PointProfile::Uniform);
         emitters.environment = Some(env.clone());
     }
     drop(environment_query);
@@ -481,8 +489,9 @@ fn build_distribution(emitters: &mut Emitters, receiving_area: f64) {
         .radiance
         .iter()
         .zip(&emitters.area)
-        .zip(emitters.triangle.iter().zip(&emitters.profile))
-        .map(|((l, &area), (&triangle, profile))| {
+        .zip(&emitters.triangle)
+        .enumerate()
+        .map(|(e, ((l, &area), &triangle))| {
             if triangle == super::ENVIRONMENT {
                 let env = emitters
                     .environment
@@ -493,7 +502,7 @@ fn build_distribution(emitters: &mut Emitters, receiving_area: f64) {
                 // A directional light: `l` is its irradiance.
                 0.25 * receiving_area * l.as_dvec3()
             } else if triangle & super::POINT_LIGHT != 0 {
-                profile.map_or(4.0 * PI, |s| s.weighted_solid_angle()) * l.as_dvec3()
+                emitters.weighted_solid_angle(e) * l.as_dvec3()
             } else {
                 PI * area as f64 * l.as_dvec3()
             }

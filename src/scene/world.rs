@@ -34,8 +34,9 @@ pub struct SourceSpot {
 pub struct PointLight {
     pub position: glam::DVec3,
     pub intensity: Vec3,
-    /// A spot light's cone (Mitsuba's `spot`); None: alike in every direction.
-    pub spot: Option<super::lights::Spot>,
+    /// How it sends its intensity out: alike everywhere, a spot's cone (Mitsuba's `spot`) or a
+    /// projector's frustum (`projector`).
+    pub profile: super::lights::PointProfile,
     pub order: u32,
 }
 
@@ -49,9 +50,9 @@ pub struct DirectionalLight {
     pub order: u32,
 }
 
-/// The texture a spot light projects (its `Spot::projection` says how).
+/// The texture a spot light or a projector projects (its profile says how).
 #[derive(Clone, Debug)]
-pub struct SpotTexture(pub super::textures::Texture);
+pub struct ProjectedTexture(pub super::textures::Texture);
 
 /// The light at infinity (Mitsuba's `constant` or `envmap` emitter).
 #[derive(Clone, Debug)]

@@ -22,6 +22,8 @@ tests=(
   "tests/scenes/instancing/test_instancing_path.xml test_instancing"
   "tests/scenes/orthographic_sensor/test_orthographic_path.xml test_orthographic"
   "tests/scenes/spot_light/test_spot_direct.xml test_spot"
+  "tests/scenes/projector/test_projector_constant_direct.xml test_projector_constant"
+  "tests/scenes/projector/test_projector_textured_direct.xml test_projector_textured"
   "tests/scenes/bsdf_spheres/test_textured_diffuse_path.xml test_textured_diffuse"
   "tests/scenes/bsdf_spheres/test_textured_roughconductor_path.xml test_textured_roughconductor"
   "tests/scenes/bsdf_spheres/test_roughplastic_linear_path.xml test_roughplastic_linear"

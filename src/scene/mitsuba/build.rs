@@ -16,12 +16,13 @@ use crate::bsdf::plastic::RoughPlastic;
 use crate::bsdf::rough_dielectric::RoughDielectric;
 use crate::bsdf::smooth_plastic::SmoothPlastic;
 use crate::scene::filter::{Gaussian, PixelFilter};
+use crate::scene::lights::{PointProfile, Projector, SpotProjection};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
     BackMaterial, DeclaredIn, DirectionalLight, Emission, EnvironmentLight, FlipNormals,
-    MaterialInfo, MaterialRef, ObjectInfo, OneSided, PointLight, SceneWorld, Shape, SourceSpot,
-    SpotTexture, SurfaceVarying, Transform,
+    MaterialInfo, MaterialRef, ObjectInfo, OneSided, PointLight, ProjectedTexture, SceneWorld,
+    Shape, SourceSpot, SurfaceVarying, Transform,
 };
 use crate::scene::{Camera, Crop, Limits, Projection, SceneError};
 
@@ -53,7 +54,7 @@ pub const SHAPES: &str =
     "obj, ply, serialized, rectangle, disk, cube, sphere, cylinder, shapegroup, instance";
 pub const BSDFS: &str = "diffuse, twosided, dielectric, thindielectric, roughdielectric, \
      conductor, roughconductor, plastic, roughplastic";
-pub const EMITTERS: &str = "area, point, spot, directional, constant, envmap";
+pub const EMITTERS: &str = "area, point, spot, projector, directional, constant, envmap";
 pub const TEXTURES: &str = "bitmap, checkerboard";
 pub const SENSORS: &str = "perspective, orthographic";
 pub const FILMS: &str = "hdrfilm";
@@ -463,7 +464,7 @@ impl<'a> Builder<'a> {
                             ));
                         }
                         self.area_emitter(child.object)?;
-                    } else if object.kind == "point" || object.kind == "spot" {
+                    } else if matches!(object.kind.as_str(), "point" | "spot" | "projector") {
                         let (light, texture) = self.point_emitter(child.object)?;
                         let spot = object.spot.clone();
                         let entity = self.world.spawn((
@@ -1371,10 +1372,16 @@ impl<'a> Builder<'a> {
     /// A `point` emitter: `intensity` (W/sr, default 1) from `position` or from the origin
     /// placed by `to_world` (one of the two); or a `spot`: the same from to_world's origin
     /// along its +z, within `cutoff_angle` (default 20 degrees), full within `beam_width`
-    /// (default 3/4 of the cutoff).
-    fn point_emitter(&mut self, id: usize) -> Result<(PointLight, Option<SpotTexture>), XmlError> {
+    /// (default 3/4 of the cutoff); or a `projector` (`projector_emitter`).
+    fn point_emitter(
+        &mut self,
+        id: usize,
+    ) -> Result<(PointLight, Option<ProjectedTexture>), XmlError> {
         let object = self.object(id);
         let kind = object.kind.as_str();
+        if kind == "projector" {
+            return self.projector_emitter(id);
+        }
         let mut params = Params::new(object);
         let mut projected = None;
         for c in &object.children {
@@ -1430,7 +1437,7 @@ impl<'a> Builder<'a> {
                 .map_err(|m| XmlError::at(&object.spot, m))?;
             if projected.is_some() {
                 // The texture is looked up in the light's own frame (to_world's inverse).
-                spot.projection = Some(crate::scene::lights::SpotProjection {
+                spot.projection = Some(SpotProjection {
                     to_local: linear.inverse().as_mat3(),
                     uv_factor: cutoff.to_radians().tan() as f32,
                     texture: u32::MAX,
@@ -1461,10 +1468,114 @@ impl<'a> Builder<'a> {
             PointLight {
                 position,
                 intensity,
-                spot,
+                profile: spot.map_or(PointProfile::Uniform, PointProfile::Spot),
                 order: self.point_lights,
             },
-            projected.map(SpotTexture),
+            projected.map(ProjectedTexture),
+        ))
+    }
+
+    /// A `projector`: a pinhole at to_world's origin looking along its +z that casts its
+    /// `irradiance` (a texture, or a colour: a one-texel image) onto the plane z = 1 through
+    /// the frustum a perspective camera of the image's aspect would see (`fov`, `fov_axis`,
+    /// `focal_length` as the sensor reads them), times `scale`. to_world must be rigid: Mitsuba
+    /// scales the light with a scaled to_world in a way no other light follows.
+    fn projector_emitter(
+        &mut self,
+        id: usize,
+    ) -> Result<(PointLight, Option<ProjectedTexture>), XmlError> {
+        let object = self.object(id);
+        let mut params = Params::new(object);
+        let mut image = None;
+        for c in &object.children {
+            let child = self.object(c.object);
+            if child.class != Class::Texture
+                || c.name.as_deref() != Some("irradiance")
+                || image.is_some()
+            {
+                return Err(XmlError::at(
+                    &c.spot,
+                    "projector: only its irradiance texture (named \"irradiance\") may be nested",
+                ));
+            }
+            image = Some(self.texture(c.object)?);
+        }
+        let object = self.object(id);
+        let constant = params.color("irradiance", Role::Unbounded)?;
+        let texture = match (image, constant) {
+            (Some(_), Some((_, spot))) => {
+                return Err(XmlError::at(
+                    &spot,
+                    "projector: irradiance given twice (a texture and a value)",
+                ));
+            }
+            (Some(t), None) => t,
+            (None, Some((c, spot))) => {
+                if !c.is_finite() || c.min_element() < 0.0 {
+                    return Err(XmlError::at(
+                        &spot,
+                        format!(
+                            "irradiance {:?} must be finite and not negative",
+                            c.to_array()
+                        ),
+                    ));
+                }
+                Texture::constant(c)
+            }
+            (None, None) => {
+                return Err(XmlError::at(
+                    &object.spot,
+                    "projector needs an irradiance (a texture or a colour)",
+                ));
+            }
+        };
+        let scale = match params.float("scale")? {
+            Some((v, spot)) if !(v.is_finite() && v >= 0.0) => {
+                return Err(XmlError::at(
+                    &spot,
+                    format!("scale {v} must be finite and not negative"),
+                ));
+            }
+            Some((v, _)) => v,
+            None => 1.0,
+        };
+        let (width, height) = texture.resolution();
+        let aspect = width as f64 / height as f64;
+        let fov_y = perspective_fov_y(object, &mut params, aspect)?;
+        let (matrix, spot) = params
+            .transform("to_world")?
+            .unwrap_or((DMat4::IDENTITY, object.spot.clone()));
+        let linear = glam::DMat3::from_mat4(matrix);
+        let rigid = (linear.transpose() * linear - glam::DMat3::IDENTITY)
+            .to_cols_array()
+            .iter()
+            .all(|d| d.abs() < 1e-6)
+            && linear.determinant() > 0.0;
+        if !rigid {
+            return Err(XmlError::at(
+                &spot,
+                "projector: to_world must be a rotation and translation (no scale, shear or \
+                 mirror)",
+            ));
+        }
+        params.finish()?;
+        let tan_y = (0.5 * fov_y.to_radians()).tan();
+        let projector = Projector {
+            to_local: linear.transpose().as_mat3(),
+            to_world: linear.as_mat3(),
+            tan_x: (tan_y * aspect) as f32,
+            tan_y: tan_y as f32,
+            texture: u32::MAX,
+        };
+        self.point_lights += 1;
+        Ok((
+            PointLight {
+                position: matrix.w_axis.truncate(),
+                intensity: Vec3::splat((std::f64::consts::PI * scale) as f32),
+                profile: PointProfile::Projector(projector),
+                order: self.point_lights,
+            },
+            Some(ProjectedTexture(texture)),
         ))
     }
 
