@@ -218,9 +218,10 @@ fn srgb_to_linear(c: f32) -> f32 {
     }
 }
 
-/// Reads an image file (PNG, JPEG or EXR, through `image` and its memory limits) as linear RGB
-/// texels, row 0 first: 8-bit and 16-bit images sRGB-decoded unless `raw`, floating-point ones
-/// (EXR) linear; alpha dropped, grey spread to three channels.
+/// Reads an image file (PNG, JPEG, EXR, Radiance HDR, BMP, TGA or PPM: the formats of Mitsuba's
+/// `Bitmap` that `image` decodes, through its memory limits) as linear RGB texels, row 0
+/// first: 8-bit and 16-bit images sRGB-decoded unless `raw`, floating-point ones (EXR, HDR)
+/// linear; alpha dropped, grey spread to three channels.
 pub fn read_image(path: &Path, raw: bool) -> Result<(usize, usize, Vec<Vec3>), String> {
     let image = image::ImageReader::open(path)
         .map_err(|e| format!("cannot open {}: {e}", path.display()))?
@@ -229,7 +230,7 @@ pub fn read_image(path: &Path, raw: bool) -> Result<(usize, usize, Vec<Vec3>), S
         .decode()
         .map_err(|e| {
             format!(
-                "{} is not an image stagelight reads (PNG, JPEG, EXR): {e}",
+                "{} is not an image stagelight reads (PNG, JPEG, EXR, HDR, BMP, TGA, PPM): {e}",
                 path.display()
             )
         })?;
@@ -314,5 +315,54 @@ mod tests {
         assert_eq!(srgb_to_linear(0.0), 0.0);
         assert!((srgb_to_linear(1.0) - 1.0).abs() < 1e-6);
         assert!((srgb_to_linear(0.5) - 0.214_041_14).abs() < 1e-6);
+    }
+
+    /// The formats beyond PNG, JPEG and EXR that Mitsuba's scenes use: 8-bit BMP, TGA and PPM
+    /// read as sRGB (so 128 is 0.2158), Radiance HDR as linear radiance (RGBE keeps about
+    /// three digits). Files written by `image`'s own encoders, read back through `read_image`.
+    #[test]
+    fn bmp_tga_ppm_are_srgb_and_hdr_is_linear() {
+        let dir = std::env::temp_dir().join(format!("stagelight-formats-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let srgb = image::RgbImage::from_fn(3, 2, |x, y| {
+            image::Rgb([128, (x * 100) as u8, (y * 255) as u8])
+        });
+        let expected = |x: usize, y: usize| {
+            Vec3::new(
+                srgb_to_linear(128.0 / 255.0),
+                srgb_to_linear((x * 100) as f32 / 255.0),
+                srgb_to_linear((y * 255) as f32 / 255.0),
+            )
+        };
+        for name in ["t.bmp", "t.tga", "t.ppm"] {
+            let path = dir.join(name);
+            srgb.save(&path).unwrap();
+            let (w, h, texels) = read_image(&path, false).unwrap();
+            assert_eq!((w, h), (3, 2), "{name}");
+            for y in 0..2 {
+                for x in 0..3 {
+                    let d = (texels[y * 3 + x] - expected(x, y)).abs().max_element();
+                    assert!(d < 1e-6, "{name} ({x}, {y}): {}", texels[y * 3 + x]);
+                }
+            }
+            assert!((texels[0].x - 0.215_861).abs() < 1e-5);
+        }
+        let radiance = image::Rgb32FImage::from_fn(2, 2, |x, y| {
+            image::Rgb([0.25 + x as f32, 3.0 * y as f32 + 0.5, 40.0])
+        });
+        let path = dir.join("t.hdr");
+        image::DynamicImage::ImageRgb32F(radiance.clone())
+            .save(&path)
+            .unwrap();
+        let (w, h, texels) = read_image(&path, false).unwrap();
+        assert_eq!((w, h), (2, 2));
+        for (t, p) in texels.iter().zip(radiance.pixels()) {
+            let want = Vec3::new(p[0], p[1], p[2]);
+            assert!(
+                ((*t - want) / want).abs().max_element() < 0.01,
+                "{t} against {want}"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

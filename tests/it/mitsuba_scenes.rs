@@ -559,6 +559,56 @@ fn near_clip_that_would_hide_a_surface_is_refused() {
     scene::load(&path).unwrap();
 }
 
+/// A cylinder scaled along its axis stays round (Mitsuba reads its radius and length from such a
+/// to_world, as mitsuba-data's various_shapes test scales one by (1.5, 1.5, 2)): its
+/// triangles' corners lie within 0.05% of the cylinder of radius 0.5 about the turned axis and
+/// cover 2 pi r l within 0.1%; a scale that differs across the axis is refused.
+#[test]
+fn a_cylinder_scaled_along_its_axis_stays_round() {
+    let dir = temp_dir("mitsuba-cylinder");
+    let path = dir.join("c.xml");
+    let cylinder = |scale: &str| {
+        scene_with(&format!(
+            "<shape type=\"cylinder\"><transform name=\"to_world\"><scale value=\"{scale}\"/>\
+             <rotate x=\"1\" angle=\"-35\"/><translate z=\"-5\"/></transform></shape>\n\
+             <emitter type=\"constant\"/>"
+        ))
+    };
+    let text = cylinder("0.5, 0.5, 3");
+    let (scene, _) =
+        scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine()).unwrap();
+    let t = &scene.triangles;
+    let rotation = glam::Quat::from_rotation_x((-35f32).to_radians());
+    let (origin, axis) = (Vec3::new(0.0, 0.0, -5.0), rotation * Vec3::Z);
+    let mut area = 0.0f64;
+    for i in 0..t.p0.len() {
+        for p in [t.p0[i], t.p1[i], t.p2[i]] {
+            let d = p - origin;
+            let radial = (d - axis * d.dot(axis)).length();
+            // The tessellation's radius is a little wider, so that its area is the circle's.
+            assert!(
+                (radial / 0.5 - 1.0).abs() < 5e-4,
+                "a corner {radial} off the axis"
+            );
+            assert!((-1e-5..=3.0 + 1e-5).contains(&d.dot(axis)));
+        }
+        area += 0.5 * f64::from((t.p1[i] - t.p0[i]).cross(t.p2[i] - t.p0[i]).length());
+    }
+    let exact = 2.0 * std::f64::consts::PI * 0.5 * 3.0;
+    assert!(
+        (area / exact - 1.0).abs() < 1e-3,
+        "area {area} against {exact}"
+    );
+    let text = cylinder("1, 2, 1");
+    let e = scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.contains("c.xml:5:1: cylinder: a to_world that scales or shears across the axis"),
+        "{e}"
+    );
+}
+
 /// Mitsuba's own plugins (a glass sphere, a ggx cylinder, a spectral floor rectangle, an
 /// instanced cube, a flipped disk light with a spectral radiance, the default fov axis) against
 /// Mitsuba 3.9.1's render of the same file (8192 spp, committed): the image mean of four seeds

@@ -1782,18 +1782,21 @@ impl<'a> Builder<'a> {
             "disk" => super::analytic::disk(),
             "cube" => super::analytic::cube(),
             "sphere" | "cylinder" => {
-                check_similarity(&to_world)
-                    .map_err(|m| XmlError::at(&object.spot, format!("{}: {m}", object.kind)))?;
                 let radius = params.float("radius")?.map_or(1.0, |(r, _)| r);
                 let point = |params: &mut Params, name: &str, default: DVec3| {
                     params.point(name).map(|p| p.unwrap_or(default))
                 };
+                let round = |check: Result<(), String>| {
+                    check.map_err(|m| XmlError::at(&object.spot, format!("{}: {m}", object.kind)))
+                };
                 if object.kind == "sphere" {
+                    round(check_similarity(&to_world))?;
                     let center = point(&mut params, "center", DVec3::ZERO)?;
                     super::analytic::sphere(center, radius)
                 } else {
                     let p0 = point(&mut params, "p0", DVec3::ZERO)?;
                     let p1 = point(&mut params, "p1", DVec3::Z)?;
+                    round(check_round_cylinder(&to_world, p1 - p0))?;
                     super::analytic::cylinder(p0, p1, radius)
                 }
                 .map_err(|m| XmlError::at(&object.spot, m))?
@@ -1994,6 +1997,28 @@ fn check_similarity(m: &DAffine3) -> Result<(), String> {
                 .into(),
         )
     }
+}
+
+/// Fails unless `m` keeps a cylinder along `axis` round: across the axis a rotation (or
+/// mirror) with one scale, along it any scale (its length), no shear between the two; Mitsuba
+/// reads a cylinder's radius and length from such a to_world (a scale of (r, r, l)).
+fn check_round_cylinder(m: &DAffine3, axis: DVec3) -> Result<(), String> {
+    let refused = || {
+        "a to_world that scales or shears across the axis unevenly is not supported (Mitsuba \
+         keeps the cylinder round; a mesh would not be)"
+            .to_string()
+    };
+    let axis = axis.try_normalize().ok_or_else(refused)?;
+    let across = crate::math::Frame::from_normal(axis.as_vec3());
+    let (a, b) = (across.s.as_dvec3(), across.t.as_dvec3());
+    let (ma, mb, md) = (m.matrix3 * a, m.matrix3 * b, m.matrix3 * axis);
+    let scale = ma.length();
+    let tolerance = 1e-6 * scale * scale.max(md.length());
+    let round = (mb.length() - scale).abs() <= 1e-6 * scale
+        && ma.dot(mb).abs() <= tolerance
+        && ma.dot(md).abs() <= tolerance
+        && mb.dot(md).abs() <= tolerance;
+    if round { Ok(()) } else { Err(refused()) }
 }
 
 /// A perspective sensor's vertical field of view (degrees) on a film of this aspect: from
