@@ -10,6 +10,7 @@
 //! would have; a strategy's weight needs only ratios of the two along the path, so the weight
 //! of every strategy is found in one walk instead of by evaluating each from scratch.
 
+use crate::bsdf::diffuse::Diffuse;
 use crate::bsdf::{Material, TransportMode, scatters_between};
 use crate::components::{CAMERA_VERTEX, PathVertex, PathVerticesView};
 use crate::math::Frame;
@@ -589,7 +590,9 @@ impl PathContext<'_> {
             VertexKind::Light => Lobe::Light,
             VertexKind::Surface => match self.material_seen(v, wo) {
                 (m, _) if m.kind().is_delta() => return None,
-                (Material::Diffuse { reflectance }, _) => Lobe::Diffuse(reflectance * FRAC_1_PI),
+                (Material::Diffuse(Diffuse { reflectance }), _) => {
+                    Lobe::Diffuse(reflectance * FRAC_1_PI)
+                }
                 (material, ns) => Lobe::Other(material, ns),
             },
         };

@@ -8,9 +8,9 @@
 //! which tends to a finite limit in the tangent plane instead of forming 0/0.
 //! The microfacet maths (src/bsdf/microfacet.rs) is Mitsuba's up to Beckmann's exact G1, which
 //! moves images by far less than noise.
-use super::BsdfSample;
 pub use super::microfacet::{ALPHA_MIN, Microfacet};
 use super::microfacet::{Alphas, off_axis, onto_axis};
+use super::{Bsdf, BsdfSample, TransportMode};
 use glam::{Vec2, Vec3};
 
 /// A conductor's complex index of refraction eta + i k, per RGB channel, relative to the
@@ -30,7 +30,8 @@ impl ComplexIor {
     };
 }
 
-/// A rough conductor: what `Material::Conductor` holds.
+/// Rough conductor (GGX or Beckmann microfacets, possibly anisotropic): a conductor's Fresnel
+/// term times a reflectance, or the reflectance alone.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Conductor {
     pub distribution: Microfacet,
@@ -86,16 +87,6 @@ impl Conductor {
         self.alpha_u.max(self.alpha_v)
     }
 
-    /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
-    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        self.eval_pdf(wo, wi).0
-    }
-
-    /// The solid-angle density with which `sample` returns `wi`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi).1
-    }
-
     /// (f, pdf) for a reflection pair; zero unless both lie strictly above the surface.
     #[inline]
     fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
@@ -119,10 +110,31 @@ impl Conductor {
         };
         (reflectance * (pdf * gi), pdf)
     }
+}
+
+impl Bsdf for Conductor {
+    const IS_DELTA: bool = false;
+    const HAS_DELTA_LOBE: bool = false;
+    const TRANSMITS: bool = false;
+    const SHADING_SYSTEM: &'static str = "shade_conductor";
+
+    fn two_sided(&self) -> bool {
+        self.two_sided
+    }
+
+    /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
+    fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Vec3 {
+        self.eval_pdf(wo, wi).0
+    }
+
+    /// The solid-angle density with which `sample` returns `wi`.
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.eval_pdf(wo, wi).1
+    }
 
     /// Samples wi given wo by the distribution of visible normals; `None` when wo is not
     /// above the surface or the reflected direction is not (the microsurface masks it).
-    pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
+    fn sample(&self, wo: Vec3, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }

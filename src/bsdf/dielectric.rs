@@ -1,6 +1,69 @@
-//! Smooth dielectric interface.
-use super::{BsdfSample, TransportMode};
-use glam::Vec3;
+//! Smooth dielectric interface, and the thin dielectric sheet.
+use super::{Bsdf, BsdfSample, TransportMode};
+use glam::{Vec2, Vec3};
+
+/// Smooth dielectric: exact unpolarised Fresnel, refraction, total internal reflection.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Dielectric {
+    /// The index inside (the side opposite the geometric normal) over outside.
+    pub ior: f32,
+}
+
+impl Bsdf for Dielectric {
+    const IS_DELTA: bool = true;
+    const HAS_DELTA_LOBE: bool = true;
+    const TRANSMITS: bool = false;
+    const SHADING_SYSTEM: &'static str = "shade_dielectric";
+
+    fn two_sided(&self) -> bool {
+        false
+    }
+
+    fn eval(&self, _wo: Vec3, _wi: Vec3, _mode: TransportMode) -> Vec3 {
+        Vec3::ZERO
+    }
+
+    fn pdf(&self, _wo: Vec3, _wi: Vec3) -> f32 {
+        0.0
+    }
+
+    #[inline]
+    fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+        Some(sample(self.ior, wo, u.x, mode))
+    }
+}
+
+/// Thin dielectric sheet (Mitsuba's `thindielectric`): reflects R' (the Fresnel term of both
+/// faces and the light bouncing between them) and lets 1 - R' straight through.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ThinDielectric {
+    /// The sheet's index over its surroundings'; alike from both sides.
+    pub ior: f32,
+}
+
+impl Bsdf for ThinDielectric {
+    const IS_DELTA: bool = true;
+    const HAS_DELTA_LOBE: bool = true;
+    const TRANSMITS: bool = false;
+    const SHADING_SYSTEM: &'static str = "shade_thin_dielectric";
+
+    fn two_sided(&self) -> bool {
+        false
+    }
+
+    fn eval(&self, _wo: Vec3, _wi: Vec3, _mode: TransportMode) -> Vec3 {
+        Vec3::ZERO
+    }
+
+    fn pdf(&self, _wo: Vec3, _wi: Vec3) -> f32 {
+        0.0
+    }
+
+    #[inline]
+    fn sample(&self, wo: Vec3, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
+        Some(sample_thin(self.ior, wo, u.x))
+    }
+}
 
 /// Smallest |cos| a delta lobe divides by. A direction exactly in the tangent plane would make
 /// `F / |cos|` infinite; with the floor the value stays finite (at most ~1e20 times eta^2) and

@@ -1,10 +1,10 @@
 //! Lambertian reflection on both sides of the surface.
 //!
 //! The lobe's maths is written once over [`Real`] (`eval_cos`, `pdf_cos`, `sample_of`): the
-//! megakernel and the other integrators run it for one path (`f32`, through `Material`), the
-//! wavefront's lane systems for `N` paths at a time (`F<N>`), bit for bit alike (see
-//! docs/architecture.md, "Writing a material once for one path and for lanes").
-use super::BsdfSample;
+//! megakernel and the other integrators run it for one path (`f32`, through `Diffuse`'s
+//! `Bsdf`), the wavefront's lane systems for `N` paths at a time (`F<N>`), bit for bit alike
+//! (see docs/architecture.md, "Writing a material once for one path and for lanes").
+use super::{Bsdf, BsdfSample, TransportMode};
 use crate::lanes::{Real, V3};
 use crate::sampling::cosine_hemisphere_of;
 use glam::{Vec2, Vec3};
@@ -18,12 +18,51 @@ fn same_side<T: Real>(cos_o: T, cos_i: T) -> T::Mask {
     (cos_o.greater(zero) & cos_i.greater(zero)) | (cos_o.less(zero) & cos_i.less(zero))
 }
 
-pub fn eval(reflectance: Vec3, wo: Vec3, wi: Vec3) -> Vec3 {
-    eval_cos(reflectance.into(), wo.z, wi.z).into()
+/// Lambertian reflection, alike on both sides.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Diffuse {
+    pub reflectance: Vec3,
 }
 
-pub fn pdf(wo: Vec3, wi: Vec3) -> f32 {
-    pdf_cos(wo.z, wi.z)
+impl Bsdf for Diffuse {
+    const IS_DELTA: bool = false;
+    const HAS_DELTA_LOBE: bool = false;
+    const TRANSMITS: bool = false;
+    const SHADING_SYSTEM: &'static str = "shade_diffuse";
+
+    fn two_sided(&self) -> bool {
+        true
+    }
+
+    fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Vec3 {
+        eval_cos(self.reflectance.into(), wo.z, wi.z).into()
+    }
+
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        pdf_cos(wo.z, wi.z)
+    }
+
+    fn sample(&self, wo: Vec3, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
+        let s = sample_of(self.reflectance.into(), wo.into(), u.x, u.y);
+        s.valid.then(|| BsdfSample {
+            wi: s.wi.into(),
+            value: s.value.into(),
+            pdf: s.pdf,
+            delta: false,
+        })
+    }
+
+    /// The lobe depends only on the two cosines, so it needs no frame (the common case in
+    /// bidirectional connections, which evaluate many direction pairs per vertex).
+    #[inline]
+    fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Vec3 {
+        eval_cos(self.reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
+    }
+
+    #[inline]
+    fn pdf_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+        pdf_cos(wo.dot(ns), wi.dot(ns))
+    }
 }
 
 /// `eval` from the two cosines with the shading normal (all the lobe depends on).
@@ -44,16 +83,6 @@ pub fn pdf_cos<T: Real>(cos_o: T, cos_i: T) -> T {
         cos_i.abs() * FRAC_1_PI,
         T::splat(0.0),
     )
-}
-
-pub fn sample(reflectance: Vec3, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
-    let s = sample_of(reflectance.into(), wo.into(), u.x, u.y);
-    s.valid.then(|| BsdfSample {
-        wi: s.wi.into(),
-        value: s.value.into(),
-        pdf: s.pdf,
-        delta: false,
-    })
 }
 
 /// A sample of the lobe for one path or lanes: `BsdfSample` where `valid` is set (elsewhere

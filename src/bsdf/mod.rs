@@ -16,114 +16,231 @@ pub mod smooth_plastic;
 
 use glam::{Vec2, Vec3};
 
-/// A material as SCENES.md defines them.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Material {
-    /// Lambertian, reflecting on both sides.
-    Diffuse { reflectance: Vec3 },
-    /// Smooth dielectric: exact unpolarised Fresnel, refraction, total internal reflection.
-    /// `ior` is the index inside (the side opposite the geometric normal) over outside.
-    Dielectric { ior: f32 },
-    /// Rough conductor (GGX or Beckmann microfacets, possibly anisotropic): a conductor's Fresnel term
-    /// times a reflectance, or the reflectance alone (see `conductor`).
+/// A material's BSDF, one type per material in that material's own file (`diffuse::Diffuse`,
+/// `conductor::Conductor`, ...), listed once in `materials!` below, which derives `Material`,
+/// `MaterialKind` and their dispatch from the list. A new material provides what its kind is
+/// (the consts: the engine reads them per kind, before any material is seen), whether it
+/// reflects alike on both sides, and `eval`, `pdf` and `sample` in the local shading frame
+/// (normal = +z); `eval_world` and `pdf_world` build that frame unless the material has a
+/// cheaper form.
+pub trait Bsdf: ListedMaterial + Copy {
+    /// Whether every lobe is a Dirac delta: light sampling and connections cannot reach it.
+    /// (The smooth plastic is not: its diffuse lobe is reached; see `HAS_DELTA_LOBE`.)
+    const IS_DELTA: bool;
+    /// Whether `sample` may return a delta lobe (`BsdfSample::delta`): the delta kinds, and
+    /// the smooth plastic, whose specular reflection is a delta beside its diffuse lobe.
+    const HAS_DELTA_LOBE: bool;
+    /// Whether a non-delta lobe transmits: connections, light samples and merges may then join
+    /// the surface's two sides (where the shading frame agrees, see `scatters_between`).
+    const TRANSMITS: bool;
+    /// The name of the kind's shading system.
+    const SHADING_SYSTEM: &'static str;
+
+    /// Whether it reflects alike on both sides of a surface: the engine turns the shading
+    /// frame to the side a ray arrives from (Lambertian surfaces always; a conductor or a
+    /// plastic inside Mitsuba's `twosided`). The others are black from behind, or transmit.
+    fn two_sided(&self) -> bool;
+
+    /// f(wo, wi) without the cosine, for what the path carries (only refraction tells the
+    /// two apart); zero for delta materials (the smooth plastic: its diffuse lobe's alone).
+    fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3;
+
+    /// Solid-angle density with which `sample` returns `wi`; zero for delta materials (the
+    /// smooth plastic's diffuse lobe's, times the probability of choosing that lobe).
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32;
+
+    /// Samples wi given wo; `None` when the sample carries no energy.
+    fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample>;
+
+    /// `eval` for world-space directions about the shading normal `ns`.
+    #[inline]
+    fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
+        if Self::IS_DELTA {
+            return Vec3::ZERO;
+        }
+        let frame = crate::math::Frame::from_normal(ns);
+        self.eval(frame.to_local(wo), frame.to_local(wi), mode)
+    }
+
+    /// `pdf` for world-space directions about the shading normal `ns`.
+    #[inline]
+    fn pdf_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+        if Self::IS_DELTA {
+            return 0.0;
+        }
+        let frame = crate::math::Frame::from_normal(ns);
+        self.pdf(frame.to_local(wo), frame.to_local(wi))
+    }
+}
+
+/// What `materials!` gives each material type it lists: its kind and the way back to it from
+/// a `Material`, so that code generic over a `Bsdf` (a kind's shading system) reads its own
+/// type. A `Bsdf` not in the list does not compile.
+pub trait ListedMaterial: Sized {
+    const KIND: MaterialKind;
+    /// The material's value if `material` is of this type.
+    fn of(material: &Material) -> Option<&Self>;
+}
+
+/// Code generic over the material type, run for a kind known only at run time
+/// (`MaterialKind::visit`): each kind's shading system is one such instance.
+pub trait KindVisitor {
+    type Output;
+    fn visit<B: Bsdf>(self) -> Self::Output;
+}
+
+/// The one list of materials: each entry names a kind and the `Bsdf` type behind it, and
+/// from the list come `Material` (a variant per entry), `MaterialKind` (the kinds in the
+/// list's order), the kinds' facts, `MaterialKind::visit` and `Material`'s dispatch of
+/// `eval_mode`, `pdf`, `sample`, `eval_world` and `pdf_world`. The order is the queue order
+/// of `sort_by_material`: the kinds with a non-delta lobe first, so light sampling runs over
+/// one contiguous range of slots (checked below).
+macro_rules! materials {
+    ($($kind:ident($bsdf:ty)),+ $(,)?) => {
+        /// A material as SCENES.md defines them: the value of one of the listed `Bsdf` types.
+        #[derive(Clone, Copy, Debug, PartialEq)]
+        pub enum Material {
+            $(
+                #[doc = concat!("See [`", stringify!($bsdf), "`].")]
+                $kind($bsdf),
+            )+
+        }
+
+        /// The kind of a material: the graph holds one shading system per kind a scene uses,
+        /// and `sort_by_material` one queue per kind, in this order. What each kind is comes
+        /// from its `Bsdf` type's consts.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+        pub enum MaterialKind {
+            $($kind,)+
+        }
+
+        $(
+            impl ListedMaterial for $bsdf {
+                const KIND: MaterialKind = MaterialKind::$kind;
+                #[inline(always)]
+                fn of(material: &Material) -> Option<&Self> {
+                    match material {
+                        Material::$kind(m) => Some(m),
+                        _ => None,
+                    }
+                }
+            }
+        )+
+
+        impl MaterialKind {
+            /// Every kind, in queue order.
+            pub const ALL: [MaterialKind; [$(MaterialKind::$kind),+].len()] =
+                [$(MaterialKind::$kind),+];
+            pub const COUNT: usize = MaterialKind::ALL.len();
+
+            /// `Bsdf::IS_DELTA` of the kind.
+            pub const fn is_delta(self) -> bool {
+                match self {
+                    $(MaterialKind::$kind => <$bsdf as Bsdf>::IS_DELTA,)+
+                }
+            }
+
+            /// `Bsdf::HAS_DELTA_LOBE` of the kind.
+            pub const fn has_delta_lobe(self) -> bool {
+                match self {
+                    $(MaterialKind::$kind => <$bsdf as Bsdf>::HAS_DELTA_LOBE,)+
+                }
+            }
+
+            /// `Bsdf::TRANSMITS` of the kind.
+            pub const fn transmits(self) -> bool {
+                match self {
+                    $(MaterialKind::$kind => <$bsdf as Bsdf>::TRANSMITS,)+
+                }
+            }
+
+            /// The name of the shading system of this kind.
+            pub const fn shading_system(self) -> &'static str {
+                match self {
+                    $(MaterialKind::$kind => <$bsdf as Bsdf>::SHADING_SYSTEM,)+
+                }
+            }
+
+            /// Runs `visitor` for this kind's `Bsdf` type.
+            #[inline]
+            pub fn visit<V: KindVisitor>(self, visitor: V) -> V::Output {
+                match self {
+                    $(MaterialKind::$kind => visitor.visit::<$bsdf>(),)+
+                }
+            }
+        }
+
+        impl Material {
+            pub fn kind(&self) -> MaterialKind {
+                match self {
+                    $(Material::$kind(_) => MaterialKind::$kind,)+
+                }
+            }
+
+            /// `Bsdf::two_sided` of the material.
+            pub fn is_two_sided(&self) -> bool {
+                match self {
+                    $(Material::$kind(m) => m.two_sided(),)+
+                }
+            }
+
+            /// f(wo, wi) for what the path carries: only refraction tells the two apart.
+            pub fn eval_mode(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
+                match self {
+                    $(Material::$kind(m) => m.eval(wo, wi, mode),)+
+                }
+            }
+
+            /// Solid-angle density with which `sample` returns `wi`; zero for delta materials
+            /// (the smooth plastic's diffuse lobe's, times the probability of choosing that
+            /// lobe).
+            pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+                match self {
+                    $(Material::$kind(m) => m.pdf(wo, wi),)+
+                }
+            }
+
+            /// `eval_mode` for world-space directions about the shading normal `ns`.
+            #[inline]
+            pub fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
+                match self {
+                    $(Material::$kind(m) => m.eval_world(ns, wo, wi, mode),)+
+                }
+            }
+
+            /// `pdf` for world-space directions about the shading normal `ns`.
+            #[inline]
+            pub fn pdf_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
+                match self {
+                    $(Material::$kind(m) => m.pdf_world(ns, wo, wi),)+
+                }
+            }
+
+            /// Samples wi given wo; `None` when the sample carries no energy. Inlined so that
+            /// a loop that sees one material kind keeps only that kind's arm hot.
+            #[inline(always)]
+            pub fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+                match self {
+                    $(Material::$kind(m) => m.sample(wo, u, mode),)+
+                }
+            }
+        }
+    };
+}
+
+materials! {
+    Diffuse(diffuse::Diffuse),
     Conductor(conductor::Conductor),
-    /// Rough plastic: a rough dielectric coat over a Lambertian base (see `plastic`).
     RoughPlastic(plastic::RoughPlastic),
-    /// Rough dielectric: microfacets that reflect and refract (see `rough_dielectric`).
     RoughDielectric(rough_dielectric::RoughDielectric),
-    /// Smooth plastic: a delta reflection off a smooth coat over a Lambertian base (see
-    /// `smooth_plastic`): a delta lobe and a non-delta one.
     Plastic(smooth_plastic::SmoothPlastic),
-    /// Thin dielectric sheet (Mitsuba's `thindielectric`): reflects R' (the Fresnel term of
-    /// both faces and the light bouncing between them) and lets 1 - R' straight through.
-    /// `ior` is the sheet's index over its surroundings'; alike from both sides.
-    ThinDielectric { ior: f32 },
+    Dielectric(dielectric::Dielectric),
+    ThinDielectric(dielectric::ThinDielectric),
 }
 
 // Materials are copied by value into every shading point and visible point: keep them small
 // (the anisotropic conductor, with its Fresnel indices, two roughnesses and axis, is the largest).
 const _: () = assert!(std::mem::size_of::<Material>() <= 56);
-
-/// The kind of a material: the graph holds one shading system per kind a scene uses, and
-/// `sort_by_material` one queue per kind, in this order: the kinds with a non-delta lobe
-/// first, so light sampling runs over one contiguous range of slots. What each kind is (delta
-/// or not, reflecting on both sides or not, its system's name) is said here once.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum MaterialKind {
-    Diffuse = 0,
-    Conductor = 1,
-    RoughPlastic = 2,
-    RoughDielectric = 3,
-    Plastic = 4,
-    Dielectric = 5,
-    ThinDielectric = 6,
-}
-
-impl MaterialKind {
-    /// Every kind, in queue order.
-    pub const ALL: [MaterialKind; 7] = [
-        MaterialKind::Diffuse,
-        MaterialKind::Conductor,
-        MaterialKind::RoughPlastic,
-        MaterialKind::RoughDielectric,
-        MaterialKind::Plastic,
-        MaterialKind::Dielectric,
-        MaterialKind::ThinDielectric,
-    ];
-    pub const COUNT: usize = MaterialKind::ALL.len();
-
-    /// Whether every lobe is a Dirac delta: light sampling and connections cannot reach it.
-    /// (The smooth plastic is not: its diffuse lobe is reached; see `has_delta_lobe`.)
-    pub const fn is_delta(self) -> bool {
-        match self {
-            MaterialKind::Diffuse
-            | MaterialKind::Conductor
-            | MaterialKind::RoughPlastic
-            | MaterialKind::RoughDielectric
-            | MaterialKind::Plastic => false,
-            MaterialKind::Dielectric | MaterialKind::ThinDielectric => true,
-        }
-    }
-
-    /// Whether `sample` may return a delta lobe (`BsdfSample::delta`): the delta kinds, and
-    /// the smooth plastic, whose specular reflection is a delta beside its diffuse lobe.
-    pub const fn has_delta_lobe(self) -> bool {
-        match self {
-            MaterialKind::Diffuse
-            | MaterialKind::Conductor
-            | MaterialKind::RoughPlastic
-            | MaterialKind::RoughDielectric => false,
-            MaterialKind::Plastic | MaterialKind::Dielectric | MaterialKind::ThinDielectric => true,
-        }
-    }
-
-    /// Whether a non-delta lobe transmits: connections, light samples and merges may then join
-    /// the surface's two sides (where the shading frame agrees, see `scatters_between`).
-    pub const fn transmits(self) -> bool {
-        match self {
-            MaterialKind::RoughDielectric => true,
-            MaterialKind::Diffuse
-            | MaterialKind::Conductor
-            | MaterialKind::RoughPlastic
-            | MaterialKind::Plastic
-            | MaterialKind::Dielectric
-            | MaterialKind::ThinDielectric => false,
-        }
-    }
-
-    /// The name of the shading system of this kind.
-    pub const fn shading_system(self) -> &'static str {
-        match self {
-            MaterialKind::Diffuse => "shade_diffuse",
-            MaterialKind::Conductor => "shade_conductor",
-            MaterialKind::RoughPlastic => "shade_rough_plastic",
-            MaterialKind::RoughDielectric => "shade_rough_dielectric",
-            MaterialKind::Plastic => "shade_plastic",
-            MaterialKind::Dielectric => "shade_dielectric",
-            MaterialKind::ThinDielectric => "shade_thin_dielectric",
-        }
-    }
-}
 
 // `ALL` lists the kinds in their queue order, the non-delta ones first.
 const _: () = {
@@ -136,31 +253,10 @@ const _: () = {
 };
 
 impl Material {
-    /// Whether it reflects alike on both sides of a surface: the engine turns the shading
-    /// frame to the side a ray arrives from (Lambertian surfaces always; a conductor or a
-    /// plastic inside Mitsuba's `twosided`). The others are black from behind, or transmit.
-    pub const fn is_two_sided(&self) -> bool {
-        match self {
-            Material::Diffuse { .. } => true,
-            Material::Conductor(c) => c.two_sided,
-            Material::RoughPlastic(p) => p.two_sided,
-            Material::Plastic(p) => p.two_sided,
-            Material::RoughDielectric(_)
-            | Material::Dielectric { .. }
-            | Material::ThinDielectric { .. } => false,
-        }
-    }
-
-    pub fn kind(&self) -> MaterialKind {
-        match self {
-            Material::Diffuse { .. } => MaterialKind::Diffuse,
-            Material::Dielectric { .. } => MaterialKind::Dielectric,
-            Material::Conductor(_) => MaterialKind::Conductor,
-            Material::RoughPlastic(_) => MaterialKind::RoughPlastic,
-            Material::RoughDielectric(_) => MaterialKind::RoughDielectric,
-            Material::Plastic(_) => MaterialKind::Plastic,
-            Material::ThinDielectric { .. } => MaterialKind::ThinDielectric,
-        }
+    /// f(wo, wi) without the cosine, for radiance; zero for delta materials (the smooth
+    /// plastic's diffuse lobe alone: its delta reflection only `sample` returns).
+    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+        self.eval_mode(wo, wi, TransportMode::Radiance)
     }
 }
 
@@ -214,7 +310,19 @@ pub fn sample_direction(
     u: Vec2,
     mode: TransportMode,
 ) -> Option<(BsdfSample, Vec3)> {
-    let bs = material.sample(wo_local, u, mode)?;
+    leaving_direction(material.sample(wo_local, u, mode)?, frame, ng, wo, wo_local)
+}
+
+/// `sample_direction` for a sample `bs` already drawn (by one material type's own `sample`,
+/// where the caller knows the type).
+#[inline(always)]
+pub fn leaving_direction(
+    bs: BsdfSample,
+    frame: &crate::math::Frame,
+    ng: Vec3,
+    wo: Vec3,
+    wo_local: Vec3,
+) -> Option<(BsdfSample, Vec3)> {
     if bs.pdf <= 0.0 {
         return None;
     }
@@ -246,89 +354,5 @@ pub fn scatters_between(
         (reflected && wo_ns * wi_ns > 0.0) || (refracted && wo_ns * wi_ns < 0.0)
     } else {
         reflected
-    }
-}
-
-impl Material {
-    /// f(wo, wi) without the cosine, for radiance; zero for delta materials (the smooth
-    /// plastic's diffuse lobe alone: its delta reflection only `sample` returns).
-    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        self.eval_mode(wo, wi, TransportMode::Radiance)
-    }
-
-    /// f(wo, wi) for what the path carries: only refraction tells the two apart.
-    pub fn eval_mode(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
-        match *self {
-            Material::Diffuse { reflectance } => diffuse::eval(reflectance, wo, wi),
-            Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
-            Material::Conductor(c) => c.eval(wo, wi),
-            Material::RoughPlastic(p) => p.eval(wo, wi),
-            Material::RoughDielectric(d) => d.eval(wo, wi, mode),
-            Material::Plastic(p) => p.eval(wo, wi),
-        }
-    }
-
-    /// Solid-angle density with which `sample` returns `wi`; zero for delta materials (the
-    /// smooth plastic's diffuse lobe's, times the probability of choosing that lobe).
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        match *self {
-            Material::Diffuse { .. } => diffuse::pdf(wo, wi),
-            Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
-            Material::Conductor(c) => c.pdf(wo, wi),
-            Material::RoughPlastic(p) => p.pdf(wo, wi),
-            Material::RoughDielectric(d) => d.pdf(wo, wi),
-            Material::Plastic(p) => p.pdf(wo, wi),
-        }
-    }
-
-    /// `eval_mode` for world-space directions about the shading normal `ns`. The Lambertian
-    /// lobe depends only on the two cosines, so it needs no frame (the common case in
-    /// bidirectional connections, which evaluate many direction pairs per vertex).
-    #[inline]
-    pub fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
-        match *self {
-            Material::Diffuse { reflectance } => {
-                diffuse::eval_cos(reflectance.into(), wo.dot(ns), wi.dot(ns)).into()
-            }
-            Material::Dielectric { .. } | Material::ThinDielectric { .. } => Vec3::ZERO,
-            Material::Conductor(_)
-            | Material::RoughPlastic(_)
-            | Material::RoughDielectric(_)
-            | Material::Plastic(_) => {
-                let frame = crate::math::Frame::from_normal(ns);
-                self.eval_mode(frame.to_local(wo), frame.to_local(wi), mode)
-            }
-        }
-    }
-
-    /// `pdf` for world-space directions about the shading normal `ns`.
-    #[inline]
-    pub fn pdf_world(&self, ns: Vec3, wo: Vec3, wi: Vec3) -> f32 {
-        match *self {
-            Material::Diffuse { .. } => diffuse::pdf_cos(wo.dot(ns), wi.dot(ns)),
-            Material::Dielectric { .. } | Material::ThinDielectric { .. } => 0.0,
-            Material::Conductor(_)
-            | Material::RoughPlastic(_)
-            | Material::RoughDielectric(_)
-            | Material::Plastic(_) => {
-                let frame = crate::math::Frame::from_normal(ns);
-                self.pdf(frame.to_local(wo), frame.to_local(wi))
-            }
-        }
-    }
-
-    /// Samples wi given wo; `None` when the sample carries no energy. Inlined so that each
-    /// shading system's loop, which sees one material kind, keeps only that kind's arm hot.
-    #[inline(always)]
-    pub fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
-        match *self {
-            Material::Diffuse { reflectance } => diffuse::sample(reflectance, wo, u),
-            Material::Dielectric { ior } => Some(dielectric::sample(ior, wo, u.x, mode)),
-            Material::Conductor(c) => c.sample(wo, u),
-            Material::RoughPlastic(p) => p.sample(wo, u),
-            Material::RoughDielectric(d) => d.sample(wo, u, mode),
-            Material::Plastic(p) => p.sample(wo, u),
-            Material::ThinDielectric { ior } => Some(dielectric::sample_thin(ior, wo, u.x)),
-        }
     }
 }

@@ -16,10 +16,10 @@
 //! the two reflectances' means, then visible normals or the cosine. One-sided: black from
 //! behind the shading normal.
 
-use super::BsdfSample;
 use super::conductor::Microfacet;
 use super::dielectric::fresnel;
 use super::microfacet::Alphas;
+use super::{Bsdf, BsdfSample, TransportMode};
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 use std::f32::consts::FRAC_1_PI;
@@ -104,16 +104,6 @@ impl RoughPlastic {
         specular / (specular + diffuse)
     }
 
-    /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
-    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
-        self.eval_pdf(wo, wi).0
-    }
-
-    /// The solid-angle density with which `sample` returns `wi`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi).1
-    }
-
     #[inline]
     fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
         if wo.z <= 0.0 || wi.z <= 0.0 {
@@ -137,11 +127,32 @@ impl RoughPlastic {
         let p = self.specular_probability(wo.z);
         (glossy + base, p * glossy_pdf + (1.0 - p) * wi.z * FRAC_1_PI)
     }
+}
+
+impl Bsdf for RoughPlastic {
+    const IS_DELTA: bool = false;
+    const HAS_DELTA_LOBE: bool = false;
+    const TRANSMITS: bool = false;
+    const SHADING_SYSTEM: &'static str = "shade_rough_plastic";
+
+    fn two_sided(&self) -> bool {
+        self.two_sided
+    }
+
+    /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
+    fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Vec3 {
+        self.eval_pdf(wo, wi).0
+    }
+
+    /// The solid-angle density with which `sample` returns `wi`.
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.eval_pdf(wo, wi).1
+    }
 
     /// Samples the glossy lobe or the base (one number chooses, then is stretched back to
     /// [0, 1) for the direction); `None` when wo is not above the surface or the reflection
     /// goes below it.
-    pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
+    fn sample(&self, wo: Vec3, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }

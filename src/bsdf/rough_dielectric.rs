@@ -20,14 +20,14 @@
 //! G1(wi), bounded by 20 G1(wi); the pdf is the same mixture, so eval / pdf is the weight.
 use super::dielectric::{fresnel, fresnel_of_pair};
 use super::microfacet::{Alphas, Microfacet, off_axis, onto_axis};
-use super::{BsdfSample, TransportMode};
+use super::{Bsdf, BsdfSample, TransportMode};
 use glam::{Vec2, Vec3};
 
 /// The least probability of either lobe: refraction past the macro-surface's critical angle
 /// is still possible on tilted microfacets, and reflection at ior 1.0001 still happens.
 const MIN_LOBE_PROBABILITY: f32 = 0.05;
 
-/// Mitsuba's `roughdielectric`: what `Material::RoughDielectric` holds.
+/// Mitsuba's `roughdielectric`: microfacets that reflect and refract.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RoughDielectric {
     pub distribution: Microfacet,
@@ -75,16 +75,6 @@ impl RoughDielectric {
     #[inline]
     pub fn reflect_probability(&self, wo: Vec3) -> f32 {
         fresnel(wo.z, self.eta).clamp(MIN_LOBE_PROBABILITY, 1.0 - MIN_LOBE_PROBABILITY)
-    }
-
-    /// f(wo, wi) without the cosine, for light carried as `mode` says.
-    pub fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
-        self.eval_pdf(wo, wi, mode).0
-    }
-
-    /// The solid-angle density with which `sample` returns `wi`.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi, TransportMode::Radiance).1
     }
 
     /// (f, pdf) of the pair, in the frame of the lobe's axis.
@@ -140,9 +130,30 @@ impl RoughDielectric {
             (self.transmittance * (scale * (1.0 - f) * lobe * g_i), pdf)
         }
     }
+}
+
+impl Bsdf for RoughDielectric {
+    const IS_DELTA: bool = false;
+    const HAS_DELTA_LOBE: bool = false;
+    const TRANSMITS: bool = true;
+    const SHADING_SYSTEM: &'static str = "shade_rough_dielectric";
+
+    fn two_sided(&self) -> bool {
+        false
+    }
+
+    /// f(wo, wi) without the cosine, for light carried as `mode` says.
+    fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
+        self.eval_pdf(wo, wi, mode).0
+    }
+
+    /// The solid-angle density with which `sample` returns `wi`.
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+        self.eval_pdf(wo, wi, TransportMode::Radiance).1
+    }
 
     /// Samples wi given wo (see the module's comment); `None` where the sample carries nothing.
-    pub fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
+    fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         if wo.z == 0.0 || !wo.is_finite() {
             return None;
         }

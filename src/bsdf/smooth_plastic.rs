@@ -18,15 +18,16 @@
 //! pdf times the probability of choosing that lobe), while `sample` says `delta: true` when
 //! it picks the reflection. Each integrator keys its delta rules on that per-sample flag.
 
-use super::BsdfSample;
 use super::dielectric::fresnel;
+use super::{Bsdf, BsdfSample, TransportMode};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
 /// Smallest cosine the delta lobe's value divides by (as the smooth dielectric's).
 const COS_FLOOR: f32 = 1e-20;
 
-/// Mitsuba's `plastic`.
+/// Mitsuba's `plastic`: a delta reflection off a smooth coat over a Lambertian base, a
+/// delta lobe and a non-delta one.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SmoothPlastic {
     /// Relative index of the coat (inside over outside).
@@ -120,10 +121,21 @@ impl SmoothPlastic {
         let sum = specular + diffuse;
         if sum > 0.0 { specular / sum } else { 0.0 }
     }
+}
+
+impl Bsdf for SmoothPlastic {
+    const IS_DELTA: bool = false;
+    const HAS_DELTA_LOBE: bool = true;
+    const TRANSMITS: bool = false;
+    const SHADING_SYSTEM: &'static str = "shade_plastic";
+
+    fn two_sided(&self) -> bool {
+        self.two_sided
+    }
 
     /// The diffuse lobe's f(wo, wi) without the cosine; zero unless both lie strictly above
     /// the surface. (The specular lobe is a delta: `sample` alone returns it.)
-    pub fn eval(&self, wo: Vec3, wi: Vec3) -> Vec3 {
+    fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Vec3 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Vec3::ZERO;
         }
@@ -137,7 +149,7 @@ impl SmoothPlastic {
     }
 
     /// The solid-angle density with which `sample` returns `wi` by the diffuse lobe.
-    pub fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
+    fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
@@ -147,7 +159,7 @@ impl SmoothPlastic {
     /// Picks the specular lobe (the mirror direction, `delta: true`, weight specular F / its
     /// probability) or the diffuse one (the cosine); one number chooses, then is stretched back
     /// to [0, 1) for the direction. `None` when wo is not above the surface.
-    pub fn sample(&self, wo: Vec3, u: Vec2) -> Option<BsdfSample> {
+    fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample> {
         if wo.z <= 0.0 {
             return None;
         }
@@ -173,7 +185,7 @@ impl SmoothPlastic {
         }
         Some(BsdfSample {
             wi,
-            value: self.eval(wo, wi),
+            value: self.eval(wo, wi, mode),
             pdf,
             delta: false,
         })

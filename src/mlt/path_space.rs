@@ -16,6 +16,7 @@
 //! so an image is splats x pixels / mutations.
 
 use crate::accel::Accel;
+use crate::bsdf::dielectric::{Dielectric, ThinDielectric};
 use crate::bsdf::dielectric::{fresnel, thin_reflectance};
 use crate::bsdf::{Material, TransportMode, sample_direction};
 use crate::components::CAMERA_VERTEX;
@@ -239,7 +240,7 @@ impl<'a> PathSpace<'a> {
     /// the delta factor left out at a specular vertex.
     pub fn scatter_weight(&self, v: &Vertex, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
         match self.ctx.material(v) {
-            Material::Dielectric { ior } => match specular_lobe(v, wo, wi) {
+            Material::Dielectric(Dielectric { ior }) => match specular_lobe(v, wo, wi) {
                 Some(reflect) => {
                     let f = fresnel(wo.dot(v.ns), ior);
                     if reflect {
@@ -269,7 +270,7 @@ impl<'a> PathSpace<'a> {
                 }
             }
             // Thin glass: R' back, 1 - R' straight on, in either mode (no index change).
-            Material::ThinDielectric { ior } => match specular_lobe(v, wo, wi) {
+            Material::ThinDielectric(ThinDielectric { ior }) => match specular_lobe(v, wo, wi) {
                 Some(true) => Vec3::splat(thin_reflectance(wo.dot(v.ns), ior)),
                 Some(false) => Vec3::splat(1.0 - thin_reflectance(wo.dot(v.ns), ior)),
                 None => Vec3::ZERO,
@@ -296,8 +297,10 @@ impl<'a> PathSpace<'a> {
                 };
             }
             let reflectance = match self.ctx.material(v) {
-                Material::Dielectric { ior } => Some(fresnel(wo.dot(v.ns), ior)),
-                Material::ThinDielectric { ior } => Some(thin_reflectance(wo.dot(v.ns), ior)),
+                Material::Dielectric(Dielectric { ior }) => Some(fresnel(wo.dot(v.ns), ior)),
+                Material::ThinDielectric(ThinDielectric { ior }) => {
+                    Some(thin_reflectance(wo.dot(v.ns), ior))
+                }
                 _ => None,
             };
             if let Some(r) = reflectance {
@@ -542,15 +545,15 @@ impl<'a> PathSpace<'a> {
     /// wrong geometric side.
     pub fn follow_specular(&self, v: &Vertex, wo: Vec3, reflect: bool) -> Option<Vec3> {
         let ior = match self.ctx.material(v) {
-            Material::Dielectric { ior } => ior,
+            Material::Dielectric(Dielectric { ior }) => ior,
             // The plastic's delta lobe only reflects (its `eta` is not used below then).
             Material::Plastic(p) if v.delta && reflect => p.eta,
-            Material::ThinDielectric { ior } if !reflect => {
+            Material::ThinDielectric(ThinDielectric { ior }) if !reflect => {
                 // Straight on: -wo is on the other geometric side whatever the normals.
                 return (thin_reflectance(wo.dot(v.ns), ior) < 1.0 && wo.dot(v.ng) != 0.0)
                     .then_some(-wo);
             }
-            Material::ThinDielectric { ior } => ior,
+            Material::ThinDielectric(ThinDielectric { ior }) => ior,
             _ => return None,
         };
         let frame = Frame::from_normal(v.ns);

@@ -260,13 +260,13 @@ pub fn chains_follow(material: &crate::bsdf::Material) -> bool {
     match *material {
         // Rough glass at every roughness: a gather disc on a surface that transmits would
         // have to gather the photons of both its sides.
-        Material::Dielectric { .. }
-        | Material::ThinDielectric { .. }
-        | Material::RoughDielectric(_) => true,
+        Material::Dielectric(_) | Material::ThinDielectric(_) | Material::RoughDielectric(_) => {
+            true
+        }
         Material::Conductor(c) => c.max_alpha() < FOLLOW_ALPHA,
         // The smooth plastic gathers on its diffuse lobe; camera chains follow its delta
         // reflection by a per-chain choice (`extend_camera_chains`).
-        Material::Diffuse { .. } | Material::RoughPlastic(_) | Material::Plastic(_) => false,
+        Material::Diffuse(_) | Material::RoughPlastic(_) | Material::Plastic(_) => false,
     }
 }
 

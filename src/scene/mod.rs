@@ -21,6 +21,7 @@ pub use prepare::prepare;
 pub use world::SceneWorld;
 
 use crate::bsdf::Material;
+use crate::bsdf::diffuse::Diffuse;
 use glam::Vec3;
 use std::path::{Path, PathBuf};
 
@@ -282,9 +283,9 @@ pub fn is_at_infinity(triangle: u32) -> bool {
 }
 
 /// What a one-sided surface is from behind: it reflects nothing.
-pub const BLACK: Material = Material::Diffuse {
+pub const BLACK: Material = Material::Diffuse(Diffuse {
     reflectance: Vec3::ZERO,
-};
+});
 
 impl PreparedScene {
     /// The material of triangle `tri` as a ray arriving from `wo` (unit, pointing away from the
@@ -392,7 +393,7 @@ impl PreparedScene {
         let uv = self.uv_at(tri, p);
         let texture = |t: u32| &self.textures[t as usize];
         match &mut material {
-            Material::Diffuse { reflectance } => {
+            Material::Diffuse(Diffuse { reflectance }) => {
                 if let Some(t) = v.reflectance {
                     *reflectance = texture(t).eval(uv);
                 }
@@ -432,7 +433,7 @@ impl PreparedScene {
                     plastic.diffuse = texture(t).eval(uv);
                 }
             }
-            Material::Dielectric { .. } | Material::ThinDielectric { .. } => {}
+            Material::Dielectric(_) | Material::ThinDielectric(_) => {}
         }
         material
     }

@@ -7,6 +7,8 @@ use super::shapes::{self, Mesh};
 use super::{Camera, ParsedScene, SceneError};
 use crate::bsdf::Material;
 use crate::bsdf::conductor::Conductor;
+use crate::bsdf::dielectric::{Dielectric, ThinDielectric};
+use crate::bsdf::diffuse::Diffuse;
 use glam::{DAffine3, DQuat, Vec3};
 use hecs::{Entity, EntityBuilder, World};
 use std::collections::HashMap;
@@ -286,11 +288,13 @@ fn make_camera(desc: &CameraDesc) -> Result<Camera, String> {
 
 fn make_material(desc: &MaterialDesc) -> Material {
     match *desc {
-        MaterialDesc::Diffuse { reflectance } => Material::Diffuse {
+        MaterialDesc::Diffuse { reflectance } => Material::Diffuse(Diffuse {
             reflectance: reflectance.0,
-        },
-        MaterialDesc::Dielectric { ior } => Material::Dielectric { ior: ior.0 },
-        MaterialDesc::ThinDielectric { ior } => Material::ThinDielectric { ior: ior.0 },
+        }),
+        MaterialDesc::Dielectric { ior } => Material::Dielectric(Dielectric { ior: ior.0 }),
+        MaterialDesc::ThinDielectric { ior } => {
+            Material::ThinDielectric(ThinDielectric { ior: ior.0 })
+        }
         MaterialDesc::RoughPlastic {
             diffuse,
             alpha,

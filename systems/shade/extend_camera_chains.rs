@@ -211,12 +211,7 @@ crate::system! {
                     }
                     let frame = Frame::from_normal(ns);
                     let wo_local = frame.to_local(wo);
-                    if tree
-                        && matches!(
-                            material,
-                            Material::Dielectric { .. } | Material::ThinDielectric { .. }
-                        )
-                    {
+                    if tree && material.kind().is_delta() {
                         // Refraction (u = 1 is never below F), then reflection (u = 0 is
                         // below F unless F = 0); each weighs its Fresnel term: f cos, not
                         // divided by the probability of choosing it.

@@ -8,6 +8,7 @@
 //! (`tests/it/kernels.rs` renders both kernels and compares the films). The BSDFs' maths is not
 //! here: it is written once over `Real` (`crate::bsdf::diffuse`) and runs in lanes as it is.
 
+use crate::bsdf::diffuse::Diffuse;
 use crate::lanes::{F, Real, V3, lanes_of};
 use crate::math::Frame;
 use crate::sampling::{SampleKey, Sampler};
@@ -170,7 +171,7 @@ impl<const N: usize> DiffuseLanes<N> {
                 None => scene.uniform_material_seen(triangles[k], -dirs[k], surfaces.ng[k]),
             };
             match material {
-                crate::bsdf::Material::Diffuse { reflectance } => *r = reflectance,
+                crate::bsdf::Material::Diffuse(Diffuse { reflectance }) => *r = reflectance,
                 _ => return None,
             }
         }

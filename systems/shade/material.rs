@@ -2,7 +2,7 @@
 //! Lambertian surfaces, visible normals at conductors, Fresnel choice at glass and thin glass). The graph
 //! holds one of these per material kind its scene uses, each over its kind's contiguous queue.
 
-use super::surface::scatter_paths;
+use super::surface::ScatterPaths;
 use crate::bsdf::{Material, MaterialKind};
 use crate::components::Paths;
 use crate::components::Rays;
@@ -22,33 +22,16 @@ crate::system! {
         triangles: Vec<u32>, surfaces: Surfaces, materials: Vec<Material>, ranges: MaterialRanges;
     write rays: Rays, paths: Paths;
     run(this) {
-        let range = ranges.of(this.0);
-        match this.0 {
-            MaterialKind::Diffuse => scatter_paths::<{ MaterialKind::Diffuse as u8 }>(
-                data, sampler, *lanes, triangles, surfaces, materials, rays, paths, range,
-            ),
-            MaterialKind::Dielectric => scatter_paths::<{ MaterialKind::Dielectric as u8 }>(
-                data, sampler, *lanes, triangles, surfaces, materials, rays, paths, range,
-            ),
-            MaterialKind::Conductor => scatter_paths::<{ MaterialKind::Conductor as u8 }>(
-                data, sampler, *lanes, triangles, surfaces, materials, rays, paths, range,
-            ),
-            MaterialKind::RoughPlastic => scatter_paths::<{ MaterialKind::RoughPlastic as u8 }>(
-                data, sampler, *lanes, triangles, surfaces, materials, rays, paths, range,
-            ),
-            MaterialKind::RoughDielectric => {
-                scatter_paths::<{ MaterialKind::RoughDielectric as u8 }>(
-                    data, sampler, *lanes, triangles, surfaces, materials, rays, paths, range,
-                )
-            }
-            MaterialKind::Plastic => scatter_paths::<{ MaterialKind::Plastic as u8 }>(
-                data, sampler, *lanes, triangles, surfaces, materials, rays, paths, range,
-            ),
-            MaterialKind::ThinDielectric => {
-                scatter_paths::<{ MaterialKind::ThinDielectric as u8 }>(
-                    data, sampler, *lanes, triangles, surfaces, materials, rays, paths, range,
-                )
-            }
-        }
+        this.0.visit(ScatterPaths {
+            data,
+            sampler,
+            lanes: *lanes,
+            triangles,
+            surfaces,
+            looked_up: materials,
+            rays,
+            paths,
+            range: ranges.of(this.0),
+        })
     }
 }

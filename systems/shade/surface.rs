@@ -2,7 +2,10 @@
 //! emission: position with its error bound, normals, the shading frame and wo.
 
 use super::lanes::{DiffuseLanes, draw2, offset_origin};
-use crate::bsdf::{Material, MaterialKind, TransportMode, diffuse, sample_direction};
+use crate::bsdf::{
+    Bsdf, BsdfSample, KindVisitor, Material, MaterialKind, TransportMode, diffuse,
+    leaving_direction,
+};
 use crate::components::path_tracing::DIM_BSDF;
 use crate::components::path_tracing::bounce_dim;
 use crate::components::{PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView};
@@ -12,8 +15,9 @@ use crate::math::Frame;
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler};
 use crate::scene::SceneData;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::marker::PhantomData;
 use std::ops::Range;
 
 pub struct Surface {
@@ -120,49 +124,65 @@ pub fn material_looked_up(
         .material_seen(triangle, point.p, wo, point.ng, ns)
 }
 
-/// The scattering step every shading system shares, compiled once per material kind `KIND`
-/// (a `MaterialKind as u8`) so that each loop holds only its kind's BSDF code (about 1% of a
-/// PT render's instructions): at each path of `range` (all on materials of that kind) the
-/// surface's BSDF draws wi; the path's throughput, next ray and MIS state follow, or the path
-/// ends when the sample carries nothing or leaks through the surface. Lambertian paths go
-/// `lanes` at a time. Returns the flow (paths taken, paths that scatter on).
-#[allow(clippy::too_many_arguments)]
-#[inline]
-pub fn scatter_paths<const KIND: u8>(
-    data: &SceneData,
-    sampler: &Sampler,
-    lanes: LaneWidth,
-    triangles: &[u32],
-    surfaces: &Surfaces,
-    looked_up: &[Material],
-    rays: &mut Rays,
-    paths: &mut Paths,
-    range: Range<usize>,
-) -> Flow {
-    let taken = range.len();
-    let rays = rays.chunks_mut(range.clone());
-    let paths = paths.chunks_mut(range);
-    let scattered: usize = rays
-        .into_par_iter()
-        .zip(paths)
-        .map(|(r, p)| {
-            let chunk = ScatterChunk::<KIND> {
-                data,
-                sampler,
-                triangles,
-                surfaces,
-                looked_up,
-                r,
-                p,
-            };
-            run_lanes(lanes, chunk)
-        })
-        .sum();
-    Flow::new(taken, scattered)
+/// The scattering step every shading system shares, over the paths of `range` (all on
+/// materials of one kind): at each path the surface's BSDF draws wi; the path's throughput,
+/// next ray and MIS state follow, or the path ends when the sample carries nothing or leaks
+/// through the surface. Lambertian paths go `lanes` at a time. A `KindVisitor`: compiled once
+/// per material type so that each loop holds only its kind's BSDF code (about 1% of a PT
+/// render's instructions); visiting returns the flow (paths taken, paths that scatter on).
+pub struct ScatterPaths<'a> {
+    pub data: &'a SceneData,
+    pub sampler: &'a Sampler<'a>,
+    pub lanes: LaneWidth,
+    pub triangles: &'a [u32],
+    pub surfaces: &'a Surfaces,
+    pub looked_up: &'a [Material],
+    pub rays: &'a mut Rays,
+    pub paths: &'a mut Paths,
+    pub range: Range<usize>,
+}
+
+impl KindVisitor for ScatterPaths<'_> {
+    type Output = Flow;
+    #[inline]
+    fn visit<B: Bsdf>(self) -> Flow {
+        let ScatterPaths {
+            data,
+            sampler,
+            lanes,
+            triangles,
+            surfaces,
+            looked_up,
+            rays,
+            paths,
+            range,
+        } = self;
+        let taken = range.len();
+        let rays = rays.chunks_mut(range.clone());
+        let paths = paths.chunks_mut(range);
+        let scattered: usize = rays
+            .into_par_iter()
+            .zip(paths)
+            .map(|(r, p)| {
+                let chunk = ScatterChunk::<B> {
+                    data,
+                    sampler,
+                    triangles,
+                    surfaces,
+                    looked_up,
+                    r,
+                    p,
+                    bsdf: PhantomData,
+                };
+                run_lanes(lanes, chunk)
+            })
+            .sum();
+        Flow::new(taken, scattered)
+    }
 }
 
 /// The scattering step's work over one chunk, for `run_lanes`.
-struct ScatterChunk<'a, const KIND: u8> {
+struct ScatterChunk<'a, B> {
     data: &'a SceneData,
     sampler: &'a Sampler<'a>,
     triangles: &'a [u32],
@@ -170,9 +190,10 @@ struct ScatterChunk<'a, const KIND: u8> {
     looked_up: &'a [Material],
     r: RaysChunk<'a>,
     p: PathsChunk<'a>,
+    bsdf: PhantomData<fn() -> B>,
 }
 
-impl<const KIND: u8> LaneKernel for ScatterChunk<'_, KIND> {
+impl<B: Bsdf> LaneKernel for ScatterChunk<'_, B> {
     type Output = usize;
     #[inline(always)]
     fn run<const N: usize>(self) -> usize {
@@ -184,14 +205,15 @@ impl<const KIND: u8> LaneKernel for ScatterChunk<'_, KIND> {
             looked_up,
             r,
             p,
+            bsdf: _,
         } = self;
-        scatter_chunk::<KIND, N>(data, sampler, triangles, surfaces, looked_up, r, p)
+        scatter_chunk::<B, N>(data, sampler, triangles, surfaces, looked_up, r, p)
     }
 }
 
 /// The scattering step at the paths of one chunk; returns the number that scatter on.
 #[inline(always)]
-fn scatter_chunk<const KIND: u8, const N: usize>(
+fn scatter_chunk<B: Bsdf, const N: usize>(
     data: &SceneData,
     sampler: &Sampler,
     triangles: &[u32],
@@ -206,7 +228,7 @@ fn scatter_chunk<const KIND: u8, const N: usize>(
     let (triangles, surfaces) = (&triangles[range.clone()], surfaces.view(range));
     // Lambertian paths N at a time (the rest one by one, below).
     let mut first = 0;
-    if KIND == MaterialKind::Diffuse as u8 {
+    if B::KIND == MaterialKind::Diffuse {
         while first + N <= p.len() {
             let i = first;
             let Some(surf) = DiffuseLanes::<N>::at(data, &surfaces, looked_up, triangles, r.dir, i)
@@ -236,17 +258,17 @@ fn scatter_chunk<const KIND: u8, const N: usize>(
     }
     for (i, &triangle) in triangles.iter().enumerate().skip(first) {
         let surf = Surface::at(data, &surfaces, looked_up, triangle, i, r.dir[i]);
-        // The material queue holds only this kind; saying so lets the compiler drop the
-        // other kinds' arms of the inlined BSDF sample.
-        if surf.material.kind() as u8 != KIND {
+        // The material queue holds only this kind: its own type's sample runs, no dispatch.
+        let Some(bsdf) = B::of(&surf.material) else {
             debug_assert!(
                 false,
                 "a path of another material kind in this kind's queue"
             );
             p.flags[i].set(PathFlags::DEAD, true);
             continue;
-        }
-        match scatter(sampler, &surf, p.key[i], p.depth[i]) {
+        };
+        let sample = |wo, u| bsdf.sample(wo, u, TransportMode::Radiance);
+        match scatter_by(sampler, &surf, p.key[i], p.depth[i], sample) {
             Some(next) => {
                 p.throughput[i] *= next.weight;
                 p.bsdf_pdf[i] = next.pdf;
@@ -279,16 +301,24 @@ pub struct Scattered {
 /// (`systems/trace/paths.rs`).
 #[inline(always)]
 pub fn scatter(sampler: &Sampler, surf: &Surface, key: SampleKey, depth: u32) -> Option<Scattered> {
+    let sample = |wo, u| surf.material.sample(wo, u, TransportMode::Radiance);
+    scatter_by(sampler, surf, key, depth, sample)
+}
+
+/// `scatter` with the BSDF sample drawn by `sample` (from wo in the shading frame and the
+/// path's two numbers): the material's, or where the caller knows the material's type, that
+/// type's own.
+#[inline(always)]
+fn scatter_by(
+    sampler: &Sampler,
+    surf: &Surface,
+    key: SampleKey,
+    depth: u32,
+    sample: impl FnOnce(Vec3, Vec2) -> Option<BsdfSample>,
+) -> Option<Scattered> {
     let u = sampler.get2(key, bounce_dim(depth) + DIM_BSDF);
-    let (bs, wi) = sample_direction(
-        &surf.material,
-        &surf.frame,
-        surf.ng,
-        surf.wo,
-        surf.wo_local,
-        u,
-        TransportMode::Radiance,
-    )?;
+    let bs = sample(surf.wo_local, u)?;
+    let (bs, wi) = leaving_direction(bs, &surf.frame, surf.ng, surf.wo, surf.wo_local)?;
     let weight = bs.value * bs.wi.z.abs() / bs.pdf;
     (weight.max_element() > 0.0).then(|| Scattered {
         weight,

@@ -4,11 +4,13 @@
 
 use glam::{DVec3, Vec2, Vec3};
 use stagelight::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
+use stagelight::bsdf::dielectric::{Dielectric, ThinDielectric};
+use stagelight::bsdf::diffuse::Diffuse;
 use stagelight::bsdf::plastic::RoughPlastic;
 use stagelight::bsdf::smooth_plastic::{
     FIT_MAX_ETA, SmoothPlastic, fresnel_diffuse_reflectance, internal_reflectance,
 };
-use stagelight::bsdf::{Material, TransportMode, conductor, dielectric};
+use stagelight::bsdf::{Bsdf, Material, TransportMode, conductor, dielectric};
 use stagelight::sampling::SampleKey;
 use std::f64::consts::PI;
 
@@ -428,9 +430,9 @@ fn chi2_test_over(
 
 #[test]
 fn chi2_diffuse() {
-    let m = Material::Diffuse {
+    let m = Material::Diffuse(Diffuse {
         reflectance: Vec3::new(0.8, 0.5, 0.2),
-    };
+    });
     for (stream, (theta, phi)) in [(0.0, 0.0), (89.0, 200.0), (120.0, 45.0)]
         .into_iter()
         .enumerate()
@@ -863,9 +865,9 @@ fn test_wos() -> Vec<Vec3> {
 
 #[test]
 fn sample_matches_eval_and_pdf() {
-    let mut materials = vec![Material::Diffuse {
+    let mut materials = vec![Material::Diffuse(Diffuse {
         reflectance: Vec3::new(0.7, 0.6, 0.5),
-    }];
+    })];
     for alpha in [1e-4, 1e-3, 0.01, 0.1, 0.5, 1.0] {
         for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
             materials.push(conductor_of(distribution, alpha));
@@ -880,7 +882,7 @@ fn sample_matches_eval_and_pdf() {
     for (mi, m) in materials.iter().enumerate() {
         for (wi_idx, &wo0) in test_wos().iter().enumerate() {
             // Diffuse reflects on both sides: test below the surface too.
-            let sides: &[f32] = if matches!(m, Material::Diffuse { .. }) {
+            let sides: &[f32] = if matches!(m, Material::Diffuse(_)) {
                 &[1.0, -1.0]
             } else {
                 &[1.0]
@@ -1153,11 +1155,11 @@ fn anisotropic_conductor_turns_with_its_axis() {
             for (i, wo) in test_wos().into_iter().enumerate() {
                 for j in 0..200 {
                     let u = u2(23, i as u64, j);
-                    let Some(s) = turned.sample(wo, u) else {
+                    let Some(s) = turned.sample(wo, u, TransportMode::Radiance) else {
                         continue;
                     };
                     let (f, p) = (
-                        straight.eval(unturn(wo), unturn(s.wi)),
+                        straight.eval(unturn(wo), unturn(s.wi), TransportMode::Radiance),
                         straight.pdf(unturn(wo), unturn(s.wi)),
                     );
                     for c in 0..3 {
@@ -1180,7 +1182,10 @@ fn anisotropic_conductor_turns_with_its_axis() {
             (dir_deg(40.0, 10.0), dir_deg(35.0, 200.0)),
             (dir_deg(70.0, 80.0), dir_deg(20.0, 250.0)),
         ] {
-            let (a, b) = (turned.eval(wo, wi), swapped.eval(wo, wi));
+            let (a, b) = (
+                turned.eval(wo, wi, TransportMode::Radiance),
+                swapped.eval(wo, wi, TransportMode::Radiance),
+            );
             assert!(
                 (a - b).abs().max_element() <= 1e-5 * b.max_element(),
                 "{a} vs {b}"
@@ -1317,7 +1322,7 @@ fn conductor_matches_mitsuba_eval_and_pdf() {
 #[test]
 fn diffuse_albedo_is_reflectance() {
     let r = Vec3::new(0.725, 0.71, 0.68);
-    let m = Material::Diffuse { reflectance: r };
+    let m = Material::Diffuse(Diffuse { reflectance: r });
     for wo in [dir_deg(0.0, 0.0), dir_deg(70.0, 5.0), dir_deg(150.0, 80.0)] {
         let n = 10_000;
         let mut sum = Vec3::ZERO;
@@ -1338,9 +1343,9 @@ fn diffuse_albedo_is_reflectance() {
 #[test]
 fn reciprocity_diffuse_and_conductor() {
     let materials = [
-        Material::Diffuse {
+        Material::Diffuse(Diffuse {
             reflectance: Vec3::new(0.5, 0.4, 0.3),
-        },
+        }),
         conductor_of(Microfacet::Ggx, 0.05),
         conductor_of(Microfacet::Ggx, 0.7),
         // Beckmann's D is exactly 0 beyond tan theta_h = 9.3 alpha: 0.05 would leave too few
@@ -1440,7 +1445,7 @@ fn fresnel_values() {
 #[test]
 fn dielectric_lobe_frequencies_and_directions() {
     let ior = 1.5f32;
-    let m = Material::Dielectric { ior };
+    let m = Material::Dielectric(Dielectric { ior });
     // (theta of wo in degrees; > 90 means inside).
     let thetas = [
         0.0, 30.0, 60.0, 80.0, 89.0, 180.0, 160.0, 140.0, 139.0, 138.5, 120.0,
@@ -1487,7 +1492,7 @@ fn dielectric_energy() {
         for i in 0..200 {
             let k = SampleKey::new(29, 0, i);
             let wo = stagelight::sampling::uniform_sphere(k.get2(0));
-            let m = Material::Dielectric { ior };
+            let m = Material::Dielectric(Dielectric { ior });
             let (n_o, n_t) = if wo.z >= 0.0 { (1.0, ior) } else { (ior, 1.0) };
             let f = dielectric::fresnel(wo.z, ior);
             // u = 0 picks reflection when F > 0; u just below 1 picks refraction when F < 1.
@@ -1523,7 +1528,7 @@ fn dielectric_energy() {
 #[test]
 fn dielectric_total_internal_reflection() {
     let ior = 1.5f32;
-    let m = Material::Dielectric { ior };
+    let m = Material::Dielectric(Dielectric { ior });
     let crit = (1.0 / ior as f64).asin().to_degrees();
     for theta_in in [crit + 1e-4, crit + 0.5, crit + 10.0, 89.0, 89.999] {
         let wo = dir_deg(180.0 - theta_in, 10.0);
@@ -1953,9 +1958,9 @@ fn thin_dielectric_matches_mitsuba_sample() {
         ),
     ];
     for (int_ior, by_theta) in cases {
-        let m = Material::ThinDielectric {
+        let m = Material::ThinDielectric(ThinDielectric {
             ior: int_ior / 1.000_277,
-        };
+        });
         for (theta, r) in by_theta {
             let wo = dir_deg(theta, 20.0);
             for mode in [TransportMode::Radiance, TransportMode::Importance] {
@@ -2000,7 +2005,7 @@ fn thin_dielectric_sums_its_internal_reflections() {
                 "ior {ior} theta {theta}: R' {got}, series {series}, from behind {from_behind}"
             );
             // One choice in [0, 1): reflection below R', straight through above.
-            let m = Material::ThinDielectric { ior };
+            let m = Material::ThinDielectric(ThinDielectric { ior });
             let wo = dir_deg(theta, 0.0);
             let n = 20_000u64;
             let reflected = (0..n)
@@ -2075,14 +2080,14 @@ fn check_material_finite(m: Material) {
 
 #[test]
 fn stability_all_materials() {
-    check_material_finite(Material::Diffuse {
+    check_material_finite(Material::Diffuse(Diffuse {
         reflectance: Vec3::splat(0.5),
-    });
+    }));
     for ior in [1.0f32, 1.5, 2.4, 1.0 / 1.5] {
-        check_material_finite(Material::Dielectric { ior });
+        check_material_finite(Material::Dielectric(Dielectric { ior }));
     }
     for ior in [1.0f32, 1.0001, 1.5, 4.0, 1.0 / 1.5] {
-        check_material_finite(Material::ThinDielectric { ior });
+        check_material_finite(Material::ThinDielectric(ThinDielectric { ior }));
     }
     for eta in [1.0001f32, 1.49, 4.0, 1.0 / 1.5] {
         for nonlinear in [false, true] {
@@ -2119,7 +2124,7 @@ fn stability_all_materials() {
         for alpha in [1e-4f32, 1e-3, 1.0] {
             for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
                 let m = Conductor::isotropic(distribution, alpha, Vec3::ONE, GOLD);
-                let (f, p) = (m.eval(wo, wi), m.pdf(wo, wi));
+                let (f, p) = (m.eval(wo, wi, TransportMode::Radiance), m.pdf(wo, wi));
                 assert!(
                     f.is_finite() && p.is_finite() && p > 0.0,
                     "{distribution:?} alpha {alpha} z {z}"

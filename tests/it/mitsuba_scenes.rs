@@ -6,6 +6,8 @@ use crate::common::{stagelight, stderr, temp_dir};
 use glam::Vec3;
 use stagelight::bsdf::Material;
 use stagelight::bsdf::conductor::{ALPHA_MIN, ComplexIor, Conductor, Microfacet};
+use stagelight::bsdf::dielectric::ThinDielectric;
+use stagelight::bsdf::diffuse::Diffuse;
 use stagelight::scene::lights::PointProfile;
 use stagelight::scene::mitsuba::build::file_settings;
 use stagelight::scene::{self, Limits, PreparedScene};
@@ -1218,9 +1220,9 @@ fn material_of(bsdf: &str) -> Material {
         .materials
         .iter()
         .filter(|m| {
-            **m != Material::Diffuse {
+            **m != Material::Diffuse(Diffuse {
                 reflectance: Vec3::ZERO,
-            }
+            })
         })
         .copied()
         .collect();
@@ -1247,7 +1249,7 @@ fn thin_dielectric_parameters_read_as_mitsuba_reads_them() {
     ];
     for (bsdf, ior) in cases {
         match material_of(bsdf) {
-            Material::ThinDielectric { ior: got } => {
+            Material::ThinDielectric(ThinDielectric { ior: got }) => {
                 assert!((got - ior).abs() < 1e-6, "{bsdf}: ior {got}, want {ior}")
             }
             other => panic!("{bsdf}: {other:?}"),
@@ -1337,7 +1339,7 @@ fn thin_glass_agrees_with_mitsuba_in_every_integrator() {
     let sheets = scene
         .materials
         .iter()
-        .filter(|m| matches!(m, Material::ThinDielectric { .. }))
+        .filter(|m| matches!(m, Material::ThinDielectric(_)))
         .count();
     assert_eq!(sheets, 3);
     let reference =

@@ -9,14 +9,18 @@
 use glam::Vec3;
 use stagelight::bsdf::Material;
 use stagelight::bsdf::conductor::Conductor;
+use stagelight::bsdf::dielectric::Dielectric;
+use stagelight::bsdf::diffuse::Diffuse;
 use stagelight::scene::{self, FLAT, NO_EMITTER, PreparedScene};
 use std::collections::{BTreeMap, HashMap};
 use std::path::Path;
 
 /// What a reference material name means: the material and the radiance, if it emits.
 fn expected_material(scene: &str, name: &str) -> (Material, Option<Vec3>) {
-    let diffuse = |r, g, b| Material::Diffuse {
-        reflectance: Vec3::new(r, g, b),
+    let diffuse = |r, g, b| {
+        Material::Diffuse(Diffuse {
+            reflectance: Vec3::new(r, g, b),
+        })
     };
     let black = diffuse(0.0, 0.0, 0.0);
     match (scene, name) {
@@ -25,14 +29,14 @@ fn expected_material(scene: &str, name: &str) -> (Material, Option<Vec3>) {
         ("cornell_box", "green") => (diffuse(0.14, 0.45, 0.091), None),
         ("cornell_box", "light") => (black, Some(Vec3::new(17.0, 12.0, 4.0))),
         ("torus_glass", "floor") => (diffuse(0.5, 0.5, 0.5), None),
-        ("torus_glass", "glass") => (Material::Dielectric { ior: 1.5 }, None),
+        ("torus_glass", "glass") => (Material::Dielectric(Dielectric { ior: 1.5 }), None),
         ("torus_glass", "torus") => (diffuse(0.8, 0.5, 0.2), None),
         ("torus_glass", "light") => (black, Some(Vec3::splat(200.0))),
         ("door_ajar", "wall") => (diffuse(0.75, 0.75, 0.75), None),
         ("door_ajar", "floor") => (diffuse(0.45, 0.40, 0.35), None),
         ("door_ajar", "door") => (diffuse(0.6, 0.5, 0.4), None),
         ("door_ajar", "table") => (diffuse(0.4, 0.25, 0.15), None),
-        ("door_ajar", "glass") => (Material::Dielectric { ior: 1.5 }, None),
+        ("door_ajar", "glass") => (Material::Dielectric(Dielectric { ior: 1.5 }), None),
         ("door_ajar", "metal") => (
             Material::Conductor(Conductor::ggx(0.1, Vec3::new(1.0, 0.78, 0.34))),
             None,

@@ -4,6 +4,8 @@
 use crate::common::scene_path;
 use glam::Vec3;
 use stagelight::bsdf::conductor::Conductor;
+use stagelight::bsdf::dielectric::Dielectric;
+use stagelight::bsdf::diffuse::Diffuse;
 use stagelight::bsdf::{Material, MaterialKind};
 use stagelight::scene::{self, FLAT, NO_EMITTER, PreparedScene};
 use std::collections::BTreeSet;
@@ -103,9 +105,9 @@ fn cornell_box() {
         assert_eq!(l, Vec3::new(17.0, 12.0, 4.0));
         assert_eq!(
             s.materials[s.triangles.material[t as usize] as usize],
-            Material::Diffuse {
+            Material::Diffuse(Diffuse {
                 reflectance: Vec3::ZERO
-            }
+            })
         );
     }
     // Two equal halves: equal probabilities.
@@ -134,7 +136,10 @@ fn torus_glass() {
         kinds(&s),
         BTreeSet::from([MaterialKind::Diffuse, MaterialKind::Dielectric])
     );
-    assert!(s.materials.contains(&Material::Dielectric { ior: 1.5 }));
+    assert!(
+        s.materials
+            .contains(&Material::Dielectric(Dielectric { ior: 1.5 }))
+    );
     for &t in &s.emitters.triangle {
         assert_vec_near(normal(&s, t as usize), -Vec3::Y, 1e-6);
     }
@@ -145,9 +150,9 @@ fn torus_glass() {
     // The torus: every vertex at distance r = 0.25 from its centre circle (radius 0.6 in the
     // plane tilted 30 degrees about x, centred at (0, 1.01, 0)).
     let torus = s.materials.iter().position(|m| {
-        *m == Material::Diffuse {
+        *m == Material::Diffuse(Diffuse {
             reflectance: Vec3::new(0.8, 0.5, 0.2),
-        }
+        })
     });
     let torus = torus.unwrap() as u32;
     let (sin, cos) = 30f32.to_radians().sin_cos();
@@ -240,9 +245,9 @@ fn furnace() {
     assert_vec_near(s.bounds_max, Vec3::splat(1.0), 1e-6);
     assert_eq!(
         s.materials,
-        vec![Material::Diffuse {
+        vec![Material::Diffuse(Diffuse {
             reflectance: Vec3::splat(0.5)
-        }]
+        })]
     );
     assert!(s.triangles.vertex_normals.is_empty());
     // Every triangle faces inward (toward the camera at the centre) and emits (1, 1, 1).

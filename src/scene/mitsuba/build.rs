@@ -12,6 +12,8 @@ use super::document::{
 };
 use crate::bsdf::Material;
 use crate::bsdf::conductor::{ComplexIor, Conductor, Microfacet};
+use crate::bsdf::dielectric::{Dielectric, ThinDielectric};
+use crate::bsdf::diffuse::Diffuse;
 use crate::bsdf::plastic::RoughPlastic;
 use crate::bsdf::rough_dielectric::RoughDielectric;
 use crate::bsdf::smooth_plastic::SmoothPlastic;
@@ -912,10 +914,10 @@ impl<'a> Builder<'a> {
             Material::RoughPlastic(p) => p.two_sided = true,
             Material::Plastic(p) => p.two_sided = true,
             // Lambertian reflection is two-sided in the engine already.
-            Material::Diffuse { .. }
-            | Material::Dielectric { .. }
+            Material::Diffuse(_)
+            | Material::Dielectric(_)
             | Material::RoughDielectric(_)
-            | Material::ThinDielectric { .. } => {}
+            | Material::ThinDielectric(_) => {}
         }
         Ok(material)
     }
@@ -978,7 +980,7 @@ impl<'a> Builder<'a> {
                             format!("thindielectric: int_ior / ext_ior = {ratio} must be positive"),
                         ));
                     }
-                    Material::ThinDielectric { ior: ratio }
+                    Material::ThinDielectric(ThinDielectric { ior: ratio })
                 } else {
                     if !(ratio.is_finite() && ratio > 0.0) || ratio == 1.0 {
                         return Err(XmlError::at(
@@ -988,7 +990,7 @@ impl<'a> Builder<'a> {
                             ),
                         ));
                     }
-                    Material::Dielectric { ior: ratio }
+                    Material::Dielectric(Dielectric { ior: ratio })
                 }
             }
             "conductor" | "roughconductor" => {
@@ -1332,16 +1334,16 @@ impl<'a> Builder<'a> {
             }
             // Read by `reflectance_texture_of`; the constant stands for it in the material.
             params.finish()?;
-            return Ok(Material::Diffuse {
+            return Ok(Material::Diffuse(Diffuse {
                 reflectance: Vec3::splat(0.5),
-            });
+            }));
         }
         let reflectance = params
             .color("reflectance", Role::Reflectance)?
             .map(|(c, _)| c)
             .unwrap_or(Vec3::splat(0.5));
         params.finish()?;
-        Ok(Material::Diffuse { reflectance })
+        Ok(Material::Diffuse(Diffuse { reflectance }))
     }
 
     fn area_emitter(&self, id: usize) -> Result<Vec3, XmlError> {
@@ -1926,9 +1928,9 @@ impl<'a> Builder<'a> {
                             name: "the default BSDF of emitters (black)".into(),
                             order: 0,
                         },
-                        Material::Diffuse {
+                        Material::Diffuse(Diffuse {
                             reflectance: Vec3::ZERO,
-                        },
+                        }),
                     ));
                     self.default_material = Some(e);
                     e
@@ -1944,9 +1946,9 @@ impl<'a> Builder<'a> {
                             name: "the default BSDF (one-sided diffuse 0.5)".into(),
                             order: 0,
                         },
-                        Material::Diffuse {
+                        Material::Diffuse(Diffuse {
                             reflectance: Vec3::splat(0.5),
-                        },
+                        }),
                         OneSided,
                     ));
                     self.default_diffuse = Some(e);

@@ -10,6 +10,8 @@
 
 use crate::bsdf::Material;
 use crate::bsdf::conductor::{ComplexIor, Microfacet};
+use crate::bsdf::dielectric::{Dielectric, ThinDielectric};
+use crate::bsdf::diffuse::Diffuse;
 use crate::scene::Camera;
 use crate::scene::world::{
     Emission, FlipNormals, MaterialInfo, MaterialRef, ObjectInfo, SceneWorld, Shape, Transform,
@@ -158,7 +160,7 @@ fn alphas_xml(alpha_u: f32, alpha_v: f32) -> String {
 fn bsdf_xml(material: &Material, id: &str) -> String {
     let rgb = |v: Vec3| format!("{}, {}, {}", float(v.x), float(v.y), float(v.z));
     match *material {
-        Material::Diffuse { reflectance } => format!(
+        Material::Diffuse(Diffuse { reflectance }) => format!(
             "    <bsdf type=\"twosided\" id=\"{id}\">\n        <bsdf type=\"diffuse\">\n            \
              <rgb name=\"reflectance\" value=\"{}\"/>\n        </bsdf>\n    </bsdf>",
             rgb(reflectance)
@@ -201,12 +203,12 @@ fn bsdf_xml(material: &Material, id: &str) -> String {
             rgb(p.specular),
             p.nonlinear
         ),
-        Material::Dielectric { ior } => format!(
+        Material::Dielectric(Dielectric { ior }) => format!(
             "    <bsdf type=\"dielectric\" id=\"{id}\">\n        <float name=\"int_ior\" value=\"{}\"/>\n        \
              <float name=\"ext_ior\" value=\"1\"/>\n    </bsdf>",
             float(ior)
         ),
-        Material::ThinDielectric { ior } => format!(
+        Material::ThinDielectric(ThinDielectric { ior }) => format!(
             "    <bsdf type=\"thindielectric\" id=\"{id}\">\n        <float name=\"int_ior\" value=\"{}\"/>\n        \
              <float name=\"ext_ior\" value=\"1\"/>\n    </bsdf>",
             float(ior)
