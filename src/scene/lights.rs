@@ -121,9 +121,13 @@ pub struct Projector {
     /// Half the image's width and height on the plane z = 1: tan of half the fields of view.
     pub tan_x: f32,
     pub tan_y: f32,
-    /// Index into `Emitters::projected_textures`.
+    /// Index into `Emitters::projected_textures`, or `NO_TEXTURE` where the irradiance is
+    /// one colour (then in the light's intensity).
     pub texture: u32,
 }
+
+/// `Projector::texture` of a projector whose irradiance is one colour.
+pub const NO_TEXTURE: u32 = u32::MAX;
 
 impl Projector {
     /// The image's area on the plane z = 1: the integral of 1 / cos^3 over the frustum's
@@ -173,14 +177,18 @@ impl PointProfile {
                 }
             }
             PointProfile::Projector(projector) => match projector.uv(w) {
-                Some((uv, cos)) => (1.0 / (cos * cos * cos), Some((projector.texture, uv))),
+                Some((uv, cos)) => {
+                    let texture =
+                        (projector.texture != NO_TEXTURE).then_some((projector.texture, uv));
+                    (1.0 / (cos * cos * cos), texture)
+                }
                 None => (0.0, None),
             },
         }
     }
 
-    /// The solid angle the intensity covers, weighted by the fraction `towards` gives (the
-    /// texture aside): power = intensity x this x the texture's mean.
+    /// The solid angle the intensity covers, weighted by the fraction `towards` gives: power =
+    /// intensity x this, a projected texture left out (as light selection counts it).
     pub fn weighted_solid_angle(&self) -> f64 {
         match self {
             PointProfile::Uniform => 4.0 * std::f64::consts::PI,

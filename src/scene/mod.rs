@@ -160,24 +160,6 @@ impl Emitters {
         self.radiance[e] * self.profile_towards(e, w)
     }
 
-    /// The solid angle point light `e` covers, weighted by its profile and by the mean of the
-    /// texture it projects: its power is its intensity times this.
-    pub fn weighted_solid_angle(&self, e: usize) -> f64 {
-        let profile = &self.profile[e];
-        let projected = match profile {
-            lights::PointProfile::Spot(lights::Spot {
-                projection: Some(p),
-                ..
-            }) => Some(p.texture),
-            lights::PointProfile::Projector(p) => Some(p.texture),
-            _ => None,
-        };
-        let mean = projected
-            .and_then(|t| self.projected_textures.get(t as usize))
-            .map_or(1.0, |t| f64::from(t.mean()));
-        profile.weighted_solid_angle() * mean
-    }
-
     /// The fraction of point light `e`'s intensity it sends towards unit direction `w`, per
     /// channel: its profile's (a spot's falloff, a projector's 1 / cos^3) times the texture it
     /// projects there.

@@ -329,7 +329,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         emitters.area.push(1.0);
         emitters.position.push(position);
         emitters.profile.push(light.profile);
-        let solid_angle = emitters.weighted_solid_angle(emitters.profile.len() - 1);
+        let solid_angle = light.profile.weighted_solid_angle();
         power += solid_angle * light.intensity.as_dvec3();
         if power.max_element() > super::MAX_POWER {
             return Err(error(
@@ -502,7 +502,7 @@ fn build_distribution(emitters: &mut Emitters, receiving_area: f64) {
                 // A directional light: `l` is its irradiance.
                 0.25 * receiving_area * l.as_dvec3()
             } else if triangle & super::POINT_LIGHT != 0 {
-                emitters.weighted_solid_angle(e) * l.as_dvec3()
+                emitters.profile[e].weighted_solid_angle() * l.as_dvec3()
             } else {
                 PI * area as f64 * l.as_dvec3()
             }

@@ -117,21 +117,6 @@ pub struct Texture {
 }
 
 impl Texture {
-    /// A colour as a one-texel image (what a projector reads a constant irradiance as: its
-    /// resolution, and so its aspect, is 1 x 1, as Mitsuba's constant textures report).
-    pub fn constant(c: Vec3) -> Texture {
-        Texture {
-            pattern: Pattern::Bitmap(Bitmap {
-                width: 1,
-                height: 1,
-                texels: Arc::new(vec![c]),
-                filter: Filter::Nearest,
-                wrap: Wrap::Repeat,
-            }),
-            to_uv: UvTransform::IDENTITY,
-        }
-    }
-
     /// Width and height in texels (1 x 1 for a pattern without an image, as Mitsuba has it).
     pub fn resolution(&self) -> (usize, usize) {
         match &self.pattern {

@@ -18,7 +18,7 @@ use crate::bsdf::plastic::RoughPlastic;
 use crate::bsdf::rough_dielectric::RoughDielectric;
 use crate::bsdf::smooth_plastic::SmoothPlastic;
 use crate::scene::filter::{Gaussian, PixelFilter};
-use crate::scene::lights::{PointProfile, Projector, SpotProjection};
+use crate::scene::lights::{NO_TEXTURE, PointProfile, Projector, SpotProjection};
 use crate::scene::shapes::Mesh;
 use crate::scene::textures::{Bitmap, Filter, Pattern, Texture, UvTransform, Wrap, read_image};
 use crate::scene::world::{
@@ -1504,14 +1504,14 @@ impl<'a> Builder<'a> {
         }
         let object = self.object(id);
         let constant = params.color("irradiance", Role::Unbounded)?;
-        let texture = match (image, constant) {
+        let (texture, colour) = match (image, constant) {
             (Some(_), Some((_, spot))) => {
                 return Err(XmlError::at(
                     &spot,
                     "projector: irradiance given twice (a texture and a value)",
                 ));
             }
-            (Some(t), None) => t,
+            (Some(t), None) => (Some(t), Vec3::ONE),
             (None, Some((c, spot))) => {
                 if !c.is_finite() || c.min_element() < 0.0 {
                     return Err(XmlError::at(
@@ -1522,7 +1522,9 @@ impl<'a> Builder<'a> {
                         ),
                     ));
                 }
-                Texture::constant(c)
+                // One colour: Mitsuba's constant texture, of resolution 1 x 1, in the
+                // intensity (and so in the power that light selection counts).
+                (None, c)
             }
             (None, None) => {
                 return Err(XmlError::at(
@@ -1541,7 +1543,7 @@ impl<'a> Builder<'a> {
             Some((v, _)) => v,
             None => 1.0,
         };
-        let (width, height) = texture.resolution();
+        let (width, height) = texture.as_ref().map_or((1, 1), Texture::resolution);
         let aspect = width as f64 / height as f64;
         let fov_y = perspective_fov_y(object, &mut params, aspect)?;
         let (matrix, spot) = params
@@ -1567,17 +1569,17 @@ impl<'a> Builder<'a> {
             to_world: linear.as_mat3(),
             tan_x: (tan_y * aspect) as f32,
             tan_y: tan_y as f32,
-            texture: u32::MAX,
+            texture: NO_TEXTURE,
         };
         self.point_lights += 1;
         Ok((
             PointLight {
                 position: matrix.w_axis.truncate(),
-                intensity: Vec3::splat((std::f64::consts::PI * scale) as f32),
+                intensity: colour * (std::f64::consts::PI * scale) as f32,
                 profile: PointProfile::Projector(projector),
                 order: self.point_lights,
             },
-            Some(ProjectedTexture(texture)),
+            texture.map(ProjectedTexture),
         ))
     }
 
