@@ -966,7 +966,8 @@ fn a_top_level_texture_is_shared_by_reference() {
          <shape type=\"rectangle\"><transform name=\"to_world\"><translate z=\"-1\"/></transform>\n\
          <bsdf type=\"twosided\"><bsdf type=\"diffuse\"><ref name=\"reflectance\" id=\"checks\"/></bsdf></bsdf></shape>",
     );
-    let path = temp_dir("mitsuba-texture-ref").join("a.xml");
+    let scratch = temp_dir("mitsuba-texture-ref");
+    let path = scratch.join("a.xml");
     let scene = scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine())
         .unwrap()
         .0;
@@ -1002,7 +1003,8 @@ fn textured_and_anisotropic_roughconductors_are_read_per_point() {
          <bsdf type=\"roughconductor\"><float name=\"alpha_u\" value=\"0.2\"/><float name=\"alpha_v\" value=\"0.2\"/></bsdf>\n\
          <emitter type=\"area\"><rgb name=\"radiance\" value=\"1\"/></emitter></shape>",
     );
-    let path = temp_dir("mitsuba-textured-conductor").join("a.xml");
+    let scratch = temp_dir("mitsuba-textured-conductor");
+    let path = scratch.join("a.xml");
     let scene = scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine())
         .unwrap()
         .0;
@@ -1076,7 +1078,8 @@ fn twosided_conductors_and_plastics_reflect_on_both_sides() {
              <transform name=\"to_world\"><rotate z=\"1\" angle=\"40\"/><rotate x=\"1\" angle=\"30\"/><translate z=\"3\"/></transform>\n\
              {bsdf}</shape>\n</scene>\n"
         );
-        let path = temp_dir("mitsuba-twosided").join("a.xml");
+        let scratch = temp_dir("mitsuba-twosided");
+        let path = scratch.join("a.xml");
         let scene = scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine())
             .unwrap_or_else(|e| panic!("{bsdf}: {e}"))
             .0;
@@ -1117,7 +1120,8 @@ fn conductor_of(bsdf: &str) -> Conductor {
          <shape type=\"rectangle\"><transform name=\"to_world\"><translate z=\"2\"/></transform>\n\
          <emitter type=\"area\"><rgb name=\"radiance\" value=\"1\"/></emitter></shape>"
     ));
-    let path = temp_dir("mitsuba-conductor").join("a.xml");
+    let scratch = temp_dir("mitsuba-conductor");
+    let path = scratch.join("a.xml");
     let scene = scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine())
         .unwrap_or_else(|e| panic!("{bsdf}: {e}"))
         .0;
@@ -1212,7 +1216,8 @@ fn material_of(bsdf: &str) -> Material {
          <shape type=\"rectangle\"><transform name=\"to_world\"><translate z=\"2\"/></transform>\n\
          <emitter type=\"area\"><rgb name=\"radiance\" value=\"1\"/></emitter></shape>"
     ));
-    let path = temp_dir("mitsuba-material").join("a.xml");
+    let scratch = temp_dir("mitsuba-material");
+    let path = scratch.join("a.xml");
     let scene = scene::load_mitsuba_from_str(&path, &text, &[], &Limits::of_this_machine())
         .unwrap_or_else(|e| panic!("{bsdf}: {e}"))
         .0;
@@ -1390,7 +1395,8 @@ fn twosided_of_two_bsdfs_agrees_with_mitsuba_in_every_integrator() {
     let start = text.find("        <bsdf type=\"roughconductor\">").unwrap();
     let end = start + text[start..].find("</bsdf>").unwrap() + "</bsdf>".len();
     let front_only = format!("{}{}", &text[..start], &text[end..]);
-    let path = temp_dir("mitsuba-twosided-two").join("twosided_two.xml");
+    let scratch = temp_dir("mitsuba-twosided-two");
+    let path = scratch.join("twosided_two.xml");
     std::fs::write(&path, front_only).unwrap();
     let scene = stagelight::scene::load(&path).unwrap();
     assert!(scene.back.iter().all(Option::is_none));

@@ -8,7 +8,7 @@
 //! fails, saying so, unless STAGELIGHT_SKIP_BROWSER_TEST=1 skips it on purpose;
 //! STAGELIGHT_CHROMIUM names another binary.
 
-use crate::common::{stagelight, stderr, temp_dir};
+use crate::common::{TempDir, stagelight, stderr, temp_dir};
 use stagelight::film::Image;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -379,8 +379,9 @@ fn distinct_colours(path: &Path) -> Result<usize, String> {
 }
 
 /// A small comparison's report folder: torus_glass at 48x36 (not square, so that a
-/// transposed coordinate reads another pixel), pt and bdpt at 1 and 2 spp.
-fn small_report(name: &str) -> PathBuf {
+/// transposed coordinate reads another pixel), pt and bdpt at 1 and 2 spp; with the folder
+/// that holds it, which the caller keeps while it reads the report.
+fn small_report(name: &str) -> (TempDir, PathBuf) {
     let dir = temp_dir(name);
     let scene = std::fs::read_to_string(crate::common::scene_path("torus_glass.ron")).unwrap();
     let scene = scene.replacen("camera: (", "camera: (\n width: 48,\n height: 36,", 1);
@@ -404,13 +405,13 @@ fn small_report(name: &str) -> PathBuf {
         report.to_str().unwrap(),
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
-    report
+    (dir, report)
 }
 
 #[test]
 fn report_page_works_in_chromium() {
     let Some(chromium) = chromium() else { return };
-    let report = small_report("report-page");
+    let (_dir, report) = small_report("report-page");
     if let Err(problem) = check_page(&chromium, &report) {
         panic!("{}/index.html: {problem}", report.display());
     }
@@ -419,7 +420,7 @@ fn report_page_works_in_chromium() {
 #[test]
 fn broken_report_pages_fail_the_browser_check() {
     let Some(chromium) = chromium() else { return };
-    let report = small_report("report-page-broken");
+    let (_dir, report) = small_report("report-page-broken");
     // A corrupted image: its float data cut short.
     let data = report.join("index_data/image-001.js");
     let text = std::fs::read_to_string(&data).unwrap();
@@ -445,7 +446,7 @@ fn broken_report_pages_fail_the_browser_check() {
 #[test]
 fn view_writes_the_viewer_for_any_images() {
     let Some(chromium) = chromium() else { return };
-    let report = small_report("view-page");
+    let (_dir, report) = small_report("view-page");
     let html = report.join("pages/view.html");
     let out = stagelight(&[
         "view",

@@ -38,7 +38,8 @@ fn temp_dir(test: &str) -> PathBuf {
 
 /// Loads `text` from a file named after the test and returns the error's Display.
 fn load_error(test: &str, text: &str) -> (SceneError, String) {
-    let path = temp_dir(test).join(format!("{test}.ron"));
+    let scratch = temp_dir(test);
+    let path = scratch.join(format!("{test}.ron"));
     std::fs::write(&path, text).unwrap();
     match scene::load(&path) {
         Ok(_) => panic!("{test}: loaded without error:\n{text}"),
@@ -74,7 +75,8 @@ fn expect(test: &str, text: &str, line: usize, column: Option<usize>, phrases: &
 }
 
 fn loads(test: &str, text: &str) {
-    let path = temp_dir(test).join(format!("{test}.ron"));
+    let scratch = temp_dir(test);
+    let path = scratch.join(format!("{test}.ron"));
     std::fs::write(&path, text).unwrap();
     if let Err(e) = scene::load(&path) {
         panic!("{test}: {e}");
@@ -106,7 +108,8 @@ fn malformed_ron() {
 
 #[test]
 fn missing_scene_file() {
-    let path = temp_dir("missing").join("no_such_scene.ron");
+    let scratch = temp_dir("missing");
+    let path = scratch.join("no_such_scene.ron");
     let e = scene::load(&path).unwrap_err().to_string();
     assert!(
         e.contains("no_such_scene.ron") && e.contains("cannot read"),

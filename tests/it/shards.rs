@@ -3,8 +3,8 @@
 //! as `cmp` would compare them); parts that do not belong together are refused, naming
 //! what is missing, overlapping or different.
 
-use crate::common::{shrunk_scene, stagelight, stderr, stdout, temp_dir};
-use std::path::{Path, PathBuf};
+use crate::common::{TempDir, shrunk_scene, stagelight, stderr, stdout, temp_dir};
+use std::path::Path;
 
 fn s(p: &Path) -> &str {
     p.to_str().unwrap()
@@ -47,7 +47,7 @@ fn whole_against_merged(
     command: &str,
     common: &[&str],
     shard_args: &[&[&str]],
-) -> PathBuf {
+) -> TempDir {
     let dir = temp_dir(name);
     let scene = shrunk_scene("cornell_box", 12, &dir.join("scene.ron"));
     let whole = dir.join("whole.exr");
