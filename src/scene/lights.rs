@@ -198,12 +198,6 @@ impl PointProfile {
     }
 }
 
-/// The fraction of a point light's intensity towards unit direction `w` (its texture aside).
-#[inline]
-pub fn falloff(profile: &PointProfile, w: Vec3) -> f32 {
-    profile.towards(w).0
-}
-
 /// A direction a point light's photon or light subpath leaves by, with its solid-angle density:
 /// uniform over the sphere, over a spot's cone, or over a projector's image (uniform in area on
 /// its plane, so the density follows 1 / cos^3 as its intensity does).

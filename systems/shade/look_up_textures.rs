@@ -4,10 +4,10 @@
 //! material as the scene lists it and run no texture code.
 
 use crate::bsdf::Material;
-use crate::components::{CHUNK, Surfaces};
+use crate::components::Surfaces;
 use crate::geometry::SurfacePoint;
 use crate::pipeline::Flow;
-use crate::scene::{BLACK, SceneData};
+use crate::scene::SceneData;
 use crate::systems::shade::material_looked_up;
 use glam::Vec3;
 use rayon::prelude::*;
@@ -22,25 +22,17 @@ crate::system! {
     write materials: Vec<Material>;
     run {
         let live = *live;
+        // Written in slot order, whatever the thread count (an indexed parallel extend).
         materials.clear();
-        materials.resize(live, BLACK);
-        materials
-            .par_chunks_mut(CHUNK)
-            .enumerate()
-            .for_each(|(c, chunk)| {
-                let start = c * CHUNK;
-                let surfaces = surfaces.view(start..start + chunk.len());
-                for (i, material) in chunk.iter_mut().enumerate() {
-                    let point = SurfacePoint {
-                        p: surfaces.p[i],
-                        p_error: surfaces.p_error[i],
-                        ng: surfaces.ng[i],
-                        ns: surfaces.ns[i],
-                    };
-                    let slot = start + i;
-                    *material = material_looked_up(data, triangles[slot], &point, dirs[slot]);
-                }
-            });
+        materials.par_extend((0..live).into_par_iter().map(|slot| {
+            let point = SurfacePoint {
+                p: surfaces.p[slot],
+                p_error: surfaces.p_error[slot],
+                ng: surfaces.ng[slot],
+                ns: surfaces.ns[slot],
+            };
+            material_looked_up(data, triangles[slot], &point, dirs[slot])
+        }));
         Flow::new(live, live)
     }
 }

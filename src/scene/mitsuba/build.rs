@@ -293,6 +293,28 @@ impl<'a> Params<'a> {
         Ok(Some((rgb, p.spot.clone())))
     }
 
+    /// `color` of a light (a radiance, intensity or irradiance): finite and not negative.
+    fn light_color(&mut self, name: &str, role: Role) -> Result<Option<(Vec3, Spot)>, XmlError> {
+        match self.color(name, role)? {
+            Some((c, spot)) if !c.is_finite() || c.min_element() < 0.0 => Err(XmlError::at(
+                &spot,
+                format!("{name} {:?} must be finite and not negative", c.to_array()),
+            )),
+            found => Ok(found),
+        }
+    }
+
+    /// A light's `scale` (1 by default): finite and not negative.
+    fn light_scale(&mut self) -> Result<f64, XmlError> {
+        match self.float("scale")? {
+            Some((v, spot)) if !(v.is_finite() && v >= 0.0) => Err(XmlError::at(
+                &spot,
+                format!("scale {v} must be finite and not negative"),
+            )),
+            found => Ok(found.map_or(1.0, |(v, _)| v)),
+        }
+    }
+
     /// A string parameter that names one of `choices` (`default` when absent); any other value
     /// is an error listing them.
     fn keyword<T: Copy>(
@@ -1355,19 +1377,10 @@ impl<'a> Builder<'a> {
                 "area: a textured radiance is not supported yet",
             ));
         }
-        let (radiance, spot) = params
-            .color("radiance", Role::Emission)?
+        let (radiance, _) = params
+            .light_color("radiance", Role::Emission)?
             .ok_or_else(|| XmlError::at(&object.spot, "area emitter needs a radiance"))?;
         params.finish()?;
-        if !radiance.is_finite() || radiance.min_element() < 0.0 {
-            return Err(XmlError::at(
-                &spot,
-                format!(
-                    "radiance {:?} must be finite and not negative",
-                    radiance.to_array()
-                ),
-            ));
-        }
         Ok(radiance)
     }
 
@@ -1449,21 +1462,9 @@ impl<'a> Builder<'a> {
         } else {
             None
         };
-        let intensity = match params.color("intensity", Role::Emission)? {
-            Some((c, spot)) => {
-                if !c.is_finite() || c.min_element() < 0.0 {
-                    return Err(XmlError::at(
-                        &spot,
-                        format!(
-                            "intensity {:?} must be finite and not negative",
-                            c.to_array()
-                        ),
-                    ));
-                }
-                c
-            }
-            None => Vec3::ONE,
-        };
+        let intensity = params
+            .light_color("intensity", Role::Emission)?
+            .map_or(Vec3::ONE, |(c, _)| c);
         params.finish()?;
         self.point_lights += 1;
         Ok((
@@ -1503,7 +1504,7 @@ impl<'a> Builder<'a> {
             image = Some(self.texture(c.object)?);
         }
         let object = self.object(id);
-        let constant = params.color("irradiance", Role::Unbounded)?;
+        let constant = params.light_color("irradiance", Role::Unbounded)?;
         let (texture, colour) = match (image, constant) {
             (Some(_), Some((_, spot))) => {
                 return Err(XmlError::at(
@@ -1512,16 +1513,7 @@ impl<'a> Builder<'a> {
                 ));
             }
             (Some(t), None) => (Some(t), Vec3::ONE),
-            (None, Some((c, spot))) => {
-                if !c.is_finite() || c.min_element() < 0.0 {
-                    return Err(XmlError::at(
-                        &spot,
-                        format!(
-                            "irradiance {:?} must be finite and not negative",
-                            c.to_array()
-                        ),
-                    ));
-                }
+            (None, Some((c, _))) => {
                 // One colour: Mitsuba's constant texture, of resolution 1 x 1, in the
                 // intensity (and so in the power that light selection counts).
                 (None, c)
@@ -1533,16 +1525,7 @@ impl<'a> Builder<'a> {
                 ));
             }
         };
-        let scale = match params.float("scale")? {
-            Some((v, spot)) if !(v.is_finite() && v >= 0.0) => {
-                return Err(XmlError::at(
-                    &spot,
-                    format!("scale {v} must be finite and not negative"),
-                ));
-            }
-            Some((v, _)) => v,
-            None => 1.0,
-        };
+        let scale = params.light_scale()?;
         let (width, height) = texture.as_ref().map_or((1, 1), Texture::resolution);
         let aspect = width as f64 / height as f64;
         let fov_y = perspective_fov_y(object, &mut params, aspect)?;
@@ -1613,21 +1596,9 @@ impl<'a> Builder<'a> {
                 "directional: the direction is zero or not finite",
             ));
         }
-        let irradiance = match params.color("irradiance", Role::Emission)? {
-            Some((c, spot)) => {
-                if !c.is_finite() || c.min_element() < 0.0 {
-                    return Err(XmlError::at(
-                        &spot,
-                        format!(
-                            "irradiance {:?} must be finite and not negative",
-                            c.to_array()
-                        ),
-                    ));
-                }
-                c
-            }
-            None => Vec3::ONE,
-        };
+        let irradiance = params
+            .light_color("irradiance", Role::Emission)?
+            .map_or(Vec3::ONE, |(c, _)| c);
         params.finish()?;
         self.directional_lights += 1;
         Ok(DirectionalLight {
@@ -1674,21 +1645,9 @@ impl<'a> Builder<'a> {
             }
         };
         let radiance = if kind == "constant" {
-            let radiance = match params.color("radiance", Role::Emission)? {
-                Some((c, spot)) => {
-                    if !c.is_finite() || c.min_element() < 0.0 {
-                        return Err(XmlError::at(
-                            &spot,
-                            format!(
-                                "radiance {:?} must be finite and not negative",
-                                c.to_array()
-                            ),
-                        ));
-                    }
-                    c
-                }
-                None => Vec3::ONE,
-            };
+            let radiance = params
+                .light_color("radiance", Role::Emission)?
+                .map_or(Vec3::ONE, |(c, _)| c);
             EnvironmentRadiance::Constant(radiance)
         } else {
             params.ignore(&["mis_compensation"]);
@@ -1696,16 +1655,7 @@ impl<'a> Builder<'a> {
                 .string("filename")?
                 .ok_or_else(|| XmlError::at(&object.spot, "envmap needs a filename"))?;
             let path = self.doc.resolve(name);
-            let scale = match params.float("scale")? {
-                Some((v, spot)) if !(v.is_finite() && v >= 0.0) => {
-                    return Err(XmlError::at(
-                        &spot,
-                        format!("envmap: scale {v} must be finite and not negative"),
-                    ));
-                }
-                Some((v, _)) => v as f32,
-                None => 1.0,
-            };
+            let scale = params.light_scale()? as f32;
             let (width, height, texels) =
                 read_image(&path, false).map_err(|m| XmlError::at(&spot, m))?;
             let texels = texels.into_iter().map(|t| t * scale).collect();
