@@ -88,8 +88,10 @@ pub struct MltSettings {
     /// Keep each strategy's share of the image (mmlt: `--strategy-images`), split by the
     /// strategy (s, t) of the chain state that made each splat.
     pub strategy_images: bool,
-    /// Depths below this get no weight (path-space MLT renders them apart).
+    /// Depths below this get no weight (2 where direct illumination is rendered apart).
     pub min_depth: u32,
+    /// Where direct illumination comes from (`systems::gather::direct_illumination`).
+    pub direct: DirectIllumination,
     /// How many chains, unless given.
     pub chain_rule: ChainRule,
     /// Bootstrap evaluations per wave at least (path-space MLT: `BOOTSTRAP_WAVE`; else the
@@ -120,6 +122,7 @@ impl MltSettings {
             bootstrap_image: false,
             strategy_images: false,
             min_depth: 0,
+            direct: DirectIllumination::InChains,
             chain_rule: ChainRule::StepsPerChain(STEPS_PER_CHAIN),
             bootstrap_wave: 0,
             time_budget: None,
@@ -209,8 +212,56 @@ impl Bootstrap {
     }
 }
 
-/// Mitsuba's samples per pixel for the direct illumination rendered apart.
+/// Mitsuba's samples per pixel for the direct illumination rendered apart (path-space mlt).
 pub const DEFAULT_DIRECT_SPP: u32 = 16;
+
+/// pssmlt and mmlt: one sample per pixel of direct illumination every this many mutations per
+/// pixel, so that it converges with the chains whatever the budget. A depth-0/1 path tracing
+/// sample costs a fraction of a mutation (a BDPT evaluation of a whole path): one per mutation
+/// took about 12% of mmlt's time on tests/scenes/glass_tube.ron, whose direct light includes
+/// a small light's reflection in glass that a quarter of that sampled too rarely (issue 42).
+pub const DIRECT_MUTATIONS_PER_SAMPLE: u32 = 1;
+
+/// Where a Metropolis render's direct illumination (paths of depth 0 and 1) comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DirectIllumination {
+    /// The chains render every depth (`--direct-spp 0`).
+    InChains,
+    /// Path tracing at this many samples per pixel, before the chains (`--direct-spp N`;
+    /// path-space mlt's default, Mitsuba's 16).
+    Samples(u32),
+    /// Path tracing, one sample per pixel from the start and one more every this many
+    /// mutations per pixel (pssmlt's and mmlt's default, `DIRECT_MUTATIONS_PER_SAMPLE`).
+    OnePerMutations(u32),
+}
+
+impl DirectIllumination {
+    /// From `--direct-spp` (None: `default`).
+    pub fn from_option(spp: Option<u32>, default: DirectIllumination) -> DirectIllumination {
+        match spp {
+            None => default,
+            Some(0) => DirectIllumination::InChains,
+            Some(n) => DirectIllumination::Samples(n),
+        }
+    }
+
+    /// Whether the chains leave depths 0 and 1 to path tracing.
+    pub fn apart(self) -> bool {
+        self != DirectIllumination::InChains
+    }
+
+    /// Samples per pixel the direct image should hold once the chains have taken
+    /// `mutations` steps in all over `pixels` pixels.
+    pub fn samples_after(self, mutations: u64, pixels: u64) -> u64 {
+        match self {
+            DirectIllumination::InChains => 0,
+            DirectIllumination::Samples(n) => n as u64,
+            DirectIllumination::OnePerMutations(k) => {
+                mutations / (pixels.max(1) * k.max(1) as u64) + 1
+            }
+        }
+    }
+}
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct PathMltSettings {
@@ -218,10 +269,8 @@ pub struct PathMltSettings {
     /// The user's depth cap (`u32::MAX`: none).
     pub max_depth: u32,
     pub mutations: MutationSet,
-    /// Direct illumination rendered apart at this many samples per pixel (0: none).
-    pub direct_spp: u32,
     /// The bootstrap's settings (full BDPT, balance heuristic, depth >= 2 with direct
-    /// illumination apart).
+    /// illumination apart), and the direct illumination's samples per pixel.
     pub bootstrap: MltSettings,
 }
 
@@ -232,6 +281,8 @@ pub struct MutationCounts {
     pub accepted: [u64; 4],
     /// Proposals with f = 0 (impossible or black paths).
     pub zero: [u64; 4],
+    /// Chain steps taken (chains x steps).
+    pub steps: u64,
 }
 
 impl std::ops::Add for MutationCounts {
@@ -242,6 +293,7 @@ impl std::ops::Add for MutationCounts {
             self.accepted[k] += o.accepted[k];
             self.zero[k] += o.zero[k];
         }
+        self.steps += o.steps;
         self
     }
 }

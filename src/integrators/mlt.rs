@@ -80,6 +80,23 @@ impl MltSettings {
             strategy_images: multiplexed && s.strategy_images,
             ..MltSettings::new(s.seed, multiplexed)
         }
+        .with_direct_apart(s)
+    }
+
+    /// Direct illumination apart (`--direct-spp`, by default one sample per pixel every
+    /// `DIRECT_MUTATIONS_PER_SAMPLE` mutations per pixel) where the chains have deeper paths to render
+    /// (`max_depth` 2 or more): the chains then weigh only depths from 2.
+    fn with_direct_apart(mut self, s: &RenderSettings) -> MltSettings {
+        if s.max_depth >= 2 {
+            self.direct = DirectIllumination::from_option(
+                s.mlt.direct_spp,
+                DirectIllumination::OnePerMutations(DIRECT_MUTATIONS_PER_SAMPLE),
+            );
+        }
+        if self.direct.apart() {
+            self.min_depth = 2;
+        }
+        self
     }
 }
 
@@ -110,6 +127,8 @@ pub struct MltState {
     pub nonfinite: u64,
     /// When the render began (the report gives the bootstrap's share of the wall time).
     pub started: std::time::Instant,
+    /// The direct illumination's film, once rendered (`settings.direct_spp` above 0).
+    pub direct: Option<Film>,
 }
 
 impl MltState {
@@ -142,7 +161,7 @@ impl MltState {
     }
 
     /// The image of the steps taken: per group, b_k x its splat sums x pixels / steps per
-    /// chain, summed over the groups; under the gaussian each pixel divided by the filter's
+    /// chain, summed over the groups, plus the direct illumination rendered apart; under the gaussian each pixel divided by the filter's
     /// integral about it (`Film::splat_normalisations`: the splats were spread over their
     /// footprints).
     pub fn image_film(&self) -> Film {
@@ -161,15 +180,18 @@ impl MltState {
                 }
             }
         }
-        let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), self.nonfinite)
+        let nonfinite = self.nonfinite
+            + gather::direct_illumination::add_direct_image(&mut sums, self.direct.as_ref());
+        let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), nonfinite)
             .expect("the image's size");
-        film.nonfinite = self.nonfinite;
+        film.nonfinite = nonfinite;
         film
     }
 
     /// Each strategy's image (`s{s}_t{t}`, with `strategy_images`): its splats scaled as the
     /// image's are (b_k of its group x pixels / steps per chain), so the images of a depth
-    /// sum to that depth's part of the image and all of them to the image.
+    /// sum to that depth's part of the image; with the direct illumination's image
+    /// (`direct`, depths 0 and 1) where it was rendered apart, all of them sum to the image.
     pub fn strategy_images(&self) -> Vec<(String, Image)> {
         let (w, h) = (self.bdpt.film.width, self.bdpt.film.height);
         let mut layers: BTreeMap<(u32, u16), Vec<DVec3>> = BTreeMap::new();
@@ -196,6 +218,12 @@ impl MltState {
                 };
                 (format!("s{s}_t{t}"), image)
             })
+            .chain(
+                self.direct
+                    .as_ref()
+                    .filter(|_| self.settings.strategy_images)
+                    .map(|direct| ("direct".to_string(), direct.image())),
+            )
             .collect()
     }
 
@@ -253,6 +281,10 @@ impl MltState {
                 ),
             ),
         ];
+        lines.push((
+            "direct illumination",
+            direct_illumination_line(&self.settings, self.direct.as_ref()),
+        ));
         if self.bootstrap_share() > BOOTSTRAP_SHARE_WARNING {
             lines.push(("warning", bootstrap_warning(self.bootstrap_share())));
         }
@@ -283,6 +315,17 @@ impl MltState {
             }
         }
         lines
+    }
+}
+
+/// The report's line on where direct illumination comes from.
+pub fn direct_illumination_line(settings: &MltSettings, direct: Option<&Film>) -> String {
+    match direct {
+        Some(film) if settings.direct.apart() => format!(
+            "{} spp of path tracing, added",
+            film.total_samples() / (film.width * film.height).max(1) as u64
+        ),
+        _ => "in the chains".into(),
     }
 }
 
@@ -328,39 +371,55 @@ pub fn bootstrap_nodes() -> Vec<Node<MltState>> {
     ]
 }
 
-/// The MLT graph (the same for pssmlt and mmlt; the settings choose).
-pub fn graph() -> Graph<MltState> {
+/// The MLT graph (the same for pssmlt and mmlt; the settings choose), with direct
+/// illumination rendered first where it is apart.
+pub fn graph(settings: &MltSettings) -> Graph<MltState> {
     use mutate::{accept, propose};
-    Graph::new(
-        "mlt",
-        vec![
-            Node::Once {
-                name: "bootstrap",
-                needed: |s: &MltState| !s.bootstrap.done,
-                body: bootstrap_nodes(),
+    let mut nodes = Vec::new();
+    if settings.direct.apart() {
+        nodes.push(Node::Once {
+            name: "direct_illumination",
+            needed: |s: &MltState| {
+                gather::direct_illumination::due(
+                    s.settings.direct,
+                    s.counters.steps,
+                    s.pixels,
+                    s.direct.as_ref(),
+                )
             },
-            Node::Loop {
-                name: "mutation_steps",
-                queue_len: |s: &MltState| {
-                    if s.selection.is_some() {
-                        s.steps_left as usize
-                    } else {
-                        0
-                    }
-                },
-                body: vec![
-                    Node::system(propose::ProposeMutations),
-                    evaluation(),
-                    Node::system(gather::chain_contributions::GatherChainContributions),
-                    Node::system(accept::AcceptOrReject),
-                    Node::system(accept::EstimateNormalisation),
-                    Node::system(accept::SplatExpectedValues),
-                    Node::system(accept::SplatStrategyImages),
-                    Node::system(accept::CommitAccepted),
-                ],
+            body: vec![Node::system(
+                gather::direct_illumination::RenderDirectIllumination,
+            )],
+        });
+    }
+    nodes.extend([
+        Node::Once {
+            name: "bootstrap",
+            needed: |s: &MltState| !s.bootstrap.done,
+            body: bootstrap_nodes(),
+        },
+        Node::Loop {
+            name: "mutation_steps",
+            queue_len: |s: &MltState| {
+                if s.selection.is_some() {
+                    s.steps_left as usize
+                } else {
+                    0
+                }
             },
-        ],
-    )
+            body: vec![
+                Node::system(propose::ProposeMutations),
+                evaluation(),
+                Node::system(gather::chain_contributions::GatherChainContributions),
+                Node::system(accept::AcceptOrReject),
+                Node::system(accept::EstimateNormalisation),
+                Node::system(accept::SplatExpectedValues),
+                Node::system(accept::SplatStrategyImages),
+                Node::system(accept::CommitAccepted),
+            ],
+        },
+    ]);
+    Graph::new("mlt", nodes)
 }
 
 impl IntegratorState for MltState {
@@ -383,9 +442,10 @@ impl IntegratorState for MltState {
         "normalisation",
         "nonfinite",
         "started",
+        "direct",
     ];
-    fn graph(_: &SceneData, _: &MltSettings) -> Graph<MltState> {
-        graph()
+    fn graph(_: &SceneData, settings: &MltSettings) -> Graph<MltState> {
+        graph(settings)
     }
 }
 
@@ -440,6 +500,7 @@ impl PassState for MltState {
             normalisation: Normalisation::default(),
             nonfinite: 0,
             started: std::time::Instant::now(),
+            direct: None,
         }
     }
 
@@ -522,6 +583,11 @@ mod bindings {
 
     crate::bind! {
         MltState:
+        gather::direct_illumination::RenderDirectIllumination {
+            read data, seed = settings.seed, schedule = settings.direct,
+                mutations = counters.steps, pixels;
+            write direct;
+        }
         gather::chain_contributions::GatherChainContributions {
             read wave = bdpt.wave, shadow = bdpt.shadow, connections = bdpt.connections,
                 starts = bdpt.connection_start, radiance = bdpt.sample_radiance,

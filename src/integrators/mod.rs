@@ -66,6 +66,7 @@ const MLT_OPTIONS: &[&str] = &[
     "--bootstrap",
     "--chains",
     "--mis",
+    "--direct-spp",
 ];
 
 /// The `render` options of mmlt: the Metropolis ones and the strategy images (each chain
@@ -76,6 +77,7 @@ const MMLT_OPTIONS: &[&str] = &[
     "--bootstrap",
     "--chains",
     "--mis",
+    "--direct-spp",
     "--strategy-images",
 ];
 
@@ -436,7 +438,8 @@ pub struct MltOptions {
     pub bootstrap: Option<u64>,
     /// Chains (default: from the budget).
     pub chains: Option<u64>,
-    /// Path-space MLT: samples per pixel of the direct illumination rendered apart (16).
+    /// Samples per pixel of the direct illumination rendered apart (0: in the chains; None:
+    /// path-space MLT 16, pssmlt and mmlt one per `DIRECT_MUTATIONS_PER_SAMPLE` mutations per pixel).
     pub direct_spp: Option<u32>,
     /// Path-space MLT: the mutations enabled, bit k = `MutationKind` k (all).
     pub mutations: Option<u8>,

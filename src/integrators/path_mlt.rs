@@ -33,12 +33,12 @@
 use crate::film::Film;
 use crate::integrators::driver::{IntegratorState, PassState};
 use crate::integrators::mlt::{self, MltSettings, MltState};
-use crate::integrators::pt::PtSettings;
 use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
 use crate::mlt::Splat;
 use crate::mlt::path_chains::{MutationKind, MutationSet, PathChains};
 use crate::path::MisHeuristic;
-use crate::pipeline::{Flow, Graph, Node};
+use crate::pipeline::{Graph, Node};
+use crate::systems::gather;
 use crate::systems::mutate::{
     bidirectional, caustic_perturbation, lens_perturbation, multichain_perturbation, path_accept,
     path_mutation, path_seeds,
@@ -46,12 +46,13 @@ use crate::systems::mutate::{
 use glam::DVec3;
 use std::sync::Arc;
 
-pub use crate::components::metropolis::{DEFAULT_DIRECT_SPP, MutationCounts, PathMltSettings};
+pub use crate::components::metropolis::{
+    DEFAULT_DIRECT_SPP, DirectIllumination, MutationCounts, PathMltSettings,
+};
 
 impl PathMltSettings {
     pub fn from_render(data: &SceneData, s: &RenderSettings) -> PathMltSettings {
         let cam = data.scene.camera;
-        let direct_spp = s.mlt.direct_spp.unwrap_or(DEFAULT_DIRECT_SPP);
         let mut mutations = MutationSet::new(cam.width, cam.height, s.mlt.lens_min.unwrap_or(0.1));
         if let Some(m) = s.mlt.mutations {
             mutations.enabled = m;
@@ -60,17 +61,22 @@ impl PathMltSettings {
         bootstrap.mis = MisHeuristic::Balance;
         bootstrap.bootstrap_wave = mlt::BOOTSTRAP_WAVE;
         bootstrap.chain_rule = mlt::ChainRule::SqrtOfMutations(mlt::PATH_CHAINS_PER_SQRT_MUTATION);
-        if direct_spp == 0 {
+        bootstrap.direct = DirectIllumination::InChains;
+        if s.max_depth >= 2 {
+            bootstrap.direct = DirectIllumination::from_option(
+                s.mlt.direct_spp,
+                DirectIllumination::Samples(DEFAULT_DIRECT_SPP),
+            );
+        }
+        bootstrap.min_depth = if bootstrap.direct.apart() { 2 } else { 0 };
+        if !bootstrap.direct.apart() {
             mutations.min_vertices = 2;
-        } else {
-            bootstrap.min_depth = 2;
         }
         mutations.max_vertices = MutationSet::max_vertices_for_depth(s.max_depth);
         PathMltSettings {
             seed: s.seed,
             max_depth: s.max_depth,
             mutations,
-            direct_spp,
             bootstrap,
         }
     }
@@ -99,36 +105,6 @@ pub struct PathMltState {
     /// The direct illumination's film, once rendered.
     pub direct: Option<Film>,
 }
-
-struct RenderDirectIllumination;
-
-crate::system! {
-    RenderDirectIllumination = "render_direct_illumination";
-    read data: Arc<SceneData>, settings: PathMltSettings;
-    write direct: Option<Film>;
-    run {
-        let pt = PtSettings {
-            max_depth: 1,
-            ..PtSettings::new(crate::sampling::mix64(settings.seed ^ DIRECT_DOMAIN), 1)
-        };
-        let outcome = crate::integrators::driver::render_waves::<crate::integrators::pt::PtState>(
-            data.clone(),
-            pt,
-            Budget::SamplesPerPixel(settings.direct_spp as u64),
-            &Control {
-                stop: &std::sync::atomic::AtomicBool::new(false),
-                progress: &|_, _| {},
-            },
-            None,
-        );
-        let n = outcome.film.width * outcome.film.height;
-        *direct = Some(outcome.film);
-        Flow::new(n, n)
-    }
-}
-
-/// Separates the direct image's numbers from the chains'.
-const DIRECT_DOMAIN: u64 = 0x6469_7265_6374_5f6c;
 
 /// The graph for a scene: the perturbations that can apply to its paths.
 pub fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState> {
@@ -159,11 +135,20 @@ pub fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState
         Node::system(path_accept::CommitPathProposals),
     ]);
     let mut nodes = Vec::new();
-    if settings.direct_spp > 0 {
+    if settings.bootstrap.direct.apart() {
         nodes.push(Node::Once {
             name: "direct_illumination",
-            needed: |s: &PathMltState| s.direct.is_none(),
-            body: vec![Node::system(RenderDirectIllumination)],
+            needed: |s: &PathMltState| {
+                gather::direct_illumination::due(
+                    s.settings.bootstrap.direct,
+                    s.counts.steps,
+                    s.pixels,
+                    s.direct.as_ref(),
+                )
+            },
+            body: vec![Node::system(
+                gather::direct_illumination::RenderDirectIllumination,
+            )],
         });
     }
     nodes.push(Node::Once {
@@ -282,11 +267,7 @@ impl PassState for PathMltState {
         ));
         lines.push((
             "direct illumination",
-            if self.settings.direct_spp > 0 {
-                format!("{} spp of path tracing, added", self.settings.direct_spp)
-            } else {
-                "in the chains".into()
-            },
+            mlt::direct_illumination_line(&self.settings.bootstrap, self.direct.as_ref()),
         ));
         lines
     }
@@ -310,14 +291,8 @@ impl PassState for PathMltState {
             .zip(&norm)
             .map(|(v, d)| *v * (scale / d))
             .collect();
-        let mut nonfinite = self.nonfinite;
-        if let Some(direct) = &self.direct {
-            let image = direct.image();
-            for (s, v) in sums.iter_mut().zip(&image.pixels) {
-                *s += v.as_dvec3();
-            }
-            nonfinite += direct.nonfinite;
-        }
+        let nonfinite = self.nonfinite
+            + gather::direct_illumination::add_direct_image(&mut sums, self.direct.as_ref());
         let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), nonfinite)
             .expect("the image's size");
         film.nonfinite = nonfinite;
@@ -344,8 +319,9 @@ mod bindings {
 
     crate::bind! {
         PathMltState:
-        super::RenderDirectIllumination {
-            read data, settings;
+        gather::direct_illumination::RenderDirectIllumination {
+            read data, seed = settings.seed, schedule = settings.bootstrap.direct,
+                mutations = counts.steps, pixels;
             write direct;
         }
         mutate::bidirectional::BidirectionalMutation {

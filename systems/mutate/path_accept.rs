@@ -42,7 +42,10 @@ crate::system! {
             .zip(chains.accepted.par_chunks_mut(CHUNK))
             .enumerate()
             .map(|(c, (a_out, acc_out))| {
-                let mut counts = MutationCounts::default();
+                let mut counts = MutationCounts {
+                    steps: a_out.len() as u64,
+                    ..MutationCounts::default()
+                };
                 for local in 0..a_out.len() {
                     let i = c * CHUNK + local;
                     let a = acceptance(cur[i], prop[i], ratio[i]);
