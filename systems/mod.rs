@@ -70,7 +70,6 @@ pub mod gather {
     pub mod caustic_photons;
     pub mod chain_contributions;
     pub mod connections;
-    pub mod direct_illumination;
     pub mod direct_light;
     pub mod film;
     pub mod global_photons;

@@ -90,7 +90,7 @@ pub struct MltSettings {
     pub strategy_images: bool,
     /// Depths below this get no weight (2 where direct illumination is rendered apart).
     pub min_depth: u32,
-    /// Where direct illumination comes from (`systems::gather::direct_illumination`).
+    /// Where direct illumination comes from (`integrators::direct_illumination`).
     pub direct: DirectIllumination,
     /// How many chains, unless given.
     pub chain_rule: ChainRule,

@@ -37,6 +37,7 @@
 
 use crate::film::{Film, Image};
 use crate::integrators::bdpt::{self, BdptSettings, BdptState, Numbers};
+use crate::integrators::direct_illumination;
 use crate::integrators::driver::{IntegratorState, PassState, render_passes};
 use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
 use crate::mlt::{ChainSplats, ChainStates, MltCounters, Normalisation, SeedSelection, SmallStep};
@@ -180,8 +181,8 @@ impl MltState {
                 }
             }
         }
-        let nonfinite = self.nonfinite
-            + gather::direct_illumination::add_direct_image(&mut sums, self.direct.as_ref());
+        let nonfinite =
+            self.nonfinite + direct_illumination::add_direct_image(&mut sums, self.direct.as_ref());
         let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), nonfinite)
             .expect("the image's size");
         film.nonfinite = nonfinite;
@@ -380,16 +381,14 @@ pub fn graph(settings: &MltSettings) -> Graph<MltState> {
         nodes.push(Node::Once {
             name: "direct_illumination",
             needed: |s: &MltState| {
-                gather::direct_illumination::due(
+                direct_illumination::due(
                     s.settings.direct,
                     s.counters.steps,
                     s.pixels,
                     s.direct.as_ref(),
                 )
             },
-            body: vec![Node::system(
-                gather::direct_illumination::RenderDirectIllumination,
-            )],
+            body: vec![Node::system(direct_illumination::RenderDirectIllumination)],
         });
     }
     nodes.extend([
@@ -583,7 +582,7 @@ mod bindings {
 
     crate::bind! {
         MltState:
-        gather::direct_illumination::RenderDirectIllumination {
+        crate::integrators::direct_illumination::RenderDirectIllumination {
             read data, seed = settings.seed, schedule = settings.direct,
                 mutations = counters.steps, pixels;
             write direct;

@@ -9,6 +9,7 @@ pub mod pt_megakernel;
 pub mod sppm;
 
 pub mod camera_walk;
+pub mod direct_illumination;
 pub mod driver;
 
 pub use crate::scene::SceneData;

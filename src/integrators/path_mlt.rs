@@ -31,6 +31,7 @@
 //! the chain's overflow list).
 
 use crate::film::Film;
+use crate::integrators::direct_illumination;
 use crate::integrators::driver::{IntegratorState, PassState};
 use crate::integrators::mlt::{self, MltSettings, MltState};
 use crate::integrators::{Budget, Control, RenderOutcome, RenderSettings, SceneData};
@@ -38,7 +39,6 @@ use crate::mlt::Splat;
 use crate::mlt::path_chains::{MutationKind, MutationSet, PathChains};
 use crate::path::MisHeuristic;
 use crate::pipeline::{Graph, Node};
-use crate::systems::gather;
 use crate::systems::mutate::{
     bidirectional, caustic_perturbation, lens_perturbation, multichain_perturbation, path_accept,
     path_mutation, path_seeds,
@@ -139,16 +139,14 @@ pub fn graph(data: &SceneData, settings: &PathMltSettings) -> Graph<PathMltState
         nodes.push(Node::Once {
             name: "direct_illumination",
             needed: |s: &PathMltState| {
-                gather::direct_illumination::due(
+                direct_illumination::due(
                     s.settings.bootstrap.direct,
                     s.counts.steps,
                     s.pixels,
                     s.direct.as_ref(),
                 )
             },
-            body: vec![Node::system(
-                gather::direct_illumination::RenderDirectIllumination,
-            )],
+            body: vec![Node::system(direct_illumination::RenderDirectIllumination)],
         });
     }
     nodes.push(Node::Once {
@@ -291,8 +289,8 @@ impl PassState for PathMltState {
             .zip(&norm)
             .map(|(v, d)| *v * (scale / d))
             .collect();
-        let nonfinite = self.nonfinite
-            + gather::direct_illumination::add_direct_image(&mut sums, self.direct.as_ref());
+        let nonfinite =
+            self.nonfinite + direct_illumination::add_direct_image(&mut sums, self.direct.as_ref());
         let mut film = Film::from_parts(w, h, sums, vec![1; w * h], Vec::new(), nonfinite)
             .expect("the image's size");
         film.nonfinite = nonfinite;
@@ -319,7 +317,7 @@ mod bindings {
 
     crate::bind! {
         PathMltState:
-        gather::direct_illumination::RenderDirectIllumination {
+        crate::integrators::direct_illumination::RenderDirectIllumination {
             read data, seed = settings.seed, schedule = settings.bootstrap.direct,
                 mutations = counts.steps, pixels;
             write direct;

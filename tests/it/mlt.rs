@@ -252,6 +252,44 @@ fn mlt_bootstrap_wave_width_changes_nothing() {
     }
 }
 
+/// pssmlt's and mmlt's direct image grows by a sample per pixel as the chains take a mutation
+/// per pixel, each time going on from its film: after the render it is, bit for bit, one path
+/// tracing render of that many samples (its numbers are pure functions of the sample ids).
+#[test]
+fn mlt_direct_image_grows_with_the_mutations_and_equals_one_render_of_its_samples() {
+    use stagelight::integrators::direct_illumination::{held, path_tracing_settings};
+    for (multiplexed, name) in BOTH {
+        let state = run("cornell_box.ron", 16, settings(multiplexed, 4, 6, 12));
+        let direct = state
+            .direct
+            .as_ref()
+            .expect("direct illumination apart by default");
+        let spp = held(Some(direct));
+        let mutations = state.counters.steps as f64 / 256.0;
+        // One sample at the start, one more per mutation per pixel taken before the last pass.
+        assert!(
+            spp >= 8 && (spp as f64) <= mutations + 1.0,
+            "{name}: {spp} samples per pixel after {mutations} mutations per pixel"
+        );
+        let data = Arc::new(SceneData::new(load_small("cornell_box.ron", 16)));
+        let once =
+            stagelight::integrators::driver::render_waves::<stagelight::integrators::pt::PtState>(
+                data,
+                path_tracing_settings(4),
+                stagelight::integrators::Budget::SamplesPerPixel(spp),
+                &stagelight::integrators::Control {
+                    stop: &std::sync::atomic::AtomicBool::new(false),
+                    progress: &|_, _| {},
+                },
+                None,
+            );
+        assert!(
+            once.film.image().pixels == direct.image().pixels,
+            "{name}: the direct image differs from one render of {spp} samples per pixel"
+        );
+    }
+}
+
 /// Mean and standard error of a few values.
 fn mean_and_error(values: &[f64]) -> (f64, f64) {
     let n = values.len() as f64;

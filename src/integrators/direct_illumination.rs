@@ -9,6 +9,9 @@
 //! depth 1 carry (a small light seen in a mirror or a glass ball) is estimated in every pixel
 //! it lights instead of by how often an independent sample of the chains happens on it (issue
 //! 42: a light's reflection in a glass sphere that one full BDPT sample in 1e5 finds).
+//!
+//! It is a system of the Metropolis graphs, but it lives with the integrators: it runs a whole
+//! path tracing render (PT's state and driver), which systems/ may not name.
 
 use crate::components::metropolis::DirectIllumination;
 use crate::film::{Film, Image};
@@ -27,10 +30,7 @@ crate::system! {
     write direct: Option<Film>;
     run {
         let want = schedule.samples_after(*mutations, *pixels);
-        let pt = PtSettings {
-            max_depth: 1,
-            ..PtSettings::new(crate::sampling::mix64(*seed ^ DIRECT_DOMAIN), 1)
-        };
+        let pt = path_tracing_settings(*seed);
         // Samples are pure functions of their ids: going on from the film's passes gives the
         // image one render of `want` samples per pixel would.
         let from = direct.take().map(|film| {
@@ -53,8 +53,17 @@ crate::system! {
     }
 }
 
+/// The path tracer that renders a Metropolis render's direct image for `seed`: depth 1 and
+/// its own numbers, apart from the chains'.
+pub fn path_tracing_settings(seed: u64) -> PtSettings {
+    PtSettings {
+        max_depth: 1,
+        ..PtSettings::new(crate::sampling::mix64(seed ^ DIRECT_DOMAIN), 1)
+    }
+}
+
 /// Samples per pixel the direct image holds.
-fn held(direct: Option<&Film>) -> u64 {
+pub fn held(direct: Option<&Film>) -> u64 {
     direct.map_or(0, |film| {
         film.total_samples() / (film.width * film.height).max(1) as u64
     })
