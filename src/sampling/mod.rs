@@ -112,15 +112,14 @@ pub fn concentric_disk_of<T: Real>(ux: T, uy: T) -> (T, T) {
     let centre = ox.equal(zero) & oy.equal(zero);
     let wide = ox.abs().greater(oy.abs());
     let r = T::select(wide, ox, oy);
-    let theta = T::select(
-        wide,
-        T::splat(0.25 * PI) * (oy / ox),
-        T::splat(0.5 * PI) - T::splat(0.25 * PI) * (ox / oy),
-    );
-    // The centre's theta is 0 / 0: its lanes take 0 whatever the sine and cosine give.
+    // The angle is phi (wide) or pi/2 - phi, with phi within [-pi/4, pi/4]: its sine and
+    // cosine swap for the second.
+    let phi = T::splat(0.25 * PI) * T::select(wide, oy / ox, ox / oy);
+    let (sin, cos) = phi.sin_cos_quarter();
+    // The centre's phi is 0 / 0: its lanes take 0 whatever the sine and cosine give.
     (
-        T::select(centre, zero, r * theta.cos()),
-        T::select(centre, zero, r * theta.sin()),
+        T::select(centre, zero, r * T::select(wide, cos, sin)),
+        T::select(centre, zero, r * T::select(wide, sin, cos)),
     )
 }
 
