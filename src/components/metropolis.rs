@@ -88,9 +88,8 @@ pub struct MltSettings {
     /// Keep each strategy's share of the image (mmlt: `--strategy-images`), split by the
     /// strategy (s, t) of the chain state that made each splat.
     pub strategy_images: bool,
-    /// Depths below this get no weight (2 where direct illumination is rendered apart).
-    pub min_depth: u32,
-    /// Where direct illumination comes from (`integrators::direct_illumination`).
+    /// Where direct illumination comes from (`integrators::direct_illumination`); where it
+    /// is apart, depths 0 and 1 get no weight (`min_depth`).
     pub direct: DirectIllumination,
     /// How many chains, unless given.
     pub chain_rule: ChainRule,
@@ -121,12 +120,32 @@ impl MltSettings {
             mutations_per_pixel: None,
             bootstrap_image: false,
             strategy_images: false,
-            min_depth: 0,
             direct: DirectIllumination::InChains,
             chain_rule: ChainRule::StepsPerChain(STEPS_PER_CHAIN),
             bootstrap_wave: 0,
             time_budget: None,
         }
+    }
+
+    /// Depths below this get no weight: 2 where direct illumination is rendered apart.
+    pub fn min_depth(&self) -> u32 {
+        if self.direct.apart() { 2 } else { 0 }
+    }
+
+    /// Direct illumination as `--direct-spp` asks (None: `default`) where the chains have
+    /// deeper paths to render (`max_depth` 2 or more); else in the chains.
+    pub fn with_direct(
+        mut self,
+        max_depth: u32,
+        direct_spp: Option<u32>,
+        default: DirectIllumination,
+    ) -> MltSettings {
+        self.direct = if max_depth >= 2 {
+            DirectIllumination::from_option(direct_spp, default)
+        } else {
+            DirectIllumination::InChains
+        };
+        self
     }
 
     /// Seed groups: in mmlt one per depth below `MULTIPLEX_TAIL_DEPTH` (up to max_depth), and

@@ -1,9 +1,10 @@
 //! Renders direct illumination (paths of depth 0 and 1: emitters seen, and light reaching the
-//! first surface straight from an emitter) apart, by path tracing at `direct_spp` samples per
-//! pixel, for the Metropolis integrators that leave it out of their chains, as Veach's MLT and
-//! Mitsuba's `mlt` and `pssmlt` do: path-space mlt at Mitsuba's 16 samples per pixel before
-//! the chains, pssmlt and mmlt one sample per pixel more every few passes, so that it keeps
-//! pace with the chains under any budget (`DirectIllumination`, `--direct-spp`).
+//! first surface straight from an emitter) apart, by path tracing, for the Metropolis
+//! integrators that leave it out of their chains, as Veach's MLT and Mitsuba's `mlt` and
+//! `pssmlt` do: path-space mlt at Mitsuba's 16 samples per pixel before the chains, pssmlt and
+//! mmlt one sample per pixel more per mutation per pixel the chains take (checked at each
+//! pass's start), so that it keeps pace with them under any budget (`DirectIllumination`,
+//! `--direct-spp`).
 //!
 //! Why apart: the chains spend their mutations on indirect light, and light that few paths of
 //! depth 1 carry (a small light seen in a mirror or a glass ball) is estimated in every pixel
@@ -67,6 +68,15 @@ pub fn held(direct: Option<&Film>) -> u64 {
     direct.map_or(0, |film| {
         film.total_samples() / (film.width * film.height).max(1) as u64
     })
+}
+
+/// The report's line on where direct illumination comes from.
+pub fn report_line(schedule: DirectIllumination, direct: Option<&Film>) -> String {
+    if schedule.apart() {
+        format!("{} spp of path tracing, added", held(direct))
+    } else {
+        "in the chains".into()
+    }
 }
 
 /// Whether the direct image needs more samples by `schedule` after `mutations` steps of the

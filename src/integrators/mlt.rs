@@ -81,23 +81,12 @@ impl MltSettings {
             strategy_images: multiplexed && s.strategy_images,
             ..MltSettings::new(s.seed, multiplexed)
         }
-        .with_direct_apart(s)
-    }
-
-    /// Direct illumination apart (`--direct-spp`, by default one sample per pixel every
-    /// `DIRECT_MUTATIONS_PER_SAMPLE` mutations per pixel) where the chains have deeper paths to render
-    /// (`max_depth` 2 or more): the chains then weigh only depths from 2.
-    fn with_direct_apart(mut self, s: &RenderSettings) -> MltSettings {
-        if s.max_depth >= 2 {
-            self.direct = DirectIllumination::from_option(
-                s.mlt.direct_spp,
-                DirectIllumination::OnePerMutations(DIRECT_MUTATIONS_PER_SAMPLE),
-            );
-        }
-        if self.direct.apart() {
-            self.min_depth = 2;
-        }
-        self
+        // By default one sample per pixel of direct light per mutation per pixel.
+        .with_direct(
+            s.max_depth,
+            s.mlt.direct_spp,
+            DirectIllumination::OnePerMutations(DIRECT_MUTATIONS_PER_SAMPLE),
+        )
     }
 }
 
@@ -128,7 +117,7 @@ pub struct MltState {
     pub nonfinite: u64,
     /// When the render began (the report gives the bootstrap's share of the wall time).
     pub started: std::time::Instant,
-    /// The direct illumination's film, once rendered (`settings.direct_spp` above 0).
+    /// The direct illumination's film, once rendered (where `settings.direct` is apart).
     pub direct: Option<Film>,
 }
 
@@ -162,9 +151,9 @@ impl MltState {
     }
 
     /// The image of the steps taken: per group, b_k x its splat sums x pixels / steps per
-    /// chain, summed over the groups, plus the direct illumination rendered apart; under the gaussian each pixel divided by the filter's
-    /// integral about it (`Film::splat_normalisations`: the splats were spread over their
-    /// footprints).
+    /// chain, summed over the groups, plus the direct illumination rendered apart; under the
+    /// gaussian each pixel divided by the filter's integral about it
+    /// (`Film::splat_normalisations`: the splats were spread over their footprints).
     pub fn image_film(&self) -> Film {
         let (w, h) = (self.bdpt.film.width, self.bdpt.film.height);
         let n = self.pixels as usize;
@@ -284,7 +273,7 @@ impl MltState {
         ];
         lines.push((
             "direct illumination",
-            direct_illumination_line(&self.settings, self.direct.as_ref()),
+            direct_illumination::report_line(self.settings.direct, self.direct.as_ref()),
         ));
         if self.bootstrap_share() > BOOTSTRAP_SHARE_WARNING {
             lines.push(("warning", bootstrap_warning(self.bootstrap_share())));
@@ -316,17 +305,6 @@ impl MltState {
             }
         }
         lines
-    }
-}
-
-/// The report's line on where direct illumination comes from.
-pub fn direct_illumination_line(settings: &MltSettings, direct: Option<&Film>) -> String {
-    match direct {
-        Some(film) if settings.direct.apart() => format!(
-            "{} spp of path tracing, added",
-            film.total_samples() / (film.width * film.height).max(1) as u64
-        ),
-        _ => "in the chains".into(),
     }
 }
 
@@ -456,7 +434,7 @@ impl PassState for MltState {
         let dims = settings.dims();
         let bdpt_settings = BdptSettings {
             mis: settings.mis,
-            min_depth: settings.min_depth,
+            min_depth: settings.min_depth(),
             ..BdptSettings::new(settings.seed, settings.max_depth)
         };
         let wave = chains.max(settings.bootstrap_wave);

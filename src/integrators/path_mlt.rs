@@ -57,18 +57,15 @@ impl PathMltSettings {
         if let Some(m) = s.mlt.mutations {
             mutations.enabled = m;
         }
-        let mut bootstrap = MltSettings::from_render(s, false);
+        // Mitsuba's 16 samples per pixel of direct light before the chains, by default.
+        let mut bootstrap = MltSettings::from_render(s, false).with_direct(
+            s.max_depth,
+            s.mlt.direct_spp,
+            DirectIllumination::Samples(DEFAULT_DIRECT_SPP),
+        );
         bootstrap.mis = MisHeuristic::Balance;
         bootstrap.bootstrap_wave = mlt::BOOTSTRAP_WAVE;
         bootstrap.chain_rule = mlt::ChainRule::SqrtOfMutations(mlt::PATH_CHAINS_PER_SQRT_MUTATION);
-        bootstrap.direct = DirectIllumination::InChains;
-        if s.max_depth >= 2 {
-            bootstrap.direct = DirectIllumination::from_option(
-                s.mlt.direct_spp,
-                DirectIllumination::Samples(DEFAULT_DIRECT_SPP),
-            );
-        }
-        bootstrap.min_depth = if bootstrap.direct.apart() { 2 } else { 0 };
         if !bootstrap.direct.apart() {
             mutations.min_vertices = 2;
         }
@@ -265,7 +262,7 @@ impl PassState for PathMltState {
         ));
         lines.push((
             "direct illumination",
-            mlt::direct_illumination_line(&self.settings.bootstrap, self.direct.as_ref()),
+            direct_illumination::report_line(self.settings.bootstrap.direct, self.direct.as_ref()),
         ));
         lines
     }

@@ -218,7 +218,7 @@ crate::system! {
                     }
                     for slot in starts[k]..starts[k + 1] {
                         if let Some((g, value)) = seed_connection(connections, shadow, slot)
-                            && g as u32 >= settings.min_depth
+                            && g as u32 >= settings.min_depth()
                         {
                             w[g] += luminance(value);
                         }

@@ -1,8 +1,8 @@
 //! Metropolis light transport (pssmlt, mmlt): normalisation (image mean luminance = b, the
 //! bootstrap's b = its image's mean, b refined by the large steps), the furnace, block means
-//! against BDPT on the three scenes (direct illumination apart, and in the chains), no depth cap (a closed mirror box against PT),
-//! thread-count independence, seeds replayed exactly, and no zero or invalid proposal ever
-//! accepted.
+//! against BDPT on the three scenes (direct illumination apart, and in the chains), no depth
+//! cap (a closed mirror box against PT), thread-count independence, seeds replayed exactly,
+//! the direct image, and no zero or invalid proposal ever accepted.
 
 use crate::common::{
     assert_blocks_agree, block_luminance_stats, block_means, load_small, load_test_scene,
@@ -31,10 +31,9 @@ fn settings(multiplexed: bool, seed: u64, max_depth: u32, mutations: u64) -> Mlt
 
 /// `settings` with every depth left to the chains (`--direct-spp 0`): the normalisation's
 /// invariants are the chains'.
-fn in_chains(mut s: MltSettings) -> MltSettings {
-    s.direct = DirectIllumination::InChains;
-    s.min_depth = 0;
-    s
+fn in_chains(s: MltSettings) -> MltSettings {
+    let max_depth = s.max_depth;
+    s.with_direct(max_depth, Some(0), DirectIllumination::InChains)
 }
 
 /// Runs `mutations` mutations per pixel (whole passes) and returns the state.
