@@ -40,6 +40,30 @@ pub fn check_integrator_options(o: &RenderOptions) -> Result<()> {
     if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
         bail!("--strategy-images needs --integrator bdpt or mmlt");
     }
+    // The Metropolis options, refused by name where the integrator does not read them.
+    let m = &o.settings.mlt;
+    for (flag, given) in [
+        ("--large-step", m.large_step.is_some()),
+        ("--sigma", m.sigma.is_some()),
+        ("--bootstrap", m.bootstrap.is_some()),
+        ("--chains", m.chains.is_some()),
+        ("--direct-spp", m.direct_spp.is_some()),
+        ("--mutations", m.mutations.is_some()),
+        ("--lens-min", m.lens_min.is_some()),
+    ] {
+        if given && !o.integrator.info().options.contains(&flag) {
+            let takers: Vec<&str> = crate::integrators::REGISTRY
+                .iter()
+                .filter(|i| i.options.contains(&flag))
+                .map(|i| i.name)
+                .collect();
+            bail!(
+                "{flag} is not an option of {}: it is {}'s",
+                o.integrator,
+                takers.join(", ")
+            );
+        }
+    }
     if o.settings.light_vertex_cache > 0
         && !o
             .integrator

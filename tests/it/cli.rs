@@ -224,6 +224,32 @@ fn strategy_images_need_bdpt() {
 }
 
 #[test]
+fn metropolis_options_are_refused_by_integrators_that_do_not_read_them() {
+    for (integrator, flag, value, takers) in [
+        ("pt", "--direct-spp", "4", "pssmlt, mmlt, mlt"),
+        ("bdpt", "--chains", "300", "pssmlt, mmlt, mlt"),
+        ("mlt", "--sigma", "0.01", "pssmlt, mmlt"),
+        ("mmlt", "--lens-min", "0.2", "mlt"),
+    ] {
+        let o = stagelight(&[
+            "render",
+            "scenes/cornell_box.ron",
+            "--integrator",
+            integrator,
+            "--spp",
+            "1",
+            flag,
+            value,
+            "-o",
+            "/tmp/never-written.exr",
+        ]);
+        assert_eq!(o.status.code(), Some(1), "{integrator} {flag}");
+        let want = format!("{flag} is not an option of {integrator}: it is {takers}'s");
+        assert!(stderr(&o).contains(&want), "{}", stderr(&o));
+    }
+}
+
+#[test]
 fn photon_mappers_render_and_report_their_photons() {
     let dir = temp_dir("cli-photon-mappers");
     for (integrator, extra) in [
