@@ -311,8 +311,8 @@ pub struct MltArgs {
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1 << 15))]
     pub chains: Option<u64>,
     /// Direct illumination (depths 0 and 1) rendered apart by path tracing at this many
-    /// samples per pixel (mlt, pssmlt, mmlt; 0: the chains render it too; default: mlt 16,
-    /// pssmlt and mmlt one per mutation per pixel, so it keeps pace with any budget).
+    /// samples per pixel (mlt, pssmlt, mmlt; 0: the chains render it too; default: one per
+    /// mutation per pixel, so it keeps pace with any budget; Mitsuba's mlt renders 16).
     #[arg(long, value_parser = clap::value_parser!(u32).range(0..=1 << 16))]
     pub direct_spp: Option<u32>,
     /// The path-space mutations to use, comma-separated from bidir, lens, caustic,

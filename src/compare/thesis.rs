@@ -13,7 +13,7 @@ use super::run::{ComparePlan, SceneRun, compare_scene};
 use super::{BudgetUnit, CompareJob, Comparison, RunResult, page, report};
 use crate::commands::{exit_code, load_scene, print_out, stop_on_ctrl_c, thread_pool};
 use crate::film::Image;
-use crate::integrators::{IntegratorKind, PhotonSettings, RenderSettings};
+use crate::integrators::{IntegratorKind, MltOptions, PhotonSettings, RenderSettings};
 use anyhow::Result;
 use std::fmt::Write;
 use std::path::{Path, PathBuf};
@@ -560,6 +560,11 @@ pub(crate) fn by_spp_plan(o: &ThesisOptions) -> ComparePlan {
                 radius: o.photons.radius,
                 alpha: o.photons.alpha,
                 ..PhotonSettings::default()
+            },
+            // The study's MLT is Mitsuba's: direct light apart at its fixed samples per pixel.
+            mlt: MltOptions {
+                direct_spp: Some(crate::integrators::path_mlt::MITSUBA_DIRECT_SPP),
+                ..MltOptions::default()
             },
             ..RenderSettings::default()
         },

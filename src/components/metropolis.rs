@@ -132,16 +132,12 @@ impl MltSettings {
         if self.direct.apart() { 2 } else { 0 }
     }
 
-    /// Direct illumination as `--direct-spp` asks (None: `default`) where the chains have
-    /// deeper paths to render (`max_depth` 2 or more); else in the chains.
-    pub fn with_direct(
-        mut self,
-        max_depth: u32,
-        direct_spp: Option<u32>,
-        default: DirectIllumination,
-    ) -> MltSettings {
+    /// Direct illumination as `--direct-spp` asks (None: one sample per pixel per
+    /// `DIRECT_MUTATIONS_PER_SAMPLE` mutations per pixel) where the chains have deeper paths to
+    /// render (`max_depth` 2 or more); else in the chains.
+    pub fn with_direct(mut self, max_depth: u32, direct_spp: Option<u32>) -> MltSettings {
         self.direct = if max_depth >= 2 {
-            DirectIllumination::from_option(direct_spp, default)
+            DirectIllumination::from_option(direct_spp)
         } else {
             DirectIllumination::InChains
         };
@@ -231,10 +227,11 @@ impl Bootstrap {
     }
 }
 
-/// Mitsuba's samples per pixel for the direct illumination rendered apart (path-space mlt).
-pub const DEFAULT_DIRECT_SPP: u32 = 16;
+/// Mitsuba's samples per pixel for the direct illumination rendered apart by its `mlt` (the
+/// study's preset asks for it).
+pub const MITSUBA_DIRECT_SPP: u32 = 16;
 
-/// pssmlt and mmlt: one sample per pixel of direct illumination every this many mutations per
+/// The Metropolis integrators' default: one sample per pixel of direct illumination every this many mutations per
 /// pixel, so that it converges with the chains whatever the budget. A depth-0/1 path tracing
 /// sample costs a fraction of a mutation (a BDPT evaluation of a whole path): one per mutation
 /// took about 12% of mmlt's time on tests/scenes/glass_tube.ron, whose direct light includes
@@ -246,19 +243,18 @@ pub const DIRECT_MUTATIONS_PER_SAMPLE: u32 = 1;
 pub enum DirectIllumination {
     /// The chains render every depth (`--direct-spp 0`).
     InChains,
-    /// Path tracing at this many samples per pixel, before the chains (`--direct-spp N`;
-    /// path-space mlt's default, Mitsuba's 16).
+    /// Path tracing at this many samples per pixel, before the chains (`--direct-spp N`).
     Samples(u32),
     /// Path tracing, one sample per pixel from the start and one more every this many
-    /// mutations per pixel (pssmlt's and mmlt's default, `DIRECT_MUTATIONS_PER_SAMPLE`).
+    /// mutations per pixel (the default, `DIRECT_MUTATIONS_PER_SAMPLE`).
     OnePerMutations(u32),
 }
 
 impl DirectIllumination {
-    /// From `--direct-spp` (None: `default`).
-    pub fn from_option(spp: Option<u32>, default: DirectIllumination) -> DirectIllumination {
+    /// From `--direct-spp` (None: the default).
+    pub fn from_option(spp: Option<u32>) -> DirectIllumination {
         match spp {
-            None => default,
+            None => DirectIllumination::OnePerMutations(DIRECT_MUTATIONS_PER_SAMPLE),
             Some(0) => DirectIllumination::InChains,
             Some(n) => DirectIllumination::Samples(n),
         }

@@ -82,11 +82,7 @@ impl MltSettings {
             ..MltSettings::new(s.seed, multiplexed)
         }
         // By default one sample per pixel of direct light per mutation per pixel.
-        .with_direct(
-            s.max_depth,
-            s.mlt.direct_spp,
-            DirectIllumination::OnePerMutations(DIRECT_MUTATIONS_PER_SAMPLE),
-        )
+        .with_direct(s.max_depth, s.mlt.direct_spp)
     }
 }
 

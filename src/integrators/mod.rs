@@ -440,8 +440,7 @@ pub struct MltOptions {
     /// Chains (default: from the budget).
     pub chains: Option<u64>,
     /// Samples per pixel of the direct illumination rendered apart (0: in the chains; None:
-    /// path-space MLT 16, pssmlt and mmlt one per `DIRECT_MUTATIONS_PER_SAMPLE` mutations
-    /// per pixel).
+    /// one per `DIRECT_MUTATIONS_PER_SAMPLE` mutations per pixel).
     pub direct_spp: Option<u32>,
     /// Path-space MLT: the mutations enabled, bit k = `MutationKind` k (all).
     pub mutations: Option<u8>,

@@ -33,7 +33,7 @@ fn settings(multiplexed: bool, seed: u64, max_depth: u32, mutations: u64) -> Mlt
 /// invariants are the chains'.
 fn in_chains(s: MltSettings) -> MltSettings {
     let max_depth = s.max_depth;
-    s.with_direct(max_depth, Some(0), DirectIllumination::InChains)
+    s.with_direct(max_depth, Some(0))
 }
 
 /// Runs `mutations` mutations per pixel (whole passes) and returns the state.
