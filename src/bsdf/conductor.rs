@@ -9,8 +9,9 @@
 //! The microfacet maths (src/bsdf/microfacet.rs) is Mitsuba's up to Beckmann's exact G1, which
 //! moves images by far less than noise.
 pub use super::microfacet::{ALPHA_MIN, Microfacet};
-use super::microfacet::{Alphas, off_axis, onto_axis};
-use super::{Bsdf, BsdfSample, TransportMode};
+use super::microfacet::{Axis, Distribution};
+use super::{Bsdf, BsdfSample, LobeSample, TransportMode};
+use crate::lanes::{F, Mask, Real, V3};
 use glam::{Vec2, Vec3};
 
 /// A conductor's complex index of refraction eta + i k, per RGB channel, relative to the
@@ -87,28 +88,10 @@ impl Conductor {
         self.alpha_u.max(self.alpha_v)
     }
 
-    /// (f, pdf) for a reflection pair; zero unless both lie strictly above the surface.
-    #[inline]
-    fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
-        let (wo, wi) = (onto_axis(self.axis, wo), onto_axis(self.axis, wi));
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return (Vec3::ZERO, 0.0);
-        }
-        let h = wo + wi;
-        // Both above the surface: h.z > 0 and |h| >= h.z, so normalising is safe.
-        let h = h / h.length();
-        let a = Alphas::new(self.alpha_u, self.alpha_v);
-        let m = self.distribution;
-        let (d, go, gi) = (a.ndf(m, h), a.g1_over_cos(m, wo), a.g1_over_cos(m, wi));
-        // The pdf's (wo.h) factors cancel: D_wo(h) / (4 wo.h) = G1(wo) D(h) / (4 wo.z).
-        let pdf = 0.25 * go * d;
-        let reflectance = if self.ior == ComplexIor::PERFECT_MIRROR {
-            // Skips a Fresnel factor of exactly 1, so the RON conductor is what it always was.
-            self.reflectance
-        } else {
-            self.reflectance * fresnel(wo.dot(h), self.ior)
-        };
-        (reflectance * (pdf * gi), pdf)
+    /// The lobe for one path.
+    #[inline(always)]
+    fn lobe(&self) -> ConductorLobe<f32> {
+        ConductorLobe::gather(&[*self])
     }
 }
 
@@ -124,31 +107,127 @@ impl Bsdf for Conductor {
 
     /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
     fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Vec3 {
-        self.eval_pdf(wo, wi).0
+        self.lobe().eval_pdf(wo.into(), wi.into()).0.into()
     }
 
     /// The solid-angle density with which `sample` returns `wi`.
     fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi).1
+        self.lobe().eval_pdf(wo.into(), wi.into()).1
+    }
+
+    #[inline]
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> (Vec3, f32) {
+        let (f, pdf) = self.lobe().eval_pdf(wo.into(), wi.into());
+        (f.into(), pdf)
     }
 
     /// Samples wi given wo by the distribution of visible normals; `None` when wo is not
     /// above the surface or the reflected direction is not (the microsurface masks it).
     fn sample(&self, wo: Vec3, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
-        if wo.z <= 0.0 {
-            return None;
+        self.lobe().sample(wo.into(), u.x, u.y).one()
+    }
+
+    const IN_LANES: bool = true;
+
+    #[inline(always)]
+    fn sample_lanes<const N: usize>(
+        materials: &[Self; N],
+        wo: V3<F<N>>,
+        ux: F<N>,
+        uy: F<N>,
+    ) -> LobeSample<F<N>> {
+        ConductorLobe::gather(materials).sample(wo, ux, uy)
+    }
+
+    #[inline(always)]
+    fn eval_pdf_lanes<const N: usize>(
+        materials: &[Self; N],
+        wo: V3<F<N>>,
+        wi: V3<F<N>>,
+    ) -> (V3<F<N>>, F<N>) {
+        ConductorLobe::gather(materials).eval_pdf(wo, wi)
+    }
+}
+
+/// A conductor's lobe for one path (`f32`) or lanes (`F<N>`): the maths of `eval`, `pdf` and
+/// `sample`, written once over `Real` (docs/architecture.md, "Writing a material once for one
+/// path and for lanes").
+#[derive(Clone, Copy)]
+pub struct ConductorLobe<T: Real> {
+    distribution: Distribution<T>,
+    axis: Axis<T>,
+    reflectance: V3<T>,
+    eta: V3<T>,
+    k: V3<T>,
+    /// Where the Fresnel factor is exactly 1 (`ComplexIor::PERFECT_MIRROR`): skipped, so the
+    /// RON conductor is what it always was.
+    mirror: T::Mask,
+}
+
+impl<T: Real> ConductorLobe<T> {
+    /// Lane `l`'s lobe is `conductors[l]`'s.
+    #[inline(always)]
+    pub fn gather(conductors: &[Conductor]) -> ConductorLobe<T> {
+        let c = |l: usize| &conductors[l];
+        ConductorLobe {
+            distribution: Distribution::new(
+                T::Mask::lanes(|l| c(l).distribution == Microfacet::Beckmann),
+                T::lanes(|l| c(l).alpha_u),
+                T::lanes(|l| c(l).alpha_v),
+            ),
+            axis: Axis::new(T::lanes(|l| c(l).axis.x), T::lanes(|l| c(l).axis.y)),
+            reflectance: V3::lanes(|l| c(l).reflectance),
+            eta: V3::lanes(|l| c(l).ior.eta),
+            k: V3::lanes(|l| c(l).ior.k),
+            mirror: T::Mask::lanes(|l| c(l).ior == ComplexIor::PERFECT_MIRROR),
         }
-        let on_axis = onto_axis(self.axis, wo);
-        let a = Alphas::new(self.alpha_u, self.alpha_v);
-        let h = a.visible_normal(self.distribution, on_axis, u);
-        let wi = 2.0 * on_axis.dot(h) * h - on_axis;
-        if wi.z <= 0.0 {
-            return None; // reflected below the surface: masked
+    }
+
+    /// (f, pdf) for a reflection pair; zero unless both lie strictly above the surface.
+    #[inline(always)]
+    pub fn eval_pdf(&self, wo: V3<T>, wi: V3<T>) -> (V3<T>, T) {
+        let zero = T::splat(0.0);
+        let none = (V3::splat(Vec3::ZERO), zero);
+        let (wo, wi) = (self.axis.onto(wo), self.axis.onto(wi));
+        let above = wo.z.greater(zero) & wi.z.greater(zero);
+        if !above.any() {
+            return none;
         }
-        let wi = off_axis(self.axis, wi.normalize());
+        let h = wo + wi;
+        // Both above the surface: h.z > 0 and |h| >= h.z, so normalising is safe.
+        let h = h / h.length();
+        let m = &self.distribution;
+        let (d, go, gi) = (m.ndf(h), m.g1_over_cos(wo), m.g1_over_cos(wi));
+        // The pdf's (wo.h) factors cancel: D_wo(h) / (4 wo.h) = G1(wo) D(h) / (4 wo.z).
+        let pdf = T::splat(0.25) * go * d;
+        let reflectance = V3::select_with(
+            self.mirror,
+            || self.reflectance,
+            || self.reflectance * fresnel_of(wo.dot(h), self.eta, self.k),
+        );
+        (
+            V3::select(above, reflectance * (pdf * gi), none.0),
+            T::select(above, pdf, zero),
+        )
+    }
+
+    /// A direction by the distribution of visible normals, valid where wo and the reflected
+    /// direction are above the surface (below, the microsurface masks it).
+    #[inline(always)]
+    pub fn sample(&self, wo: V3<T>, ux: T, uy: T) -> LobeSample<T> {
+        let zero = T::splat(0.0);
+        let facing = wo.z.greater(zero);
+        if !facing.any() {
+            return LobeSample::none();
+        }
+        let on_axis = self.axis.onto(wo);
+        let h = self.distribution.visible_normal(on_axis, ux, uy, facing);
+        let wi = h * (T::splat(2.0) * on_axis.dot(h)) - on_axis;
+        let kept = facing & wi.z.greater(zero);
+        let wi = self.axis.off(wi.normalize());
         // Value and pdf from the same code as eval/pdf so that MIS sees identical densities.
         let (value, pdf) = self.eval_pdf(wo, wi);
-        BsdfSample::of_lobe(wi, value, pdf)
+        LobeSample::of_lobe(kept, wi, value, pdf)
     }
 }
 
@@ -158,42 +237,54 @@ impl Bsdf for Conductor {
 /// evaluate on the three channels' eta and k. At normal incidence it is
 /// ((eta - 1)^2 + k^2) / ((eta + 1)^2 + k^2); at grazing incidence 1.
 pub fn fresnel(cos_i: f32, ior: ComplexIor) -> Vec3 {
-    let c = cos_i.clamp(0.0, 1.0);
-    Vec3::new(
-        fresnel_channel(c, ior.eta.x, ior.k.x),
-        fresnel_channel(c, ior.eta.y, ior.k.y),
-        fresnel_channel(c, ior.eta.z, ior.k.z),
+    fresnel_of(cos_i, ior.eta.into(), ior.k.into()).into()
+}
+
+/// `fresnel` for one path or lanes.
+#[inline(always)]
+fn fresnel_of<T: Real>(cos_i: T, eta: V3<T>, k: V3<T>) -> V3<T> {
+    // f32::clamp(0, 1), NaN kept.
+    let c = T::select(
+        cos_i.less(T::splat(0.0)),
+        T::splat(0.0),
+        T::select(cos_i.greater(T::splat(1.0)), T::splat(1.0), cos_i),
+    );
+    V3::new(
+        fresnel_channel(c, eta.x, k.x),
+        fresnel_channel(c, eta.y, k.y),
+        fresnel_channel(c, eta.z, k.z),
     )
 }
 
 /// `fresnel` of one channel, for `cos_i` in [0, 1].
-#[inline]
-fn fresnel_channel(cos_i: f32, eta: f32, k: f32) -> f32 {
+#[inline(always)]
+fn fresnel_channel<T: Real>(cos_i: T, eta: T, k: T) -> T {
+    let (zero, one) = (T::splat(0.0), T::splat(1.0));
     let cos2 = cos_i * cos_i;
-    let sin2 = 1.0 - cos2;
+    let sin2 = one - cos2;
     let sin4 = sin2 * sin2;
     let t = eta * eta - k * k - sin2;
     // a^2 + b^2 and a, where a + i b is the complex cosine of the transmitted angle times eta.
-    let a2_plus_b2 = (t * t + 4.0 * k * k * eta * eta).max(0.0).sqrt();
-    let a = (0.5 * (a2_plus_b2 + t)).max(0.0).sqrt();
+    let a2_plus_b2 = (t * t + T::splat(4.0) * k * k * eta * eta).max(zero).sqrt();
+    let a = ((a2_plus_b2 + t) * 0.5).max(zero).sqrt();
     let term1 = a2_plus_b2 + cos2;
-    let term2 = 2.0 * cos_i * a;
+    let term2 = T::splat(2.0) * cos_i * a;
     // term1 + term2 vanishes only at grazing incidence with eta 1 and k 0 (no interface at
     // all), term3 + term4 only at normal incidence with eta = k = 0: the limits there are 1
     // and r_s, which avoids 0/0.
-    let r_s = if term1 + term2 > 0.0 {
-        (term1 - term2) / (term1 + term2)
-    } else {
-        1.0
-    };
+    let r_s = T::select(
+        (term1 + term2).greater(zero),
+        (term1 - term2) / (term1 + term2),
+        one,
+    );
     let term3 = a2_plus_b2 * cos2 + sin4;
     let term4 = term2 * sin2;
-    let r_p = if term3 + term4 > 0.0 {
-        r_s * (term3 - term4) / (term3 + term4)
-    } else {
-        r_s
-    };
-    0.5 * (r_s + r_p)
+    let r_p = T::select(
+        (term3 + term4).greater(zero),
+        r_s * (term3 - term4) / (term3 + term4),
+        r_s,
+    );
+    (r_s + r_p) * 0.5
 }
 
 #[cfg(test)]

@@ -1,5 +1,6 @@
 //! Smooth dielectric interface, and the thin dielectric sheet.
 use super::{Bsdf, BsdfSample, TransportMode};
+use crate::lanes::Real;
 use glam::{Vec2, Vec3};
 
 /// Smooth dielectric: exact unpolarised Fresnel, refraction, total internal reflection.
@@ -74,29 +75,41 @@ const COS_FLOOR: f32 = 1e-20;
 /// Unpolarised Fresnel reflectance for a ray arriving with cosine `cos_i` (positive: from the
 /// outside) at an interface with relative index `eta` (inside over outside).
 pub fn fresnel(cos_i: f32, eta: f32) -> f32 {
-    let c = cos_i.clamp(-1.0, 1.0);
-    fresnel_cs(c, (1.0 - c * c).max(0.0), eta)
+    fresnel_of(cos_i, eta)
+}
+
+/// `fresnel` for one path or lanes.
+#[inline(always)]
+pub fn fresnel_of<T: Real>(cos_i: T, eta: T) -> T {
+    // f32::clamp(-1, 1), NaN kept.
+    let c = T::select(
+        cos_i.less(T::splat(-1.0)),
+        T::splat(-1.0),
+        T::select(cos_i.greater(T::splat(1.0)), T::splat(1.0), cos_i),
+    );
+    fresnel_cs(c, (T::splat(1.0) - c * c).max(T::splat(0.0)), eta)
 }
 
 /// `fresnel` given also sin^2 of the incident angle: near normal incidence 1 - cos^2 cancels,
 /// so `sample` passes wo.x^2 + wo.y^2 instead, which keeps grazing transmission accurate.
-fn fresnel_cs(cos_i: f32, sin2_i: f32, eta: f32) -> f32 {
-    let mut cos_i = cos_i;
-    let mut eta = eta;
-    if cos_i < 0.0 {
-        // Arriving from the inside: the side left is the dense one.
-        eta = 1.0 / eta;
-        cos_i = -cos_i;
-    }
+#[inline(always)]
+fn fresnel_cs<T: Real>(cos_i: T, sin2_i: T, eta: T) -> T {
+    let one = T::splat(1.0);
+    // Arriving from the inside: the side left is the dense one.
+    let inside = cos_i.less(T::splat(0.0));
+    let eta = T::select(inside, one / eta, eta);
+    let cos_i = T::select(inside, -cos_i, cos_i);
     let sin2_t = sin2_i / (eta * eta);
-    if sin2_t >= 1.0 {
-        return 1.0; // total internal reflection
-    }
-    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+    let cos_t = (one - sin2_t).max(T::splat(0.0)).sqrt();
     let r_s = (cos_i - eta * cos_t) / (cos_i + eta * cos_t);
     let r_p = (eta * cos_i - cos_t) / (eta * cos_i + cos_t);
-    // Both denominators are > 0 here: cos_t > 0 since sin2_t < 1, and eta > 0.
-    (0.5 * (r_s * r_s + r_p * r_p)).min(1.0)
+    // Both denominators are > 0 where sin2_t < 1: cos_t > 0, and eta > 0; at or beyond 1, total
+    // internal reflection.
+    T::select(
+        sin2_t.less(one),
+        ((r_s * r_s + r_p * r_p) * 0.5).min(one),
+        one,
+    )
 }
 
 /// Fresnel reflectance of a refraction pair from both its cosines: `cos_outside` and

@@ -4,8 +4,8 @@
 //! megakernel and the other integrators run it for one path (`f32`, through `Diffuse`'s
 //! `Bsdf`), the wavefront's lane systems for `N` paths at a time (`F<N>`), bit for bit alike
 //! (see docs/architecture.md, "Writing a material once for one path and for lanes").
-use super::{Bsdf, BsdfSample, TransportMode};
-use crate::lanes::{Real, V3};
+use super::{Bsdf, BsdfSample, LobeSample, TransportMode};
+use crate::lanes::{F, Real, V3};
 use crate::sampling::cosine_hemisphere_of;
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
@@ -43,13 +43,31 @@ impl Bsdf for Diffuse {
     }
 
     fn sample(&self, wo: Vec3, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
-        let s = sample_of(self.reflectance.into(), wo.into(), u.x, u.y);
-        s.valid.then(|| BsdfSample {
-            wi: s.wi.into(),
-            value: s.value.into(),
-            pdf: s.pdf,
-            delta: false,
-        })
+        sample_of(self.reflectance.into(), wo.into(), u.x, u.y).one()
+    }
+
+    const IN_LANES: bool = true;
+
+    #[inline(always)]
+    fn sample_lanes<const N: usize>(
+        materials: &[Self; N],
+        wo: V3<F<N>>,
+        ux: F<N>,
+        uy: F<N>,
+    ) -> LobeSample<F<N>> {
+        sample_of(V3::lanes(|l| materials[l].reflectance), wo, ux, uy)
+    }
+
+    #[inline(always)]
+    fn eval_pdf_lanes<const N: usize>(
+        materials: &[Self; N],
+        wo: V3<F<N>>,
+        wi: V3<F<N>>,
+    ) -> (V3<F<N>>, F<N>) {
+        (
+            eval_cos(V3::lanes(|l| materials[l].reflectance), wo.z, wi.z),
+            pdf_cos(wo.z, wi.z),
+        )
     }
 
     /// The lobe depends only on the two cosines, so it needs no frame (the common case in
@@ -85,25 +103,15 @@ pub fn pdf_cos<T: Real>(cos_o: T, cos_i: T) -> T {
     )
 }
 
-/// A sample of the lobe for one path or lanes: `BsdfSample` where `valid` is set (elsewhere
-/// the sample carries nothing).
-#[derive(Clone, Copy, Debug)]
-pub struct DiffuseSample<T: Real> {
-    pub valid: T::Mask,
-    pub wi: V3<T>,
-    pub value: V3<T>,
-    pub pdf: T,
-}
-
 /// `sample` for one path or lanes: the one body of both.
 #[inline(always)]
-pub fn sample_of<T: Real>(reflectance: V3<T>, wo: V3<T>, ux: T, uy: T) -> DiffuseSample<T> {
+pub fn sample_of<T: Real>(reflectance: V3<T>, wo: V3<T>, ux: T, uy: T) -> LobeSample<T> {
     let zero = T::splat(0.0);
     let wi = cosine_hemisphere_of(ux, uy);
     // Mirror the lobe onto wo's side: the surface reflects on both sides.
     let wi = V3::new(wi.x, wi.y, T::select(wo.z.less(zero), -wi.z, wi.z));
     let pdf = pdf_cos(wo.z, wi.z);
-    DiffuseSample {
+    LobeSample {
         // A grazing wo has no side; the rim of the disk maps to the tangent plane, where the
         // density vanishes.
         valid: !wo.z.equal(zero) & !pdf.less_eq(zero),

@@ -14,6 +14,7 @@ pub mod plastic;
 pub mod rough_dielectric;
 pub mod smooth_plastic;
 
+use crate::lanes::{F, Mask, Real, V3};
 use glam::{Vec2, Vec3};
 
 /// A material's BSDF, one type per material in that material's own file (`diffuse::Diffuse`,
@@ -51,6 +52,40 @@ pub trait Bsdf: ListedMaterial + Copy {
 
     /// Samples wi given wo; `None` when the sample carries no energy.
     fn sample(&self, wo: Vec3, u: Vec2, mode: TransportMode) -> Option<BsdfSample>;
+
+    /// `eval` and `pdf` of one pair at once (the microfacet materials compute them together).
+    #[inline]
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Vec3, f32) {
+        (self.eval(wo, wi, mode), self.pdf(wo, wi))
+    }
+
+    /// Whether the kind has a lane form: `sample_lanes` and `eval_pdf_lanes` compute, for `N`
+    /// paths on materials of the kind at once, the bits `sample` and `eval_pdf` compute for
+    /// each (the material's maths written once over `Real`), so the wavefront shades and
+    /// samples lights `N` paths at a time. Non-delta materials whose lobes never refract
+    /// (radiance and importance alike), one direction per sample.
+    const IN_LANES: bool = false;
+
+    /// `sample` (radiance) of `N` paths on `materials` at once; only called where `IN_LANES`.
+    #[inline(always)]
+    fn sample_lanes<const N: usize>(
+        _materials: &[Self; N],
+        _wo: V3<F<N>>,
+        _ux: F<N>,
+        _uy: F<N>,
+    ) -> LobeSample<F<N>> {
+        LobeSample::none()
+    }
+
+    /// `eval_pdf` of `N` pairs at once; only called where `IN_LANES`.
+    #[inline(always)]
+    fn eval_pdf_lanes<const N: usize>(
+        _materials: &[Self; N],
+        _wo: V3<F<N>>,
+        _wi: V3<F<N>>,
+    ) -> (V3<F<N>>, F<N>) {
+        (V3::splat(Vec3::ZERO), F::splat(0.0))
+    }
 
     /// `eval` for world-space directions about the shading normal `ns`.
     #[inline]
@@ -200,6 +235,14 @@ macro_rules! materials {
                 }
             }
 
+            /// `eval_mode` and `pdf` at once.
+            #[inline]
+            pub fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Vec3, f32) {
+                match self {
+                    $(Material::$kind(m) => m.eval_pdf(wo, wi, mode),)+
+                }
+            }
+
             /// `eval_mode` for world-space directions about the shading normal `ns`.
             #[inline]
             pub fn eval_world(&self, ns: Vec3, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
@@ -289,6 +332,55 @@ impl BsdfSample {
             wi,
             value,
             pdf,
+            delta: false,
+        })
+    }
+}
+
+/// A sample of a non-delta lobe for one path or lanes (`BsdfSample` where `valid` is set;
+/// elsewhere the sample carries nothing): what the materials' lane forms return.
+#[derive(Clone, Copy, Debug)]
+pub struct LobeSample<T: Real> {
+    pub valid: T::Mask,
+    pub wi: V3<T>,
+    pub value: V3<T>,
+    pub pdf: T,
+}
+
+impl<T: Real> LobeSample<T> {
+    /// No sample in any lane.
+    #[inline(always)]
+    pub fn none() -> LobeSample<T> {
+        LobeSample {
+            valid: T::Mask::splat(false),
+            wi: V3::splat(Vec3::Z),
+            value: V3::splat(Vec3::ZERO),
+            pdf: T::splat(0.0),
+        }
+    }
+
+    /// `BsdfSample::of_lobe` where `kept`: valid where the pdf is positive and finite and the
+    /// value not zero.
+    #[inline(always)]
+    pub fn of_lobe(kept: T::Mask, wi: V3<T>, value: V3<T>, pdf: T) -> LobeSample<T> {
+        let finite_pdf = pdf.greater(T::splat(0.0)) & pdf.less(T::splat(f32::INFINITY));
+        LobeSample {
+            valid: kept & finite_pdf & !value.is_zero(),
+            wi,
+            value,
+            pdf,
+        }
+    }
+}
+
+impl LobeSample<f32> {
+    /// The one path's sample, if any.
+    #[inline(always)]
+    pub fn one(self) -> Option<BsdfSample> {
+        self.valid.then(|| BsdfSample {
+            wi: self.wi.into(),
+            value: self.value.into(),
+            pdf: self.pdf,
             delta: false,
         })
     }

@@ -17,9 +17,11 @@
 //! behind the shading normal.
 
 use super::conductor::Microfacet;
-use super::dielectric::fresnel;
-use super::microfacet::Alphas;
-use super::{Bsdf, BsdfSample, TransportMode};
+use super::dielectric::{fresnel, fresnel_of};
+use super::microfacet::Distribution;
+use super::{Bsdf, BsdfSample, LobeSample, TransportMode};
+use crate::lanes::{F, Mask, Real, V3};
+use crate::sampling::cosine_hemisphere_of;
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 use std::f32::consts::FRAC_1_PI;
@@ -86,46 +88,21 @@ impl RoughPlastic {
         }
     }
 
+    /// The lobe for one path.
+    #[inline(always)]
+    fn lobe(&self) -> RoughPlasticLobe<f32> {
+        RoughPlasticLobe::gather(&[*self])
+    }
+}
+
+impl Coat {
     /// T(cos), linearly interpolated as Mitsuba's `lerp_gather`.
     #[inline]
     fn transmittance_at(&self, cos: f32) -> f32 {
         let x = cos * (TRANSMITTANCE_POINTS - 1) as f32;
         let i = (x as usize).min(TRANSMITTANCE_POINTS - 2);
-        let (t0, t1) = (self.coat.transmittance[i], self.coat.transmittance[i + 1]);
+        let (t0, t1) = (self.transmittance[i], self.transmittance[i + 1]);
         t0 + (t1 - t0) * (x - i as f32)
-    }
-
-    /// The probability of sampling the glossy lobe from `wo` (wo.z > 0).
-    #[inline]
-    fn specular_probability(&self, wo_z: f32) -> f32 {
-        let t = self.transmittance_at(wo_z);
-        let specular = (1.0 - t) * self.specular_weight;
-        let diffuse = t * (1.0 - self.specular_weight);
-        specular / (specular + diffuse)
-    }
-
-    #[inline]
-    fn eval_pdf(&self, wo: Vec3, wi: Vec3) -> (Vec3, f32) {
-        if wo.z <= 0.0 || wi.z <= 0.0 {
-            return (Vec3::ZERO, 0.0);
-        }
-        let h = wo + wi;
-        let h = h / h.length();
-        let a = Alphas::new(self.alpha, self.alpha);
-        let m = self.distribution;
-        let (d, go, gi) = (a.ndf(m, h), a.g1_over_cos(m, wo), a.g1_over_cos(m, wi));
-        let glossy_pdf = 0.25 * go * d;
-        let glossy = self.specular * (fresnel(wo.dot(h), self.eta) * glossy_pdf * gi);
-        let (t_o, t_i) = (self.transmittance_at(wo.z), self.transmittance_at(wi.z));
-        let inside = if self.nonlinear {
-            self.diffuse * self.coat.internal_reflectance
-        } else {
-            Vec3::splat(self.coat.internal_reflectance)
-        };
-        let base =
-            self.diffuse / (Vec3::ONE - inside) * (FRAC_1_PI / (self.eta * self.eta) * t_o * t_i);
-        let p = self.specular_probability(wo.z);
-        (glossy + base, p * glossy_pdf + (1.0 - p) * wi.z * FRAC_1_PI)
     }
 }
 
@@ -141,36 +118,156 @@ impl Bsdf for RoughPlastic {
 
     /// f(wo, wi) without the cosine; zero unless both lie strictly above the surface.
     fn eval(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> Vec3 {
-        self.eval_pdf(wo, wi).0
+        self.lobe().eval_pdf(wo.into(), wi.into()).0.into()
     }
 
     /// The solid-angle density with which `sample` returns `wi`.
     fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi).1
+        self.lobe().eval_pdf(wo.into(), wi.into()).1
+    }
+
+    #[inline]
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, _mode: TransportMode) -> (Vec3, f32) {
+        let (f, pdf) = self.lobe().eval_pdf(wo.into(), wi.into());
+        (f.into(), pdf)
     }
 
     /// Samples the glossy lobe or the base (one number chooses, then is stretched back to
     /// [0, 1) for the direction); `None` when wo is not above the surface or the reflection
     /// goes below it.
     fn sample(&self, wo: Vec3, u: Vec2, _mode: TransportMode) -> Option<BsdfSample> {
-        if wo.z <= 0.0 {
-            return None;
+        self.lobe().sample(wo.into(), u.x, u.y).one()
+    }
+
+    const IN_LANES: bool = true;
+
+    #[inline(always)]
+    fn sample_lanes<const N: usize>(
+        materials: &[Self; N],
+        wo: V3<F<N>>,
+        ux: F<N>,
+        uy: F<N>,
+    ) -> LobeSample<F<N>> {
+        RoughPlasticLobe::gather(materials).sample(wo, ux, uy)
+    }
+
+    #[inline(always)]
+    fn eval_pdf_lanes<const N: usize>(
+        materials: &[Self; N],
+        wo: V3<F<N>>,
+        wi: V3<F<N>>,
+    ) -> (V3<F<N>>, F<N>) {
+        RoughPlasticLobe::gather(materials).eval_pdf(wo, wi)
+    }
+}
+
+/// A rough plastic's lobes for one path (`f32`) or lanes (`F<N>`): the maths of `eval`, `pdf`
+/// and `sample`, written once over `Real`; the coat's tables are read lane by lane.
+#[derive(Clone, Copy)]
+pub struct RoughPlasticLobe<T: Real> {
+    distribution: Distribution<T>,
+    eta: T,
+    specular: V3<T>,
+    specular_weight: T,
+    /// diffuse / (1 - the internal reflections' factor): the base lobe's colour.
+    base: V3<T>,
+    coats: T::Each<&'static Coat>,
+}
+
+impl<T: Real> RoughPlasticLobe<T> {
+    /// Lane `l`'s lobes are `plastics[l]`'s.
+    #[inline(always)]
+    pub fn gather(plastics: &[RoughPlastic]) -> RoughPlasticLobe<T> {
+        let p = |l: usize| &plastics[l];
+        let alpha = T::lanes(|l| p(l).alpha);
+        RoughPlasticLobe {
+            distribution: Distribution::new(
+                T::Mask::lanes(|l| p(l).distribution == Microfacet::Beckmann),
+                alpha,
+                alpha,
+            ),
+            eta: T::lanes(|l| p(l).eta),
+            specular: V3::lanes(|l| p(l).specular),
+            specular_weight: T::lanes(|l| p(l).specular_weight),
+            base: V3::lanes(|l| {
+                let p = p(l);
+                let inside = if p.nonlinear {
+                    p.diffuse * p.coat.internal_reflectance
+                } else {
+                    Vec3::splat(p.coat.internal_reflectance)
+                };
+                p.diffuse / (Vec3::ONE - inside)
+            }),
+            coats: T::each(|l| p(l).coat),
         }
-        let p = self.specular_probability(wo.z);
-        let wi = if u.x < p {
-            let u = Vec2::new(u.x / p, u.y);
-            let a = Alphas::new(self.alpha, self.alpha);
-            let h = a.visible_normal(self.distribution, wo, u);
-            (2.0 * wo.dot(h) * h - wo).normalize()
-        } else {
-            let u = Vec2::new(((u.x - p) / (1.0 - p)).min(1.0 - f32::EPSILON), u.y);
-            crate::sampling::cosine_hemisphere(u)
-        };
-        if wi.z <= 0.0 {
-            return None;
+    }
+
+    /// T(cos) of each lane's coat.
+    #[inline(always)]
+    fn transmittance_at(&self, cos: T) -> T {
+        T::lanes(|l| self.coats[l].transmittance_at(cos.lane(l)))
+    }
+
+    /// The probability of sampling the glossy lobe from wo, given T(wo.z).
+    #[inline(always)]
+    fn specular_probability(&self, t_o: T) -> T {
+        let specular = (T::splat(1.0) - t_o) * self.specular_weight;
+        let diffuse = t_o * (T::splat(1.0) - self.specular_weight);
+        specular / (specular + diffuse)
+    }
+
+    /// (f, pdf) of a pair; zero unless both lie strictly above the surface.
+    #[inline(always)]
+    pub fn eval_pdf(&self, wo: V3<T>, wi: V3<T>) -> (V3<T>, T) {
+        let zero = T::splat(0.0);
+        let none = (V3::splat(Vec3::ZERO), zero);
+        let above = wo.z.greater(zero) & wi.z.greater(zero);
+        if !above.any() {
+            return none;
         }
+        let h = wo + wi;
+        let h = h / h.length();
+        let m = &self.distribution;
+        let (d, go, gi) = (m.ndf(h), m.g1_over_cos(wo), m.g1_over_cos(wi));
+        let glossy_pdf = T::splat(0.25) * go * d;
+        let glossy = self.specular * (fresnel_of(wo.dot(h), self.eta) * glossy_pdf * gi);
+        let (t_o, t_i) = (self.transmittance_at(wo.z), self.transmittance_at(wi.z));
+        let base = self.base * (T::splat(FRAC_1_PI) / (self.eta * self.eta) * t_o * t_i);
+        let p = self.specular_probability(t_o);
+        let pdf = p * glossy_pdf + (T::splat(1.0) - p) * wi.z * FRAC_1_PI;
+        (
+            V3::select(above, glossy + base, none.0),
+            T::select(above, pdf, zero),
+        )
+    }
+
+    /// A direction of the glossy lobe (visible normals) or the base (the cosine), one number
+    /// choosing and then stretched back to [0, 1); valid where wo and wi are above the surface.
+    #[inline(always)]
+    pub fn sample(&self, wo: V3<T>, ux: T, uy: T) -> LobeSample<T> {
+        let zero = T::splat(0.0);
+        let facing = wo.z.greater(zero);
+        if !facing.any() {
+            return LobeSample::none();
+        }
+        let p = self.specular_probability(self.transmittance_at(wo.z));
+        let glossy = ux.less(p);
+        let wi = V3::select_with(
+            glossy,
+            || {
+                let h = self
+                    .distribution
+                    .visible_normal(wo, ux / p, uy, facing & glossy);
+                (h * (T::splat(2.0) * wo.dot(h)) - wo).normalize()
+            },
+            || {
+                let ux = ((ux - p) / (T::splat(1.0) - p)).min(T::splat(1.0 - f32::EPSILON));
+                cosine_hemisphere_of(ux, uy)
+            },
+        );
+        let kept = facing & wi.z.greater(zero);
         let (value, pdf) = self.eval_pdf(wo, wi);
-        BsdfSample::of_lobe(wi, value, pdf)
+        LobeSample::of_lobe(kept, wi, value, pdf)
     }
 }
 
@@ -232,17 +329,17 @@ fn compute_coat(distribution: Microfacet, alpha: f32, eta: f32) -> Coat {
 /// integrand steep, as Mitsuba's eval_reflectance / eval_transmittance choose).
 fn coat_scattering(distribution: Microfacet, alpha: f32, w: Vec3, eta: f32, reflect: bool) -> f64 {
     let (nodes, weights) = gauss_legendre(if eta > 1.0 { 32 } else { 128 });
-    let a = Alphas::new(alpha, alpha);
+    let a = Distribution::of(distribution, alpha, alpha);
     let g1 = |v: Vec3| {
         // Smith's G1 is even in v.z (a refracted direction lies below the surface).
         let up = Vec3::new(v.x, v.y, v.z.abs());
-        f64::from(a.g1_over_cos(distribution, up) * up.z)
+        f64::from(a.g1_over_cos(up.into()) * up.z)
     };
     let mut sum = 0.0f64;
     for (x, wx) in nodes.iter().zip(&weights) {
         for (y, wy) in nodes.iter().zip(&weights) {
             let u = Vec2::new((0.5 * x + 0.5) as f32, (0.5 * y + 0.5) as f32);
-            let m = a.visible_normal(distribution, w, u);
+            let m: Vec3 = a.visible_normal(w.into(), u.x, u.y, true).into();
             let cos_i = w.dot(m);
             let f = f64::from(fresnel(cos_i, eta));
             let value = if reflect {

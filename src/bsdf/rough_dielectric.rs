@@ -19,7 +19,7 @@
 //! normal. The estimator stays unbiased with weight F / P_r (or (1 - F) / (1 - P_r)) times
 //! G1(wi), bounded by 20 G1(wi); the pdf is the same mixture, so eval / pdf is the weight.
 use super::dielectric::{fresnel, fresnel_of_pair};
-use super::microfacet::{Alphas, Microfacet, off_axis, onto_axis};
+use super::microfacet::{Distribution, Microfacet, off_axis, onto_axis};
 use super::{Bsdf, BsdfSample, TransportMode};
 use glam::{Vec2, Vec3};
 
@@ -79,7 +79,7 @@ impl RoughDielectric {
 
     /// (f, pdf) of the pair, in the frame of the lobe's axis.
     #[inline]
-    fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Vec3, f32) {
+    fn value_and_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Vec3, f32) {
         let none = (Vec3::ZERO, 0.0);
         let (wo, wi) = (onto_axis(self.axis, wo), onto_axis(self.axis, wi));
         if wo.z == 0.0 || wi.z == 0.0 {
@@ -99,11 +99,10 @@ impl RoughDielectric {
         if wo_m * wo.z <= 0.0 || wi_m * wi.z <= 0.0 {
             return none;
         }
-        let a = Alphas::new(self.alpha_u, self.alpha_v);
-        let distribution = self.distribution;
-        let d = a.ndf(distribution, m);
-        let g_o = a.g1_over_cos(distribution, upper(wo));
-        let g_i = a.g1_over_cos(distribution, upper(wi));
+        let a = Distribution::of(self.distribution, self.alpha_u, self.alpha_v);
+        let d = a.ndf(m.into());
+        let g_o = a.g1_over_cos(upper(wo).into());
+        let g_i = a.g1_over_cos(upper(wi).into());
         let p_r = self.reflect_probability(wo);
         if reflect {
             let f = fresnel(wo_m, self.eta);
@@ -144,12 +143,17 @@ impl Bsdf for RoughDielectric {
 
     /// f(wo, wi) without the cosine, for light carried as `mode` says.
     fn eval(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> Vec3 {
-        self.eval_pdf(wo, wi, mode).0
+        self.value_and_pdf(wo, wi, mode).0
     }
 
     /// The solid-angle density with which `sample` returns `wi`.
     fn pdf(&self, wo: Vec3, wi: Vec3) -> f32 {
-        self.eval_pdf(wo, wi, TransportMode::Radiance).1
+        self.value_and_pdf(wo, wi, TransportMode::Radiance).1
+    }
+
+    #[inline]
+    fn eval_pdf(&self, wo: Vec3, wi: Vec3, mode: TransportMode) -> (Vec3, f32) {
+        self.value_and_pdf(wo, wi, mode)
     }
 
     /// Samples wi given wo (see the module's comment); `None` where the sample carries nothing.
@@ -167,9 +171,11 @@ impl Bsdf for RoughDielectric {
         };
         let u_normal = Vec2::new(u_normal.min(1.0 - f32::EPSILON / 2.0), u.y);
         let on_axis = onto_axis(self.axis, wo);
-        let a = Alphas::new(self.alpha_u, self.alpha_v);
+        let a = Distribution::of(self.distribution, self.alpha_u, self.alpha_v);
         let up = upper(on_axis);
-        let m = a.visible_normal(self.distribution, up, u_normal);
+        let m: Vec3 = a
+            .visible_normal(up.into(), u_normal.x, u_normal.y, true)
+            .into();
         // Turned to wo's side of the surface, m faces wo: wo.m > 0.
         let m = if on_axis.z < 0.0 { -m } else { m };
         let cos_o = on_axis.dot(m);
@@ -196,7 +202,7 @@ impl Bsdf for RoughDielectric {
         }
         let wi = off_axis(self.axis, wi);
         // Value and pdf from the same code as eval/pdf so that MIS sees identical densities.
-        let (value, pdf) = self.eval_pdf(wo, wi, mode);
+        let (value, pdf) = self.value_and_pdf(wo, wi, mode);
         BsdfSample::of_lobe(wi, value, pdf)
     }
 }

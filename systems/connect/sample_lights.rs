@@ -2,13 +2,13 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
-use crate::bsdf::{Material, diffuse, scatters_between};
+use crate::bsdf::{Bsdf, KindVisitor, Material, TransportMode, scatters_between};
 use crate::components::ShadowRays;
 use crate::components::path_tracing::DIM_LIGHT_PICK;
 use crate::components::path_tracing::DIM_LIGHT_POINT;
 use crate::components::path_tracing::MaterialRanges;
 use crate::components::path_tracing::bounce_dim;
-use crate::components::{Paths, ShadowRaysChunk, Surfaces};
+use crate::components::{Paths, PathsView, ShadowRaysChunk, Surfaces, SurfacesView};
 use crate::lanes::{F, LaneKernel, LaneWidth, M, Real, V3, lanes_of, run_lanes};
 use crate::math::gamma;
 use crate::pipeline::Flow;
@@ -16,7 +16,7 @@ use crate::sampling::{SampleKey, Sampler, power_heuristic, sample_cdf};
 use crate::scene::SceneData;
 use crate::systems::shade::Surface;
 use crate::systems::shade::lanes::{
-    DiffuseLanes, draw, draw2, offset_origin, power_heuristic as power_heuristic_lanes,
+    SurfaceLanes, draw, draw2, offset_origin, power_heuristic as power_heuristic_lanes,
 };
 use glam::Vec3;
 use rayon::prelude::*;
@@ -108,18 +108,31 @@ fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
             0
         }
     };
-    // Lambertian paths N at a time; the rest (other kinds, the chunk's tail) one by one. The
-    // lanes sample triangles only: scenes with point lights or a light at infinity go one by
-    // one.
+    // Groups of N paths on one kind with a lane form at a time; the rest (other kinds, groups
+    // that mix kinds, the chunk's tail) one by one. The lanes sample triangles only: scenes
+    // with point lights or a light at infinity go one by one.
     let lanes = data.scene.emitters.only_triangles();
     let mut i = 0;
     while lanes && i + N <= c.len() {
-        match DiffuseLanes::<N>::at(data, &surfaces, looked_up, triangles, dirs, i) {
-            Some(surf) => {
-                let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
-                let depths: &[u32; N] = paths.depth[i..i + N].try_into().unwrap();
-                let throughput = V3::load(&paths.throughput[i..]);
-                let light = light_sample_lanes(data, sampler, &surf, keys, depths, throughput);
+        let kind = match looked_up.get(i) {
+            Some(material) => material.kind(),
+            None => data
+                .scene
+                .uniform_material_seen(triangles[i], -dirs[i], surfaces.ng[i])
+                .kind(),
+        };
+        let group = LightLanesOf::<N> {
+            data,
+            sampler,
+            surfaces: &surfaces,
+            looked_up,
+            triangles,
+            dirs,
+            paths: &paths,
+            i,
+        };
+        match kind.visit(group) {
+            Some(light) => {
                 let t_max = F::select(light.cast, F::splat(LIGHT_T_MAX), F::splat(0.0));
                 light.origin.store(&mut c.origin[i..]);
                 light.dir.store(&mut c.dir[i..]);
@@ -144,8 +157,49 @@ fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
 /// The length of every light sample's shadow ray (`spawn_ray_to`'s).
 const LIGHT_T_MAX: f32 = 1.0 - crate::geometry::SHADOW_EPSILON;
 
-/// `light_sample` of `N` paths on Lambertian surfaces: the shadow rays and their
-/// contributions, which count only where `cast` is set.
+/// Light sampling for the `N` paths from slot `i` of a chunk, if they are all on materials of
+/// the visited kind and it has a lane form (`Bsdf::IN_LANES`).
+struct LightLanesOf<'a, const N: usize> {
+    data: &'a SceneData,
+    sampler: &'a Sampler<'a>,
+    surfaces: &'a SurfacesView<'a>,
+    looked_up: &'a [Material],
+    triangles: &'a [u32],
+    dirs: &'a [Vec3],
+    paths: &'a PathsView<'a>,
+    i: usize,
+}
+
+impl<const N: usize> KindVisitor for LightLanesOf<'_, N> {
+    type Output = Option<LightLanes<N>>;
+    #[inline(always)]
+    fn visit<B: Bsdf>(self) -> Option<LightLanes<N>> {
+        if !B::IN_LANES {
+            return None;
+        }
+        let LightLanesOf {
+            data,
+            sampler,
+            surfaces,
+            looked_up,
+            triangles,
+            dirs,
+            paths,
+            i,
+        } = self;
+        let (surf, materials) =
+            SurfaceLanes::<N>::at::<B>(data, surfaces, looked_up, triangles, dirs, i)?;
+        let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
+        let depths: &[u32; N] = paths.depth[i..i + N].try_into().unwrap();
+        let throughput = V3::load(&paths.throughput[i..]);
+        Some(light_sample_lanes(
+            data, sampler, &surf, &materials, keys, depths, throughput,
+        ))
+    }
+}
+
+/// `light_sample` of `N` paths: the shadow rays and their contributions, which count only
+/// where `cast` is set.
 pub struct LightLanes<const N: usize> {
     pub cast: M<N>,
     pub origin: V3<F<N>>,
@@ -153,14 +207,15 @@ pub struct LightLanes<const N: usize> {
     pub contribution: V3<F<N>>,
 }
 
-/// `light_sample` in lanes, for paths on Lambertian surfaces (the BSDF by
-/// `diffuse::eval_cos` and `pdf_cos`, the very maths of the single path): lane by lane the
-/// same operations, so the same bits.
+/// `light_sample` in lanes, for paths on materials of one kind with a lane form (the BSDF by
+/// `Bsdf::eval_pdf_lanes`, the very maths of the single path): lane by lane the same
+/// operations, so the same bits. Such lobes never refract.
 #[inline(always)]
-pub fn light_sample_lanes<const N: usize>(
+pub fn light_sample_lanes<B: Bsdf, const N: usize>(
     data: &SceneData,
     sampler: &Sampler,
-    surf: &DiffuseLanes<N>,
+    surf: &SurfaceLanes<N>,
+    materials: &[B; N],
     keys: &[SampleKey; N],
     depths: &[u32; N],
     throughput: V3<F<N>>,
@@ -208,11 +263,10 @@ pub fn light_sample_lanes<const N: usize>(
     let origin = offset_origin(surf.p, surf.p_error, surf.ng, light_p - surf.p);
     let target = offset_origin(light_p, light_p_error, light_ng, origin - light_p);
     let light_pdf = pdf_area * dist2 / cos_light;
-    // The Lambertian BSDF toward the light, and MIS against sampling it.
+    // The BSDF toward the light, and MIS against sampling it.
     let wi_local = surf.frame.to_local(wi);
-    let f = diffuse::eval_cos(surf.reflectance, surf.wo_local.z, wi_local.z);
+    let (f, bsdf_pdf) = B::eval_pdf_lanes(materials, surf.wo_local, wi_local);
     let black = f.is_zero();
-    let bsdf_pdf = diffuse::pdf_cos(surf.wo_local.z, wi_local.z);
     let weight = power_heuristic_lanes(light_pdf, bsdf_pdf);
     LightLanes {
         cast: facing & !black,
@@ -268,14 +322,16 @@ pub fn light_sample(
     {
         return None;
     }
-    let f = surf.material.eval(surf.wo_local, wi_local);
+    let (f, pdf) = surf
+        .material
+        .eval_pdf(surf.wo_local, wi_local, TransportMode::Radiance);
     if f == Vec3::ZERO {
         return None;
     }
     let weight = if light.delta {
         1.0
     } else {
-        power_heuristic(light.pdf, surf.material.pdf(surf.wo_local, wi_local))
+        power_heuristic(light.pdf, pdf)
     };
     Some(LightConnection {
         origin: light.origin,

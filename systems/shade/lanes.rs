@@ -6,10 +6,11 @@
 //! (glam's `Vec3`, `Frame`, the sampler's hash): the same IEEE operations in the same order, no
 //! fused multiply-adds, so each lane's result is the scalar result, bit for bit
 //! (`tests/it/kernels.rs` renders both kernels and compares the films). The BSDFs' maths is not
-//! here: it is written once over `Real` (`crate::bsdf::diffuse`) and runs in lanes as it is.
+//! here: it is written once over `Real` (`crate::bsdf::diffuse`, `conductor`, `plastic`) and
+//! runs in lanes as it is (`Bsdf::sample_lanes`, `Bsdf::eval_pdf_lanes`).
 
-use crate::bsdf::diffuse::Diffuse;
-use crate::lanes::{F, Real, V3, lanes_of};
+use crate::bsdf::Bsdf;
+use crate::lanes::{F, M, Mask, Real, V3, lanes_of};
 use crate::math::Frame;
 use crate::sampling::{SampleKey, Sampler};
 use glam::{Vec2, Vec3};
@@ -136,61 +137,63 @@ pub fn power_heuristic<const N: usize>(f: F<N>, g: F<N>) -> F<N> {
     F::select(sum.equal(F::splat(0.0)), F::splat(0.0), ratio)
 }
 
-/// `Surface` in lanes, for paths on Lambertian surfaces (the common case, and the only kind
-/// shaded in lanes): the hit point with its error bound, the geometric normal and shading frame
-/// turned to the side the ray came from, wo, and each lane's reflectance.
+/// `Surface` in lanes, for `N` paths on materials of one kind with a lane form
+/// (`Bsdf::IN_LANES`): the hit points with their error bounds, the geometric normals and
+/// shading frames turned as `Surface` turns them (to the side the ray came from where the
+/// material reflects on both sides), and wo.
 #[derive(Clone, Copy)]
-pub struct DiffuseLanes<const N: usize> {
+pub struct SurfaceLanes<const N: usize> {
     pub p: V3<F<N>>,
     pub p_error: V3<F<N>>,
     pub ng: V3<F<N>>,
     pub frame: Frames<N>,
     pub wo: V3<F<N>>,
     pub wo_local: V3<F<N>>,
-    pub reflectance: V3<F<N>>,
 }
 
-impl<const N: usize> DiffuseLanes<N> {
-    /// The surfaces of slots `i..i + N` of a chunk's views (`Surface::at` lane by lane),
-    /// or None when one of them is not Lambertian.
+impl<const N: usize> SurfaceLanes<N> {
+    /// The surfaces of slots `i..i + N` of a chunk's views (`Surface::at` lane by lane) and
+    /// their materials, or None when one of them is not of type `B`.
     #[inline(always)]
-    pub fn at(
+    pub fn at<B: Bsdf>(
         data: &crate::scene::SceneData,
         surfaces: &crate::components::SurfacesView,
         looked_up: &[crate::bsdf::Material],
         triangles: &[u32],
         dirs: &[Vec3],
         i: usize,
-    ) -> Option<DiffuseLanes<N>> {
+    ) -> Option<(SurfaceLanes<N>, [B; N])> {
         let scene = &data.scene;
-        let mut reflectance = [Vec3::ZERO; N];
-        for (l, r) in reflectance.iter_mut().enumerate() {
-            let k = i + l;
-            let material = match looked_up.get(k) {
-                Some(&material) => material,
-                None => scene.uniform_material_seen(triangles[k], -dirs[k], surfaces.ng[k]),
-            };
-            match material {
-                crate::bsdf::Material::Diffuse(Diffuse { reflectance }) => *r = reflectance,
-                _ => return None,
-            }
+        let material = |k: usize| match looked_up.get(k) {
+            Some(&material) => material,
+            None => scene.uniform_material_seen(triangles[k], -dirs[k], surfaces.ng[k]),
+        };
+        let first = *B::of(&material(i))?;
+        let mut materials = [first; N];
+        for (l, m) in materials.iter_mut().enumerate().skip(1) {
+            *m = *B::of(&material(i + l))?;
         }
         let ng = V3::load(&surfaces.ng[i..]);
         let ns = V3::load(&surfaces.ns[i..]);
         let wo = -V3::load(&dirs[i..]);
-        // Lambertian surfaces reflect on both sides: shade from the side the ray came from.
-        let flip = wo.dot(ng).less(F::splat(0.0));
+        // As `Surface`: a material that reflects on both sides is shaded from the side the
+        // ray came from. `Surface` asks the triangle's material, this the material seen (a
+        // constant for the Lambertian kind): the same but for a one-sided surface seen from
+        // behind, whose black material ends the path from either side.
+        let flip = wo.dot(ng).less(F::splat(0.0)) & M::lanes(|l| materials[l].two_sided());
         let ng = V3::select(flip, -ng, ng);
         let ns = V3::select(flip, -ns, ns);
         let frame = Frames::from_normal(ns);
-        Some(DiffuseLanes {
-            p: V3::load(&surfaces.p[i..]),
-            p_error: V3::load(&surfaces.p_error[i..]),
-            ng,
-            frame,
-            wo,
-            wo_local: frame.to_local(wo),
-            reflectance: V3::from_fn(|l| reflectance[l]),
-        })
+        Some((
+            SurfaceLanes {
+                p: V3::load(&surfaces.p[i..]),
+                p_error: V3::load(&surfaces.p_error[i..]),
+                ng,
+                frame,
+                wo,
+                wo_local: frame.to_local(wo),
+            },
+            materials,
+        ))
     }
 }

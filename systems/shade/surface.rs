@@ -1,11 +1,8 @@
 //! The shading point of a hit, shared by the systems that shade, sample lights or add
 //! emission: position with its error bound, normals, the shading frame and wo.
 
-use super::lanes::{DiffuseLanes, draw2, offset_origin};
-use crate::bsdf::{
-    Bsdf, BsdfSample, KindVisitor, Material, MaterialKind, TransportMode, diffuse,
-    leaving_direction,
-};
+use super::lanes::{SurfaceLanes, draw2, offset_origin};
+use crate::bsdf::{Bsdf, BsdfSample, KindVisitor, Material, TransportMode, leaving_direction};
 use crate::components::path_tracing::DIM_BSDF;
 use crate::components::path_tracing::bounce_dim;
 use crate::components::{PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView};
@@ -127,7 +124,7 @@ pub fn material_looked_up(
 /// The scattering step every shading system shares, over the paths of `range` (all on
 /// materials of one kind): at each path the surface's BSDF draws wi; the path's throughput,
 /// next ray and MIS state follow, or the path ends when the sample carries nothing or leaks
-/// through the surface. Lambertian paths go `lanes` at a time. A `KindVisitor`: compiled once
+/// through the surface. Kinds with a lane form (`Bsdf::IN_LANES`) go `lanes` paths at a time. A `KindVisitor`: compiled once
 /// per material type so that each loop holds only its kind's BSDF code (about 1% of a PT
 /// render's instructions); visiting returns the flow (paths taken, paths that scatter on).
 pub struct ScatterPaths<'a> {
@@ -226,18 +223,19 @@ fn scatter_chunk<B: Bsdf, const N: usize>(
     let range = p.start..p.start + p.len();
     let looked_up = looked_up.get(range.clone()).unwrap_or_default();
     let (triangles, surfaces) = (&triangles[range.clone()], surfaces.view(range));
-    // Lambertian paths N at a time (the rest one by one, below).
+    // Kinds with a lane form N paths at a time (the rest one by one, below).
     let mut first = 0;
-    if B::KIND == MaterialKind::Diffuse {
+    if B::IN_LANES {
         while first + N <= p.len() {
             let i = first;
-            let Some(surf) = DiffuseLanes::<N>::at(data, &surfaces, looked_up, triangles, r.dir, i)
+            let Some((surf, materials)) =
+                SurfaceLanes::<N>::at::<B>(data, &surfaces, looked_up, triangles, r.dir, i)
             else {
                 break;
             };
             let keys: &[SampleKey; N] = p.key[i..i + N].try_into().unwrap();
             let depths: &[u32; N] = p.depth[i..i + N].try_into().unwrap();
-            let next = scatter_lanes(sampler, &surf, keys, depths);
+            let next = scatter_lanes(sampler, &surf, &materials, keys, depths);
             let throughput = V3::load(&p.throughput[i..]) * next.weight;
             for l in 0..N {
                 let j = i + l;
@@ -329,8 +327,8 @@ fn scatter_by(
     })
 }
 
-/// `scatter` of `N` paths on Lambertian surfaces: where `scattered` is set, the path's
-/// throughput factor, BSDF density and next ray.
+/// `scatter` of `N` paths on materials of one kind with a lane form: where `scattered` is
+/// set, the path's throughput factor, BSDF density and next ray.
 pub struct ScatterLanes<const N: usize> {
     pub scattered: M<N>,
     pub weight: V3<F<N>>,
@@ -339,13 +337,14 @@ pub struct ScatterLanes<const N: usize> {
     pub dir: V3<F<N>>,
 }
 
-/// `scatter` in lanes for paths on Lambertian surfaces (`diffuse::sample_of`, the very maths
-/// of the single path, then `sample_direction`'s test): lane by lane the same operations, so
-/// the same bits.
+/// `scatter` in lanes for paths on materials of one kind with a lane form (`sample_lanes`, the
+/// very maths of the single path, then `sample_direction`'s test): lane by lane the same
+/// operations, so the same bits. Such lobes never refract and are never delta.
 #[inline(always)]
-pub fn scatter_lanes<const N: usize>(
+pub fn scatter_lanes<B: Bsdf, const N: usize>(
     sampler: &Sampler,
-    surf: &DiffuseLanes<N>,
+    surf: &SurfaceLanes<N>,
+    materials: &[B; N],
     keys: &[SampleKey; N],
     depths: &[u32; N],
 ) -> ScatterLanes<N> {
@@ -355,7 +354,7 @@ pub fn scatter_lanes<const N: usize>(
         &lanes_of(|l| bounce_dim(depths[l]) + DIM_BSDF),
     );
     let zero = F::splat(0.0);
-    let bs = diffuse::sample_of(surf.reflectance, surf.wo_local, ux, uy);
+    let bs = B::sample_lanes(materials, surf.wo_local, ux, uy);
     // sample_direction: reflection must leave on wo's side of the geometric surface.
     let dir = surf.frame.to_world(bs.wi).normalize();
     let reflected = (bs.wi.z * surf.wo_local.z).greater(zero);

@@ -2154,3 +2154,135 @@ fn dielectric_grazing_is_finite() {
         }
     }
 }
+
+// ---------------------------------------------------------------------------------------------
+// Lane forms
+
+/// The bits of a number, NaN as one value (the film counts any NaN alike).
+fn bits(x: f32) -> u32 {
+    if x.is_nan() { u32::MAX } else { x.to_bits() }
+}
+
+fn bits3(v: Vec3) -> [u32; 3] {
+    [bits(v.x), bits(v.y), bits(v.z)]
+}
+
+/// `B::sample_lanes` and `B::eval_pdf_lanes` over `N` lanes holding `materials` (cycled, so
+/// neighbouring lanes differ) give, lane by lane, the bits of `sample` and `eval_pdf` for one
+/// path: directions above, below and grazing the surface, numbers across [0, 1).
+fn assert_lane_form_is_one_path<B: Bsdf + std::fmt::Debug, const N: usize>(
+    materials: &[B],
+    stream: u64,
+) {
+    use stagelight::lanes::{F, V3};
+    let lanes: [B; N] = std::array::from_fn(|l| materials[l % materials.len()]);
+    let direction = |i: u64| {
+        let u = u2(91, stream, i);
+        // Cosines across [-1, 1], a few within 1e-4 of grazing.
+        let z = if i % 7 == 0 {
+            (u.x - 0.5) * 2e-4
+        } else {
+            2.0 * u.x - 1.0
+        };
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let phi = 2.0 * std::f32::consts::PI * u.y;
+        Vec3::new(r * phi.cos(), r * phi.sin(), z)
+    };
+    for trial in 0..400u64 {
+        let wo: [Vec3; N] = std::array::from_fn(|l| direction(trial * 64 + l as u64));
+        let wi: [Vec3; N] = std::array::from_fn(|l| direction(trial * 64 + 32 + l as u64));
+        let u: [Vec2; N] = std::array::from_fn(|l| u2(92, stream, trial * 64 + l as u64));
+        let wo_lanes = V3::<F<N>>::from_fn(|l| wo[l]);
+        let sampled = B::sample_lanes(
+            &lanes,
+            wo_lanes,
+            F::from_fn(|l| u[l].x),
+            F::from_fn(|l| u[l].y),
+        );
+        let (f, pdf) = B::eval_pdf_lanes(&lanes, wo_lanes, V3::from_fn(|l| wi[l]));
+        for l in 0..N {
+            let what = format!("{:?} lane {l} of {N}, wo {} u {}", lanes[l], wo[l], u[l]);
+            match lanes[l].sample(wo[l], u[l], TransportMode::Radiance) {
+                Some(s) => {
+                    assert!(sampled.valid.0[l], "{what}: lanes drew no sample");
+                    assert_eq!(bits3(sampled.wi.lane(l)), bits3(s.wi), "{what}");
+                    assert_eq!(bits3(sampled.value.lane(l)), bits3(s.value), "{what}");
+                    assert_eq!(bits(sampled.pdf.0[l]), bits(s.pdf), "{what}");
+                    assert!(!s.delta, "{what}");
+                }
+                None => assert!(!sampled.valid.0[l], "{what}: lanes drew a sample"),
+            }
+            let (f1, pdf1) = lanes[l].eval_pdf(wo[l], wi[l], TransportMode::Radiance);
+            assert_eq!(bits3(f.lane(l)), bits3(f1), "{what} wi {}", wi[l]);
+            assert_eq!(bits(pdf.0[l]), bits(pdf1), "{what} wi {}", wi[l]);
+            assert_eq!(
+                bits3(f1),
+                bits3(lanes[l].eval(wo[l], wi[l], TransportMode::Radiance)),
+                "{what}"
+            );
+            assert_eq!(bits(pdf1), bits(lanes[l].pdf(wo[l], wi[l])), "{what}");
+        }
+    }
+}
+
+/// Each material with a lane form (`Bsdf::IN_LANES`) samples and evaluates in lanes exactly as
+/// for one path, in lanes that mix its parameters (GGX and Beckmann, roughnesses from 1e-4 to
+/// 1, anisotropic axes, Fresnel indices, linear and nonlinear bases) and in lanes that share
+/// them, at both widths: the wavefront's lanes then render the megakernel's image (which
+/// `kernels.rs` checks on whole scenes).
+#[test]
+fn lane_forms_compute_the_one_path_bits() {
+    let diffuse: Vec<Diffuse> = [0.0, 0.3, 0.9]
+        .iter()
+        .map(|&r| Diffuse {
+            reflectance: Vec3::new(r, 0.5, 0.25),
+        })
+        .collect();
+    let mut conductors: Vec<Conductor> = Vec::new();
+    for distribution in [Microfacet::Ggx, Microfacet::Beckmann] {
+        for alpha in [1e-4, 0.05, 0.3, 1.0] {
+            let Material::Conductor(c) = conductor_of(distribution, alpha) else {
+                unreachable!()
+            };
+            conductors.push(c);
+        }
+    }
+    for m in anisotropic_conductors() {
+        let Material::Conductor(c) = m else {
+            unreachable!()
+        };
+        conductors.push(c);
+    }
+    let mut plastics: Vec<RoughPlastic> = Vec::new();
+    for (distribution, alpha, nonlinear) in [
+        (Microfacet::Ggx, 0.1, false),
+        (Microfacet::Beckmann, 0.1, true),
+        (Microfacet::Ggx, 0.6, true),
+        (Microfacet::Beckmann, 0.02, false),
+    ] {
+        let diffuse = Vec3::new(0.8, 0.4, 0.1);
+        plastics.push(RoughPlastic::new(
+            distribution,
+            alpha,
+            1.49,
+            diffuse,
+            diffuse.element_sum() / 3.0,
+            Vec3::new(1.0, 0.9, 0.8),
+            nonlinear,
+        ));
+    }
+    assert!(Diffuse::IN_LANES && Conductor::IN_LANES && RoughPlastic::IN_LANES);
+    assert_lane_form_is_one_path::<Diffuse, 8>(&diffuse, 1);
+    assert_lane_form_is_one_path::<Diffuse, 16>(&diffuse, 2);
+    assert_lane_form_is_one_path::<Conductor, 8>(&conductors, 3);
+    assert_lane_form_is_one_path::<Conductor, 16>(&conductors, 4);
+    assert_lane_form_is_one_path::<RoughPlastic, 8>(&plastics, 5);
+    assert_lane_form_is_one_path::<RoughPlastic, 16>(&plastics, 6);
+    // Lanes that share one material take the branches a single path takes.
+    for (i, c) in conductors.iter().enumerate() {
+        assert_lane_form_is_one_path::<Conductor, 8>(&[*c], 10 + i as u64);
+    }
+    for (i, p) in plastics.iter().enumerate() {
+        assert_lane_form_is_one_path::<RoughPlastic, 16>(&[*p], 40 + i as u64);
+    }
+}

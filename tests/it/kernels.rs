@@ -146,6 +146,49 @@ fn textures_are_looked_up_by_their_own_system_only_where_a_scene_has_them() {
     }
 }
 
+/// The microfacet materials shade in lanes (`Bsdf::IN_LANES`): scenes of GGX and Beckmann
+/// conductors and rough plastics (isotropic, anisotropic, textured, mixed in one queue, lit by
+/// area lights only, where light sampling runs in lanes too, and with a light at infinity,
+/// where it does not) give the megakernel's film at both lane widths.
+#[test]
+fn microfacet_materials_shade_in_lanes_as_one_path() {
+    for name in [
+        "conductors.xml",
+        "plastics.xml",
+        "anisotropic.xml",
+        "materials_room.xml",
+    ] {
+        let mut scene = crate::common::load_test_scene(&format!("mitsuba/{name}"));
+        scene.camera.resize(24, 24);
+        let data = Arc::new(SceneData::new(scene));
+        let settings = RenderSettings {
+            seed: 9,
+            ..RenderSettings::default()
+        };
+        let mega = render(
+            &data,
+            "pt",
+            RenderSettings {
+                kernel: Kernel::Megakernel,
+                ..settings
+            },
+            4,
+        );
+        for lanes in [LaneWidth::Eight, LaneWidth::Sixteen] {
+            let wave = render(
+                &data,
+                "pt",
+                RenderSettings {
+                    lanes: Some(lanes),
+                    ..settings
+                },
+                4,
+            );
+            assert_same_film(&wave.film, &mega.film, &format!("{name} {lanes:?} lanes"));
+        }
+    }
+}
+
 #[test]
 fn images_do_not_depend_on_the_wavefront() {
     // 20 x 20 = 400 pixels: waves of 3, 400 and 1000 paths split passes, hold one pass, and
