@@ -339,8 +339,14 @@ impl<const N: usize> Real for F<N> {
     type Each<R: Copy> = [R; N];
     const LANES: usize = N;
     #[inline(always)]
-    fn each<R: Copy>(f: impl FnMut(usize) -> R) -> [R; N] {
-        std::array::from_fn(f)
+    fn each<R: Copy>(mut f: impl FnMut(usize) -> R) -> [R; N] {
+        // A plain loop, as `lanes_of` (`std::array::from_fn` was left out of line).
+        let first = f(0);
+        let mut out = [first; N];
+        for (l, v) in out.iter_mut().enumerate().skip(1) {
+            *v = f(l);
+        }
+        out
     }
     #[inline(always)]
     fn lanes(f: impl FnMut(usize) -> f32) -> F<N> {
@@ -359,7 +365,7 @@ impl<const N: usize> Mask for M<N> {
     }
     #[inline(always)]
     fn lanes(f: impl FnMut(usize) -> bool) -> M<N> {
-        M(std::array::from_fn(f))
+        M(lanes_of(f))
     }
     #[inline(always)]
     fn lane(self, l: usize) -> bool {
@@ -787,7 +793,34 @@ mod tests {
             let (q, qa) = (x * 0.1, a * 0.1);
             same(q.sin_cos_quarter().0, l, qa.sin_cos_quarter().0);
             same(q.sin_cos_quarter().1, l, qa.sin_cos_quarter().1);
+            let (t, ta) = (x.abs().min(F::splat(1.0)), a.abs().min(1.0));
+            same(t.sin_cos_turn().0, l, ta.sin_cos_turn().0);
+            same(t.sin_cos_turn().1, l, ta.sin_cos_turn().1);
+            same(x.floor(), l, a.floor());
+            same((-x.abs()).exp(), l, (-a.abs()).exp());
+            same(x.erf(), l, Real::erf(a));
         }
+    }
+
+    #[test]
+    fn turn_sine_and_cosine_are_accurate() {
+        let (mut worst_sin, mut worst_cos) = (0.0f64, 0.0f64);
+        for i in 0..=400_000 {
+            let u = i as f32 / 400_000.0;
+            let (s, c) = u.sin_cos_turn();
+            let angle = std::f64::consts::TAU * u as f64;
+            worst_sin = worst_sin.max((s as f64 - angle.sin()).abs());
+            worst_cos = worst_cos.max((c as f64 - angle.cos()).abs());
+        }
+        assert!(
+            worst_sin < 2e-7 && worst_cos < 2e-7,
+            "{worst_sin:e} {worst_cos:e}"
+        );
+        // The quarter turns are exact.
+        assert_eq!(0.0f32.sin_cos_turn(), (0.0, 1.0));
+        assert_eq!(0.25f32.sin_cos_turn(), (1.0, -0.0));
+        assert_eq!(0.5f32.sin_cos_turn(), (-0.0, -1.0));
+        assert_eq!(1.0f32.sin_cos_turn(), (0.0, 1.0));
     }
 
     #[test]

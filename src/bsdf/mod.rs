@@ -196,8 +196,10 @@ macro_rules! materials {
                 }
             }
 
-            /// Runs `visitor` for this kind's `Bsdf` type.
-            #[inline]
+            /// Runs `visitor` for this kind's `Bsdf` type. Always inlined: a visitor called
+            /// from a lane kernel must be compiled into that kernel's copy for the CPU's
+            /// vector instructions (`run_lanes`); out of line it ran on the baseline's.
+            #[inline(always)]
             pub fn visit<V: KindVisitor>(self, visitor: V) -> V::Output {
                 match self {
                     $(MaterialKind::$kind => visitor.visit::<$bsdf>(),)+

@@ -2,7 +2,7 @@
 //! point on it uniformly by area, and casts a shadow ray carrying the MIS-weighted (power
 //! heuristic against BSDF sampling) contribution it brings if unoccluded.
 
-use crate::bsdf::{Bsdf, KindVisitor, Material, TransportMode, scatters_between};
+use crate::bsdf::{Bsdf, KindVisitor, Material, MaterialKind, TransportMode, scatters_between};
 use crate::components::ShadowRays;
 use crate::components::path_tracing::DIM_LIGHT_PICK;
 use crate::components::path_tracing::DIM_LIGHT_POINT;
@@ -40,7 +40,7 @@ crate::system! {
             .into_par_iter()
             .map(|c| {
                 let chunk = SampleChunk {
-                    data, sampler, triangles, dirs, paths, surfaces, materials, c,
+                    data, sampler, triangles, dirs, paths, surfaces, materials, ranges, c,
                 };
                 run_lanes(*lanes, chunk)
             })
@@ -58,6 +58,7 @@ struct SampleChunk<'a> {
     paths: &'a Paths,
     surfaces: &'a Surfaces,
     materials: &'a [Material],
+    ranges: &'a MaterialRanges,
     c: ShadowRaysChunk<'a>,
 }
 
@@ -80,6 +81,7 @@ fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
         paths,
         surfaces,
         materials: looked_up,
+        ranges,
         mut c,
     } = chunk;
     let mut cast = 0;
@@ -113,14 +115,22 @@ fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
     // with point lights or a light at infinity go one by one.
     let lanes = data.scene.emitters.only_triangles();
     let mut i = 0;
+    // The queues hold one kind each, in `MaterialKind::ALL`'s order (`sort_by_material`): a
+    // group within one queue is of that kind, which `SurfaceLanes::at` checks path by path.
+    let mut queue = 0;
     while lanes && i + N <= c.len() {
-        let kind = match looked_up.get(i) {
-            Some(material) => material.kind(),
-            None => data
-                .scene
-                .uniform_material_seen(triangles[i], -dirs[i], surfaces.ng[i])
-                .kind(),
-        };
+        let (first, end) = (c.start + i, c.start + i + N);
+        while queue + 1 < MaterialKind::COUNT && ranges.of(MaterialKind::ALL[queue]).end <= first {
+            queue += 1;
+        }
+        let kind = MaterialKind::ALL[queue];
+        if end > ranges.of(kind).end {
+            for j in i..i + N {
+                cast += one(&mut c, j);
+            }
+            i += N;
+            continue;
+        }
         let group = LightLanesOf::<N> {
             data,
             sampler,
@@ -130,16 +140,10 @@ fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
             dirs,
             paths: &paths,
             i,
+            c: &mut c,
         };
         match kind.visit(group) {
-            Some(light) => {
-                let t_max = F::select(light.cast, F::splat(LIGHT_T_MAX), F::splat(0.0));
-                light.origin.store(&mut c.origin[i..]);
-                light.dir.store(&mut c.dir[i..]);
-                light.contribution.store(&mut c.contribution[i..]);
-                c.t_max[i..i + N].copy_from_slice(&t_max.0);
-                cast += light.cast.0.iter().filter(|&&b| b).count();
-            }
+            Some(n) => cast += n,
             None => {
                 for j in i..i + N {
                     cast += one(&mut c, j);
@@ -158,8 +162,9 @@ fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
 const LIGHT_T_MAX: f32 = 1.0 - crate::geometry::SHADOW_EPSILON;
 
 /// Light sampling for the `N` paths from slot `i` of a chunk, if they are all on materials of
-/// the visited kind and it has a lane form (`Bsdf::IN_LANES`).
-struct LightLanesOf<'a, const N: usize> {
+/// the visited kind and it has a lane form (`Bsdf::IN_LANES`): writes their shadow rays and
+/// returns how many are cast (None: the paths are left to be sampled one by one).
+struct LightLanesOf<'a, 'c, const N: usize> {
     data: &'a SceneData,
     sampler: &'a Sampler<'a>,
     surfaces: &'a SurfacesView<'a>,
@@ -168,12 +173,13 @@ struct LightLanesOf<'a, const N: usize> {
     dirs: &'a [Vec3],
     paths: &'a PathsView<'a>,
     i: usize,
+    c: &'a mut ShadowRaysChunk<'c>,
 }
 
-impl<const N: usize> KindVisitor for LightLanesOf<'_, N> {
-    type Output = Option<LightLanes<N>>;
+impl<const N: usize> KindVisitor for LightLanesOf<'_, '_, N> {
+    type Output = Option<usize>;
     #[inline(always)]
-    fn visit<B: Bsdf>(self) -> Option<LightLanes<N>> {
+    fn visit<B: Bsdf>(self) -> Option<usize> {
         if !B::IN_LANES {
             return None;
         }
@@ -186,15 +192,20 @@ impl<const N: usize> KindVisitor for LightLanesOf<'_, N> {
             dirs,
             paths,
             i,
+            c,
         } = self;
         let (surf, materials) =
             SurfaceLanes::<N>::at::<B>(data, surfaces, looked_up, triangles, dirs, i)?;
         let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
         let depths: &[u32; N] = paths.depth[i..i + N].try_into().unwrap();
         let throughput = V3::load(&paths.throughput[i..]);
-        Some(light_sample_lanes(
-            data, sampler, &surf, &materials, keys, depths, throughput,
-        ))
+        let light = light_sample_lanes(data, sampler, &surf, &materials, keys, depths, throughput);
+        let t_max = F::select(light.cast, F::splat(LIGHT_T_MAX), F::splat(0.0));
+        light.origin.store(&mut c.origin[i..]);
+        light.dir.store(&mut c.dir[i..]);
+        light.contribution.store(&mut c.contribution[i..]);
+        c.t_max[i..i + N].copy_from_slice(&t_max.0);
+        Some(light.cast.0.iter().filter(|&&b| b).count())
     }
 }
 

@@ -2179,7 +2179,7 @@ fn assert_lane_form_is_one_path<B: Bsdf + std::fmt::Debug, const N: usize>(
     let direction = |i: u64| {
         let u = u2(91, stream, i);
         // Cosines across [-1, 1], a few within 1e-4 of grazing.
-        let z = if i % 7 == 0 {
+        let z = if i.is_multiple_of(7) {
             (u.x - 0.5) * 2e-4
         } else {
             2.0 * u.x - 1.0
@@ -2271,7 +2271,7 @@ fn lane_forms_compute_the_one_path_bits() {
             nonlinear,
         ));
     }
-    assert!(Diffuse::IN_LANES && Conductor::IN_LANES && RoughPlastic::IN_LANES);
+    const { assert!(Diffuse::IN_LANES && Conductor::IN_LANES && RoughPlastic::IN_LANES) };
     assert_lane_form_is_one_path::<Diffuse, 8>(&diffuse, 1);
     assert_lane_form_is_one_path::<Diffuse, 16>(&diffuse, 2);
     assert_lane_form_is_one_path::<Conductor, 8>(&conductors, 3);
