@@ -74,8 +74,6 @@ pub trait Real:
     /// vector form (a table look-up, an iterative inversion), the generic code runs the
     /// scalar step lane by lane through it (`Real::lanes`, `Real::lane`).
     type Each<R: Copy>: Copy + std::ops::Index<usize, Output = R>;
-    /// How many lanes.
-    const LANES: usize;
     /// `f(l)` for every lane `l`.
     fn each<R: Copy>(f: impl FnMut(usize) -> R) -> Self::Each<R>;
     /// A number per lane from `f(l)`.
@@ -213,7 +211,6 @@ impl Real for f32 {
         libm::erff(self)
     }
     type Each<R: Copy> = [R; 1];
-    const LANES: usize = 1;
     #[inline(always)]
     fn each<R: Copy>(mut f: impl FnMut(usize) -> R) -> [R; 1] {
         [f(0)]
@@ -337,7 +334,6 @@ impl<const N: usize> Real for F<N> {
         self.map(libm::erff)
     }
     type Each<R: Copy> = [R; N];
-    const LANES: usize = N;
     #[inline(always)]
     fn each<R: Copy>(mut f: impl FnMut(usize) -> R) -> [R; N] {
         // A plain loop, as `lanes_of` (`std::array::from_fn` was left out of line).
