@@ -17,7 +17,7 @@ differences, those where Embree's hit is at t = 0 are counted apart ("Embree t=0
 traces every ray from t = 0 (it sets tnear = 0), so a ray leaving a surface from a point on
 it can hit that surface at t = 0, which stagelight's triangle test rejects (it takes only hits
 beyond the error bound of t, and spawns rays so that no real hit is that close). Such a ray
-stops at once in Embree: a quarter to a third of the bounced rays did, which made Embree look
+stops at once in Embree: a fifth to two fifths of the bounced rays did, which made Embree look
 up to 1.7x faster (big_1m's first shadow rays, 2026-11-28). So Embree's rays start a hundred-thousandth of the scene's diagonal
 further along (t_max shortened as much, the distances it finds lengthened back), which no
 hit at t = 0 survives; a real hit that close is lost, and counted in "differ".
