@@ -335,14 +335,8 @@ impl<const N: usize> Real for F<N> {
     }
     type Each<R: Copy> = [R; N];
     #[inline(always)]
-    fn each<R: Copy>(mut f: impl FnMut(usize) -> R) -> [R; N] {
-        // A plain loop, as `lanes_of` (`std::array::from_fn` was left out of line).
-        let first = f(0);
-        let mut out = [first; N];
-        for (l, v) in out.iter_mut().enumerate().skip(1) {
-            *v = f(l);
-        }
-        out
+    fn each<R: Copy>(f: impl FnMut(usize) -> R) -> [R; N] {
+        lanes_of(f)
     }
     #[inline(always)]
     fn lanes(f: impl FnMut(usize) -> f32) -> F<N> {
@@ -660,9 +654,10 @@ impl<const N: usize> V3<F<N>> {
 
 /// `[f(0), .., f(N - 1)]` (a plain loop: `std::array::from_fn` was left out of line).
 #[inline(always)]
-pub fn lanes_of<T: Copy + Default, const N: usize>(mut f: impl FnMut(usize) -> T) -> [T; N] {
-    let mut out = [T::default(); N];
-    for (l, v) in out.iter_mut().enumerate() {
+pub fn lanes_of<T: Copy, const N: usize>(mut f: impl FnMut(usize) -> T) -> [T; N] {
+    let first = f(0);
+    let mut out = [first; N];
+    for (l, v) in out.iter_mut().enumerate().skip(1) {
         *v = f(l);
     }
     out

@@ -151,25 +151,6 @@ pub struct SurfaceLanes<const N: usize> {
     pub wo_local: V3<F<N>>,
 }
 
-/// The material slot `k` of a chunk's views sees: its looked-up one where the scene has
-/// textures, else the scene's (as `Surface::at`).
-#[inline(always)]
-pub fn material_seen(
-    data: &crate::scene::SceneData,
-    surfaces: &crate::components::SurfacesView,
-    looked_up: &[crate::bsdf::Material],
-    triangles: &[u32],
-    dirs: &[Vec3],
-    k: usize,
-) -> crate::bsdf::Material {
-    match looked_up.get(k) {
-        Some(&material) => material,
-        None => data
-            .scene
-            .uniform_material_seen(triangles[k], -dirs[k], surfaces.ng[k]),
-    }
-}
-
 impl<const N: usize> SurfaceLanes<N> {
     /// The surfaces of slots `i..i + N` of a chunk's views (`Surface::at` lane by lane) and
     /// their materials, or None when one of them is not of type `B`.
@@ -182,19 +163,18 @@ impl<const N: usize> SurfaceLanes<N> {
         dirs: &[Vec3],
         i: usize,
     ) -> Option<(SurfaceLanes<N>, [B; N])> {
-        let first = *B::of(&material_seen(
-            data, surfaces, looked_up, triangles, dirs, i,
-        ))?;
+        // The material slot `k` sees: its looked-up one where the scene has textures, else
+        // the scene's (as `Surface::at`).
+        let seen = |k: usize| match looked_up.get(k) {
+            Some(&material) => material,
+            None => data
+                .scene
+                .uniform_material_seen(triangles[k], -dirs[k], surfaces.ng[k]),
+        };
+        let first = *B::of(&seen(i))?;
         let mut materials = [first; N];
         for (l, m) in materials.iter_mut().enumerate().skip(1) {
-            *m = *B::of(&material_seen(
-                data,
-                surfaces,
-                looked_up,
-                triangles,
-                dirs,
-                i + l,
-            ))?;
+            *m = *B::of(&seen(i + l))?;
         }
         let ng = V3::load(&surfaces.ng[i..]);
         let ns = V3::load(&surfaces.ns[i..]);
