@@ -11,6 +11,7 @@ use stagelight::integrators::{
 };
 use stagelight::lanes::LaneWidth;
 use stagelight::sampling::SamplerKind;
+use std::path::Path;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
@@ -148,17 +149,51 @@ fn textures_are_looked_up_by_their_own_system_only_where_a_scene_has_them() {
 
 /// The microfacet materials shade in lanes (`Bsdf::IN_LANES`): scenes of GGX and Beckmann
 /// conductors and rough plastics (isotropic, anisotropic, textured, mixed in one queue, lit by
-/// area lights only, where light sampling runs in lanes too, and with a light at infinity,
-/// where it does not) give the megakernel's film at both lane widths.
+/// area lights only, where light sampling runs in lanes too, and with every other kind of
+/// light, where it goes one path at a time beside shading in lanes) give the megakernel's film
+/// at both lane widths.
 #[test]
 fn microfacet_materials_shade_in_lanes_as_one_path() {
-    for name in [
+    // The conductors' room under an area, a point, a spot and a directional light and a
+    // constant sky at once.
+    let every_light = temp_dir("every-light");
+    let all_lights = every_light.join("every_light.xml");
+    let conductors = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/scenes/mitsuba/conductors.xml"),
+    )
+    .unwrap();
+    let lights = r#"
+    <emitter type="point"><point name="position" x="0.5" y="1.5" z="1"/><rgb name="intensity" value="2, 3, 4"/></emitter>
+    <emitter type="spot">
+        <transform name="to_world"><lookat origin="-1, 1.8, 1.5" target="0, 0.4, 0" up="0, 1, 0"/></transform>
+        <rgb name="intensity" value="6, 4, 2"/><float name="cutoff_angle" value="30"/>
+    </emitter>
+    <emitter type="directional"><vector name="direction" x="0.2" y="-1" z="-0.3"/><rgb name="irradiance" value="1, 1, 2"/></emitter>
+    <emitter type="constant"><rgb name="radiance" value="0.2, 0.3, 0.4"/></emitter>
+</scene>"#;
+    std::fs::write(&all_lights, conductors.replace("</scene>", lights)).unwrap();
+    let scenes = [
         "conductors.xml",
         "plastics.xml",
         "anisotropic.xml",
         "materials_room.xml",
-    ] {
-        let mut scene = crate::common::load_test_scene(&format!("mitsuba/{name}"));
+        "point_light.xml",
+        "spot_light.xml",
+        "envmap.xml",
+    ];
+    let mut paths: Vec<std::path::PathBuf> = scenes
+        .iter()
+        .map(|name| {
+            Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("tests/scenes/mitsuba")
+                .join(name)
+        })
+        .collect();
+    paths.push(all_lights);
+    for path in paths {
+        let name = path.file_name().unwrap().to_string_lossy().to_string();
+        let mut scene = stagelight::scene::load(&path).expect("scene loads");
         scene.camera.resize(24, 24);
         let data = Arc::new(SceneData::new(scene));
         let settings = RenderSettings {
