@@ -132,12 +132,21 @@ impl<T: Real> Distribution<T> {
     /// D(m) (see `ggx_ndf`, `beckmann_ndf`).
     #[inline(always)]
     pub(crate) fn ndf(&self, m: V3<T>) -> T {
+        // A group with no Beckmann lane runs GGX's side right here, inlined with the caller's
+        // vector features: `select_with`'s closures are compiled apart, without them (here and
+        // below; docs/measurements/2026-11-29-microfacet-sides-inlined.md).
+        if !self.beckmann.any() {
+            return self.ggx_ndf(m);
+        }
         T::select_with(self.beckmann, || self.beckmann_ndf(m), || self.ggx_ndf(m))
     }
 
     /// Smith's G1(w) / w.z, w.z > 0.
     #[inline(always)]
     pub(crate) fn g1_over_cos(&self, w: V3<T>) -> T {
+        if !self.beckmann.any() {
+            return self.ggx_g1_over_cos(w);
+        }
         T::select_with(
             self.beckmann,
             || self.beckmann_g1_over_cos(w),
@@ -150,6 +159,9 @@ impl<T: Real> Distribution<T> {
     /// runs lane by lane (in double precision), and only in the needed Beckmann lanes.
     #[inline(always)]
     pub(crate) fn visible_normal(&self, wo: V3<T>, ux: T, uy: T, needed: T::Mask) -> V3<T> {
+        if !self.beckmann.any() {
+            return self.ggx_visible_normal(wo, ux, uy);
+        }
         V3::select_with(
             self.beckmann,
             || {
