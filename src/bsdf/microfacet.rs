@@ -300,7 +300,7 @@ fn beckmann_visible_normal(alpha_u: f32, alpha_v: f32, wo: Vec3, u: Vec2) -> Vec
     };
     let tan_theta = sin_theta / v.z;
     let slope_x = invert_visible_slope_cdf(tan_theta, u.x as f64);
-    let slope_y = invert_visible_slope_cdf(0.0, u.y as f64);
+    let slope_y = gaussian_slope(u.y as f64);
     let x = (cos_phi * slope_x - sin_phi * slope_y) * alpha_u as f64;
     let y = (sin_phi * slope_x + cos_phi * slope_y) * alpha_v as f64;
     DVec3::new(-x, -y, 1.0).normalize().as_vec3()
@@ -313,32 +313,32 @@ const SQRT_PI: f64 = 1.772_453_850_905_516;
 /// `tan_theta` and azimuth 0: the s in (-inf, 1/tan_theta] where u of the way through the
 /// density exp(-s^2) (1 - s tan_theta) lies (the microfacet normal (-s, ., 1) faces the
 /// viewer for s < 1/tan_theta, with projected area in proportion to 1 - s tan_theta). Its CDF
-/// is C(s) = sqrt(pi)/2 erfc(-s) + tan_theta/2 exp(-s^2); with `tan_theta` 0 this is the
-/// other slope, Gaussian and independent. Newton's method on C from `first_slope`'s guess,
-/// kept inside a bracket that bisection shrinks whenever a step would leave it, until the step
-/// is below 1e-12 (2-6 steps; from 0, without the guess and with bisection taking over where
-/// rounding made a step land on the bracket, it took 13-15).
+/// is C(s) = sqrt(pi)/2 erfc(-s) + tan_theta/2 exp(-s^2). Halley's method on C from
+/// `first_slope`'s guess, kept inside a bracket that bisection shrinks whenever a step would
+/// leave it: C' and C'' cost no more transcendentals than C, and a cubic step needs one
+/// evaluation fewer than Newton's (about 2 in all, from 4.4; 13-15 from 0 with bisection
+/// wherever a step landed on the bracket). Within 1e-11 of u in C (`tests`).
 fn invert_visible_slope_cdf(tan_theta: f64, u: f64) -> f64 {
-    // Beyond |s| = 8 lies a probability under 1e-28: the search stays inside.
-    const LIMIT: f64 = 8.0;
-    let cdf = |s: f64| 0.5 * SQRT_PI * libm::erfc(-s) + 0.5 * tan_theta * (-s * s).exp();
-    let density = |s: f64| (-s * s).exp() * (1.0 - s * tan_theta);
-    let mut lo = -LIMIT;
+    let mut lo = -SLOPE_LIMIT;
     let mut hi = if tan_theta > 0.0 {
-        (1.0 / tan_theta).min(LIMIT)
+        (1.0 / tan_theta).min(SLOPE_LIMIT)
     } else {
-        LIMIT
+        SLOPE_LIMIT
     };
     let u = u.clamp(0.0, 1.0);
-    let target = u * cdf(hi);
-    let guess = first_slope(tan_theta, hi, u, target);
+    // C(hi) through erf(hi), which the guess reads too: erfc(-hi) = 1 + erf(hi) for hi > 0,
+    // and erf(8) is 1 in double precision.
+    let erf_hi = if hi < SLOPE_LIMIT { libm::erf(hi) } else { 1.0 };
+    let target = u * (0.5 * SQRT_PI * (1.0 + erf_hi) + 0.5 * tan_theta * (-hi * hi).exp());
+    let guess = first_slope(tan_theta, erf_hi, u);
     let mut s = if guess.is_finite() {
         guess.clamp(lo, hi)
     } else {
         0.0f64.min(hi)
     };
     for _ in 0..100 {
-        let excess = cdf(s) - target;
+        let gauss = (-s * s).exp();
+        let excess = 0.5 * SQRT_PI * libm::erfc(-s) + 0.5 * tan_theta * gauss - target;
         if excess == 0.0 {
             return s;
         }
@@ -347,13 +347,16 @@ fn invert_visible_slope_cdf(tan_theta: f64, u: f64) -> f64 {
         } else {
             hi = s;
         }
-        let slope = density(s);
-        let newton = s - excess / slope;
-        if slope > 0.0 && (newton - s).abs() <= 1e-12 * (1.0 + s.abs()) {
-            return newton;
+        let slope = gauss * (1.0 - s * tan_theta);
+        let curve = gauss * (-2.0 * s * (1.0 - s * tan_theta) - tan_theta);
+        let halley = s - 2.0 * excess * slope / (2.0 * slope * slope - excess * curve);
+        // Halley's error after a step is about the step's cube (times C's derivatives'
+        // ratios): a step under 1e-5 leaves some 1e-15.
+        if slope > 0.0 && (halley - s).abs() <= 1e-5 * (1.0 + s.abs()) {
+            return halley.clamp(lo, hi);
         }
-        s = if slope > 0.0 && newton > lo && newton < hi {
-            newton
+        s = if slope > 0.0 && halley > lo && halley < hi {
+            halley
         } else {
             0.5 * (lo + hi)
         };
@@ -361,19 +364,29 @@ fn invert_visible_slope_cdf(tan_theta: f64, u: f64) -> f64 {
     s
 }
 
-/// Where Newton's method starts for `invert_visible_slope_cdf`: for the Gaussian slope
-/// (`tan_theta` 0) erfinv of the target's place in erf's range, nearly the root; otherwise
-/// the root at grazing incidence (the most curved case: erf(s) = m - (m + 1) erf(sqrt(-ln
-/// u)), m = erf(hi)), as Mitsuba 3's `sample_visible_11` starts. NaN where the guess leaves
-/// erf's range (the caller then starts at 0).
-fn first_slope(tan_theta: f64, hi: f64, u: f64, target: f64) -> f64 {
-    let x = if tan_theta > 0.0 {
-        let m = libm::erf(hi);
-        let u = u.clamp(1e-6, 1.0 - 1e-6);
-        m - (m + 1.0) * libm::erf((-u.ln()).sqrt())
-    } else {
-        2.0 * target / SQRT_PI - 1.0
-    };
+/// The slopes' search stays within |s| <= 8: beyond lies a probability under 1e-28.
+const SLOPE_LIMIT: f64 = 8.0;
+
+/// The Beckmann microsurface's other slope, Gaussian and independent of the view: erfinv(2u -
+/// 1), from `erfinv_guess` and one Newton step on erf (the guess is within 1e-7, so the step
+/// leaves about 1e-14; 2.5x faster than searching C with tan_theta 0).
+fn gaussian_slope(u: f64) -> f64 {
+    let x = 2.0 * u.clamp(0.0, 1.0) - 1.0;
+    if x.abs() >= 1.0 || x.is_nan() {
+        return SLOPE_LIMIT.copysign(x);
+    }
+    let s = erfinv_guess(x);
+    (s - (libm::erf(s) - x) * (0.5 * SQRT_PI) * (s * s).exp()).clamp(-SLOPE_LIMIT, SLOPE_LIMIT)
+}
+
+/// Where Halley's method starts for `invert_visible_slope_cdf` (`erf_hi` is erf of the
+/// bracket's top): Mitsuba 3's fit in erf's domain (`sample_visible_11`), exact at normal
+/// incidence (erf(s) = 2u - 1) and near the root elsewhere. NaN where the guess leaves erf's
+/// range (the caller then starts at 0).
+fn first_slope(tan_theta: f64, erf_hi: f64, u: f64) -> f64 {
+    let theta = tan_theta.atan();
+    let fit = 1.0 + theta * (-0.876 + theta * (0.4265 - 0.0594 * theta));
+    let x = erf_hi - (erf_hi + 1.0) * (1.0 - u).powf(fit);
     if x.abs() < 1.0 {
         erfinv_guess(x)
     } else {
@@ -487,25 +500,37 @@ mod tests {
 
     #[test]
     fn visible_slope_cdf_inverts() {
-        for tan_theta in [0.0f64, 0.1, 1.0, 10.0, 1e4] {
+        for tan_theta in [0.0f64, 1e-3, 0.1, 0.3, 1.0, 3.0, 10.0, 100.0, 1e4] {
             let cdf = |s: f64| 0.5 * SQRT_PI * libm::erfc(-s) + 0.5 * tan_theta * (-s * s).exp();
             let top = if tan_theta > 0.0 {
                 (1.0 / tan_theta).min(8.0)
             } else {
                 8.0
             };
-            for u in [1e-9, 0.01, 0.25, 0.5, 0.75, 0.99, 1.0 - 1e-9] {
+            let inner = (1..1000).map(|i| i as f64 / 1000.0);
+            for u in [0.0, 1e-9, 1.0 - 1e-9, 1.0].into_iter().chain(inner) {
                 let s = invert_visible_slope_cdf(tan_theta, u);
                 assert!(s <= top + 1e-12, "tan {tan_theta} u {u}: {s} beyond {top}");
                 let got = cdf(s) / cdf(top);
                 assert!(
-                    (got - u).abs() < 1e-9,
+                    (got - u).abs() < 1e-11,
                     "tan {tan_theta} u {u}: C(s) = {got}"
                 );
             }
         }
-        // The Gaussian slope's quartiles: erfinv(+-1/2) = +-0.476936.
-        assert!((invert_visible_slope_cdf(0.0, 0.75) - 0.476_936_3).abs() < 1e-6);
-        assert!((invert_visible_slope_cdf(0.0, 0.25) + 0.476_936_3).abs() < 1e-6);
+    }
+
+    #[test]
+    fn gaussian_slope_inverts_its_cdf() {
+        // Every f32 number in [0, 1) at a step of 2^-20, and the ends.
+        for i in 0..=(1u32 << 20) {
+            let u = f64::from(i) / f64::from(1u32 << 20);
+            let s = gaussian_slope(u);
+            let got = 0.5 * libm::erfc(-s);
+            assert!((got - u).abs() < 1e-13, "u {u}: C(s) = {got}");
+        }
+        // Its quartiles: erfinv(+-1/2) = +-0.476936.
+        assert!((gaussian_slope(0.75) - 0.476_936_3).abs() < 1e-6);
+        assert!((gaussian_slope(0.25) + 0.476_936_3).abs() < 1e-6);
     }
 }
