@@ -129,10 +129,10 @@ pub trait Real:
 
     /// `floor(self)` for |self| < 2^22, by adding and taking off 1.5 * 2^23 (which rounds to
     /// the nearest integer) and stepping down where that went up: the same bits as `floor`
-    /// for every such f32 but -0 (which gives +0), in adds, a compare and a select. `floor` is one instruction in the AVX2 lane code but a
-    /// libm call per lane in code compiled without SSE4.1: the one-path megakernel, and the
-    /// lane code's out-of-line closures (`select_with`'s sides: Beckmann's D and G1, whose
-    /// `exp` needs it).
+    /// for every such f32 but -0 (which gives +0), in adds, a compare and a select. `floor`
+    /// is one instruction in the AVX2 lane code but a libm call per lane in code compiled
+    /// without SSE4.1: the one-path megakernel, and the lane code's out-of-line closures
+    /// (`select_with`'s sides: Beckmann's D and G1, whose `exp` needs it).
     #[inline(always)]
     fn floor_small(self) -> Self {
         const ROUND: f32 = 12_582_912.0;
