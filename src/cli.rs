@@ -328,9 +328,9 @@ pub struct MltArgs {
 /// Options of the photon mappers.
 #[derive(clap::Args, Debug, Clone, Copy)]
 pub struct PhotonArgs {
-    /// Photons traced per pass (ppm, sppm).
-    #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_PHOTONS_PER_PASS, value_parser = clap::value_parser!(u64).range(1..))]
-    pub photons_per_pass: u64,
+    /// Photons traced per pass (ppm, sppm; default 250,000).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub photons_per_pass: Option<u64>,
     /// Fraction of each pass's photons a pixel keeps, in (0, 1) (ppm, sppm; default 0.7), or
     /// the merge radius reduction: pass i's radius is r (i + 1)^((alpha - 1) / 2) (vcm, bpm;
     /// default 0.75).
@@ -342,16 +342,16 @@ pub struct PhotonArgs {
     #[arg(long, value_parser = parse_radius)]
     pub radius: Option<f32>,
     /// Eye-ray trees per pixel, jittered over it as a stratified net (ppm: its hit points are
-    /// fixed, so only they average the pixel's area; memory grows with them).
-    #[arg(long, default_value_t = crate::integrators::sppm::DEFAULT_EYE_RAYS, value_parser = clap::value_parser!(u32).range(1..=1024))]
-    pub eye_rays: u32,
-    /// Photons traced for the photon maps (pm).
-    #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_PHOTONS, value_parser = clap::value_parser!(u64).range(1..))]
-    pub photons: u64,
+    /// fixed, so only they average the pixel's area; memory grows with them; default 16).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=1024))]
+    pub eye_rays: Option<u32>,
+    /// Photons traced for the photon maps (pm; default 250,000).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub photons: Option<u64>,
     /// Photons per density estimate (pm; at least 2: the estimate sums the k - 1 nearest over
-    /// the disc through the k-th).
-    #[arg(long, default_value_t = crate::integrators::pm::DEFAULT_K as u32, value_parser = clap::value_parser!(u32).range(2..))]
-    pub k: u32,
+    /// the disc through the k-th; default 50).
+    #[arg(long, value_parser = clap::value_parser!(u32).range(2..))]
+    pub k: Option<u32>,
     /// Largest density-estimate radius in scene units (pm; default: 2% of the scene's
     /// bounding-box diagonal).
     #[arg(long, value_parser = parse_radius)]

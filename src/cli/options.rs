@@ -44,16 +44,35 @@ impl MltArgs {
 
 impl PhotonArgs {
     pub fn settings(&self) -> crate::integrators::PhotonSettings {
+        let defaults = crate::integrators::PhotonSettings::default();
         crate::integrators::PhotonSettings {
-            photons_per_pass: self.photons_per_pass,
+            photons_per_pass: self.photons_per_pass.unwrap_or(defaults.photons_per_pass),
             alpha: self.alpha,
             radius: self.radius,
-            eye_rays: self.eye_rays,
-            photons: self.photons,
-            k: self.k as usize,
+            eye_rays: self.eye_rays.unwrap_or(defaults.eye_rays),
+            photons: self.photons.unwrap_or(defaults.photons),
+            k: self.k.map_or(defaults.k, |k| k as usize),
             max_radius: self.max_radius,
             final_gather: !self.no_final_gather,
         }
+    }
+
+    /// The flags of these options the command line gives, for refusing them where the
+    /// integrator does not read them.
+    pub fn given(&self) -> Vec<&'static str> {
+        [
+            ("--photons-per-pass", self.photons_per_pass.is_some()),
+            ("--alpha", self.alpha.is_some()),
+            ("--radius", self.radius.is_some()),
+            ("--eye-rays", self.eye_rays.is_some()),
+            ("--photons", self.photons.is_some()),
+            ("--k", self.k.is_some()),
+            ("--max-radius", self.max_radius.is_some()),
+            ("--no-final-gather", self.no_final_gather),
+        ]
+        .into_iter()
+        .filter_map(|(flag, given)| given.then_some(flag))
+        .collect()
     }
 }
 
@@ -172,6 +191,7 @@ impl RenderArgs {
             }),
             strategy_images: self.strategy_images.clone(),
             variance: self.variance.clone(),
+            photon_flags: self.photons.given(),
             output,
             shard: self.shard.choice(),
             threads: self.threads.map(|t| t as usize),
@@ -205,6 +225,7 @@ impl ReferenceArgs {
                 photons: self.photons.settings(),
                 ..RenderSettings::default()
             }),
+            photon_flags: self.photons.given(),
             output,
             checkpoint_every: std::time::Duration::try_from_secs_f64(self.checkpoint_every)
                 .unwrap_or(std::time::Duration::from_secs(
@@ -266,5 +287,57 @@ impl CompareArgs {
             threads: self.threads.map(|t| t as usize),
             quiet: self.quiet,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    /// The photon options' help states their defaults in words (clap's own default would mark
+    /// every one as given); those words must be the defaults `settings` fills in.
+    #[test]
+    fn photon_option_help_states_the_defaults_settings_use() {
+        let defaults = crate::integrators::PhotonSettings::default();
+        let thousands = |n: u64| {
+            let digits = n.to_string();
+            let mut out = String::new();
+            for (i, c) in digits.chars().enumerate() {
+                if i > 0 && (digits.len() - i) % 3 == 0 {
+                    out.push(',');
+                }
+                out.push(c);
+            }
+            out
+        };
+        let command = Cli::command();
+        let render = command.find_subcommand("render").expect("a render command");
+        let help = |long: &str| {
+            render
+                .get_arguments()
+                .find(|a| a.get_long() == Some(long))
+                .and_then(|a| a.get_help())
+                .map(|h| h.to_string())
+                .unwrap_or_else(|| panic!("--{long} has help"))
+        };
+        for (long, default) in [
+            ("photons-per-pass", thousands(defaults.photons_per_pass)),
+            ("photons", thousands(defaults.photons)),
+            ("eye-rays", defaults.eye_rays.to_string()),
+            ("k", defaults.k.to_string()),
+        ] {
+            let text = help(long);
+            assert!(
+                text.contains(&format!("default {default})")),
+                "--{long}: {text}"
+            );
+        }
+        let given = Cli::try_parse_from(["stagelight", "render", "s.ron"]).expect("parses");
+        let Command::Render(args) = given.command else {
+            panic!("a render command")
+        };
+        assert_eq!(args.photons.settings(), defaults);
+        assert!(args.photons.given().is_empty());
     }
 }

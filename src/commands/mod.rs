@@ -214,6 +214,28 @@ pub fn render_memory(
     film.saturating_add(state)
 }
 
+/// Refuses each of `flags` (options the command line gives) that `integrator` does not read,
+/// naming the integrators that do: an option that would change nothing is a mistake to say.
+pub fn refuse_options_of_others<'a>(
+    integrator: IntegratorKind,
+    flags: impl IntoIterator<Item = &'a str>,
+) -> Result<()> {
+    for flag in flags {
+        if !integrator.info().options.contains(&flag) {
+            let takers: Vec<&str> = crate::integrators::REGISTRY
+                .iter()
+                .filter(|i| i.options.contains(&flag))
+                .map(|i| i.name)
+                .collect();
+            bail!(
+                "{flag} is not an option of {integrator}: it is {}'s",
+                takers.join(", ")
+            );
+        }
+    }
+    Ok(())
+}
+
 /// Refuses `--kernel megakernel` for an integrator that has none (only pt has one) and
 /// `--wavefront` for one that does not render in waves of samples (pt, bdpt, vcm, bpm do).
 pub fn check_kernel(kind: IntegratorKind, settings: &RenderSettings) -> Result<()> {

@@ -25,6 +25,9 @@ pub struct RenderOptions {
     /// Where each pixel's sample variance goes (`--variance`; pt; `settings.moments` says
     /// the same).
     pub variance: Option<PathBuf>,
+    /// The photon mappers' options the command line gives (`--photons`, `--radius`, ...),
+    /// refused where the integrator does not read them.
+    pub photon_flags: Vec<&'static str>,
     /// Only a shard of the passes (`--shard I/N` or `--pass-range`): its image and its
     /// partial film (`OUT.exr.checkpoint`) for `stagelight merge`.
     pub shard: Option<super::ShardChoice>,
@@ -40,9 +43,10 @@ pub fn check_integrator_options(o: &RenderOptions) -> Result<()> {
     if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
         bail!("--strategy-images needs --integrator bdpt or mmlt");
     }
-    // The Metropolis options, refused by name where the integrator does not read them.
+    // The Metropolis and photon mappers' options, refused by name where the integrator does
+    // not read them.
     let m = &o.settings.mlt;
-    for (flag, given) in [
+    let metropolis = [
         ("--large-step", m.large_step.is_some()),
         ("--sigma", m.sigma.is_some()),
         ("--bootstrap", m.bootstrap.is_some()),
@@ -50,20 +54,13 @@ pub fn check_integrator_options(o: &RenderOptions) -> Result<()> {
         ("--direct-spp", m.direct_spp.is_some()),
         ("--mutations", m.mutations.is_some()),
         ("--lens-min", m.lens_min.is_some()),
-    ] {
-        if given && !o.integrator.info().options.contains(&flag) {
-            let takers: Vec<&str> = crate::integrators::REGISTRY
-                .iter()
-                .filter(|i| i.options.contains(&flag))
-                .map(|i| i.name)
-                .collect();
-            bail!(
-                "{flag} is not an option of {}: it is {}'s",
-                o.integrator,
-                takers.join(", ")
-            );
-        }
-    }
+    ]
+    .into_iter()
+    .filter_map(|(flag, given)| given.then_some(flag));
+    super::refuse_options_of_others(
+        o.integrator,
+        metropolis.chain(o.photon_flags.iter().copied()),
+    )?;
     if o.settings.light_vertex_cache > 0
         && !o
             .integrator

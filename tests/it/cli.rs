@@ -224,15 +224,22 @@ fn strategy_images_need_bdpt() {
 }
 
 #[test]
-fn metropolis_options_are_refused_by_integrators_that_do_not_read_them() {
-    for (integrator, flag, value, takers) in [
-        ("pt", "--direct-spp", "4", "pssmlt, mmlt, mlt"),
-        ("bdpt", "--chains", "300", "pssmlt, mmlt, mlt"),
-        ("mlt", "--sigma", "0.01", "pssmlt, mmlt"),
-        ("mmlt", "--lens-min", "0.2", "mlt"),
+fn metropolis_and_photon_options_are_refused_by_integrators_that_do_not_read_them() {
+    for (command, integrator, flag, value, takers) in [
+        ("render", "pt", "--direct-spp", "4", "pssmlt, mmlt, mlt"),
+        ("render", "bdpt", "--chains", "300", "pssmlt, mmlt, mlt"),
+        ("render", "mlt", "--sigma", "0.01", "pssmlt, mmlt"),
+        ("render", "mmlt", "--lens-min", "0.2", "mlt"),
+        ("render", "pt", "--photons-per-pass", "1000", "ppm, sppm"),
+        ("render", "bdpt", "--radius", "0.1", "vcm, bpm, ppm, sppm"),
+        ("render", "sppm", "--k", "8", "pm"),
+        ("render", "pm", "--eye-rays", "4", "ppm"),
+        ("render", "vcm", "--photons", "1000", "pm"),
+        ("reference", "pt", "--alpha", "0.5", "vcm, bpm, ppm, sppm"),
+        ("reference", "ppm", "--max-radius", "1", "pm"),
     ] {
         let o = stagelight(&[
-            "render",
+            command,
             "scenes/cornell_box.ron",
             "--integrator",
             integrator,
@@ -243,7 +250,7 @@ fn metropolis_options_are_refused_by_integrators_that_do_not_read_them() {
             "-o",
             "/tmp/never-written.exr",
         ]);
-        assert_eq!(o.status.code(), Some(1), "{integrator} {flag}");
+        assert_eq!(o.status.code(), Some(1), "{command} {integrator} {flag}");
         let want = format!("{flag} is not an option of {integrator}: it is {takers}'s");
         assert!(stderr(&o).contains(&want), "{}", stderr(&o));
     }

@@ -171,18 +171,11 @@ fn a_light_too_small_for_f32_is_refused_not_a_panic() {
     );
     let out = dir.join("out.exr");
     for integrator in ["pt", "bdpt", "sppm"] {
-        let o = run(&render_args(
-            s(&scene),
-            s(&out),
-            &[
-                "--spp",
-                "1",
-                "--integrator",
-                integrator,
-                "--photons-per-pass",
-                "1000",
-            ],
-        ));
+        let mut args = vec!["--spp", "1", "--integrator", integrator];
+        if integrator == "sppm" {
+            args.extend(["--photons-per-pass", "1000"]);
+        }
+        let o = run(&render_args(s(&scene), s(&out), &args));
         refused(&o, "tiny.ron:6:1", &["degenerate light"]);
     }
 }
@@ -685,18 +678,11 @@ fn emission_that_overflows_f32_is_refused_and_any_other_renders_linearly() {
     let render = |emission: &str, integrator: &str| {
         let light = LIGHT.replace("(4, 4, 4)", emission);
         let scene = write_scene(&dir, "light.ron", &[FLOOR, &light]);
-        let o = run(&render_args(
-            s(&scene),
-            s(&out),
-            &[
-                "--spp",
-                "4",
-                "--integrator",
-                integrator,
-                "--photons-per-pass",
-                "10000",
-            ],
-        ));
+        let mut args = vec!["--spp", "4", "--integrator", integrator];
+        if integrator == "sppm" {
+            args.extend(["--photons-per-pass", "10000"]);
+        }
+        let o = run(&render_args(s(&scene), s(&out), &args));
         rendered(&o);
         assert!(
             !stderr(&o).contains("beyond the film's range") && !stderr(&o).contains("NaN"),
