@@ -42,6 +42,29 @@ impl MltArgs {
     }
 }
 
+impl MltArgs {
+    /// The flags of these options the command line gives (see `PhotonArgs::given`).
+    pub fn given(&self) -> Vec<&'static str> {
+        flags_given([
+            ("--large-step", self.large_step.is_some()),
+            ("--sigma", self.sigma.is_some()),
+            ("--bootstrap", self.bootstrap.is_some()),
+            ("--chains", self.chains.is_some()),
+            ("--direct-spp", self.direct_spp.is_some()),
+            ("--mutations", self.mutations.is_some()),
+            ("--lens-min", self.lens_min.is_some()),
+        ])
+    }
+}
+
+/// The flags of `flags` that are given.
+fn flags_given<const N: usize>(flags: [(&'static str, bool); N]) -> Vec<&'static str> {
+    flags
+        .into_iter()
+        .filter_map(|(flag, given)| given.then_some(flag))
+        .collect()
+}
+
 impl PhotonArgs {
     pub fn settings(&self) -> crate::integrators::PhotonSettings {
         let defaults = crate::integrators::PhotonSettings::default();
@@ -60,7 +83,7 @@ impl PhotonArgs {
     /// The flags of these options the command line gives, for refusing them where the
     /// integrator does not read them.
     pub fn given(&self) -> Vec<&'static str> {
-        [
+        flags_given([
             ("--photons-per-pass", self.photons_per_pass.is_some()),
             ("--alpha", self.alpha.is_some()),
             ("--radius", self.radius.is_some()),
@@ -69,10 +92,7 @@ impl PhotonArgs {
             ("--k", self.k.is_some()),
             ("--max-radius", self.max_radius.is_some()),
             ("--no-final-gather", self.no_final_gather),
-        ]
-        .into_iter()
-        .filter_map(|(flag, given)| given.then_some(flag))
-        .collect()
+        ])
     }
 }
 
@@ -191,7 +211,7 @@ impl RenderArgs {
             }),
             strategy_images: self.strategy_images.clone(),
             variance: self.variance.clone(),
-            photon_flags: self.photons.given(),
+            integrator_flags: [self.mlt.given(), self.photons.given()].concat(),
             output,
             shard: self.shard.choice(),
             threads: self.threads.map(|t| t as usize),
@@ -225,7 +245,7 @@ impl ReferenceArgs {
                 photons: self.photons.settings(),
                 ..RenderSettings::default()
             }),
-            photon_flags: self.photons.given(),
+            integrator_flags: self.photons.given(),
             output,
             checkpoint_every: std::time::Duration::try_from_secs_f64(self.checkpoint_every)
                 .unwrap_or(std::time::Duration::from_secs(

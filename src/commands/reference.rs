@@ -25,9 +25,9 @@ pub struct ReferenceOptions {
     pub settings: RenderSettings,
     /// Output EXR; its checkpoint and PNG preview go beside it.
     pub output: PathBuf,
-    /// The photon mappers' options the command line gives, refused where the integrator
-    /// does not read them.
-    pub photon_flags: Vec<&'static str>,
+    /// The integrators' own options the command line gives (the photon mappers'), refused
+    /// where the integrator does not read them.
+    pub integrator_flags: Vec<&'static str>,
     pub checkpoint_every: Duration,
     /// Only a shard of the passes (`--shard I/N` or `--pass-range`), for `stagelight merge`.
     pub shard: Option<super::ShardChoice>,
@@ -64,7 +64,7 @@ pub fn check_reference_options(o: &ReferenceOptions) -> Result<()> {
     {
         bail!("{}: the output must be an .exr file", o.output.display());
     }
-    super::refuse_options_of_others(o.integrator, o.photon_flags.iter().copied())?;
+    super::refuse_options_of_others(o.integrator, o.integrator_flags.iter().copied())?;
     check_threads(o.threads)?;
     super::check_kernel(o.integrator, &o.settings)
 }

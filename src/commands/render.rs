@@ -25,9 +25,9 @@ pub struct RenderOptions {
     /// Where each pixel's sample variance goes (`--variance`; pt; `settings.moments` says
     /// the same).
     pub variance: Option<PathBuf>,
-    /// The photon mappers' options the command line gives (`--photons`, `--radius`, ...),
-    /// refused where the integrator does not read them.
-    pub photon_flags: Vec<&'static str>,
+    /// The Metropolis and photon mappers' options the command line gives (`--sigma`,
+    /// `--radius`, ...), refused where the integrator does not read them.
+    pub integrator_flags: Vec<&'static str>,
     /// Only a shard of the passes (`--shard I/N` or `--pass-range`): its image and its
     /// partial film (`OUT.exr.checkpoint`) for `stagelight merge`.
     pub shard: Option<super::ShardChoice>,
@@ -43,24 +43,7 @@ pub fn check_integrator_options(o: &RenderOptions) -> Result<()> {
     if o.strategy_images.is_some() && !o.integrator.info().options.contains(&"--strategy-images") {
         bail!("--strategy-images needs --integrator bdpt or mmlt");
     }
-    // The Metropolis and photon mappers' options, refused by name where the integrator does
-    // not read them.
-    let m = &o.settings.mlt;
-    let metropolis = [
-        ("--large-step", m.large_step.is_some()),
-        ("--sigma", m.sigma.is_some()),
-        ("--bootstrap", m.bootstrap.is_some()),
-        ("--chains", m.chains.is_some()),
-        ("--direct-spp", m.direct_spp.is_some()),
-        ("--mutations", m.mutations.is_some()),
-        ("--lens-min", m.lens_min.is_some()),
-    ]
-    .into_iter()
-    .filter_map(|(flag, given)| given.then_some(flag));
-    super::refuse_options_of_others(
-        o.integrator,
-        metropolis.chain(o.photon_flags.iter().copied()),
-    )?;
+    super::refuse_options_of_others(o.integrator, o.integrator_flags.iter().copied())?;
     if o.settings.light_vertex_cache > 0
         && !o
             .integrator
