@@ -40,9 +40,7 @@ impl MltArgs {
             lens_min: self.lens_min,
         }
     }
-}
 
-impl MltArgs {
     /// The flags of these options the command line gives (see `PhotonArgs::given`).
     pub fn given(&self) -> Vec<&'static str> {
         flags_given([
