@@ -159,11 +159,14 @@ pub fn write_big_scene(dir: &Path, size: &BigScene) -> Result<PathBuf> {
         camera.width.0,
         camera.height.0
     );
+    // rr_depth: Mitsuba's roulette after as many scatterings as stagelight's, so that a sample
+    // costs both renderers the same rays.
     let mut xml = format!(
         "<!-- Written by stagelight bench (its big scenes): the same geometry as {name}.ron, for Mitsuba 3 -->\n\
          <scene version=\"3.0.0\">\n\
          \x20   <default name=\"spp\" value=\"32\"/>\n\
-         \x20   <integrator type=\"path\"><integer name=\"max_depth\" value=\"-1\"/></integrator>\n\
+         \x20   <integrator type=\"path\"><integer name=\"max_depth\" value=\"-1\"/>\
+         <integer name=\"rr_depth\" value=\"{rr_depth}\"/></integrator>\n\
          \x20   <sensor type=\"perspective\">\n\
          \x20       <float name=\"fov\" value=\"{fov}\"/><string name=\"fov_axis\" value=\"y\"/>\n\
          \x20       <transform name=\"to_world\"><lookat origin=\"{o}\" target=\"{t}\" up=\"{u}\"/></transform>\n\
@@ -173,6 +176,7 @@ pub fn write_big_scene(dir: &Path, size: &BigScene) -> Result<PathBuf> {
          \x20           <rfilter type=\"box\"/></film>\n\
          \x20   </sensor>\n",
         name = size.name,
+        rr_depth = crate::sampling::roulette::ROULETTE_DEPTH,
         fov = camera.fov.0,
         o = xml_vector(camera.position.0),
         t = xml_vector(camera.look_at.0),

@@ -47,9 +47,13 @@ pub fn export(
     let mut xml = String::new();
     let _ = writeln!(xml, "<scene version=\"3.0.0\">");
     let _ = writeln!(xml, "    <default name=\"spp\" value=\"64\"/>");
+    // Mitsuba's roulette starts after `rr_depth` scatterings, as stagelight's after
+    // ROULETTE_DEPTH (its default, 5, would give Mitsuba longer paths: more work a sample).
     let _ = writeln!(
         xml,
-        "    <integrator type=\"path\">\n        <integer name=\"max_depth\" value=\"-1\"/>\n    </integrator>"
+        "    <integrator type=\"path\">\n        <integer name=\"max_depth\" value=\"-1\"/>\n        \
+         <integer name=\"rr_depth\" value=\"{}\"/>\n    </integrator>",
+        crate::sampling::roulette::ROULETTE_DEPTH
     );
     let desc = &parsed.camera.desc;
     let point = |v: DVec3| format!("{}, {}, {}", v.x, v.y, v.z);
