@@ -173,12 +173,12 @@ macro_rules! soa {
                 $view { $($field: &*self.$field,)+ }
             }
             /// Item `i` of the chunk.
-            #[inline]
+            #[inline(always)]
             pub fn get(&self, i: usize) -> $item {
                 $item { $($field: self.$field[i],)+ }
             }
             /// Writes every field of item `i` of the chunk.
-            #[inline]
+            #[inline(always)]
             pub fn set(&mut self, i: usize, item: $item) {
                 $(self.$field[i] = item.$field;)+
             }
@@ -186,7 +186,7 @@ macro_rules! soa {
 
         impl $view<'_> {
             /// Item `i` of the view.
-            #[inline]
+            #[inline(always)]
             pub fn get(&self, i: usize) -> $item {
                 $item { $($field: self.$field[i],)+ }
             }
@@ -216,13 +216,13 @@ macro_rules! soa {
             }
 
             /// The item in `slot`.
-            #[inline]
+            #[inline(always)]
             pub fn get(&self, slot: usize) -> $item {
                 $item { $($field: self.$field[slot],)+ }
             }
 
             /// Writes every field of the item in `slot`.
-            #[inline]
+            #[inline(always)]
             pub fn set(&mut self, slot: usize, item: $item) {
                 $(self.$field[slot] = item.$field;)+
             }

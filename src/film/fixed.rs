@@ -192,7 +192,7 @@ impl FixedRgb {
     pub const ZERO: FixedRgb = FixedRgb([0; 3]);
 
     /// A sample, each channel rounded to the unit 2^(exponent - 64).
-    #[inline]
+    #[inline(always)]
     pub fn of(value: Vec3, exponent: i32) -> Result<FixedRgb, Rejected> {
         match (
             units_of_f32(value.x, exponent),

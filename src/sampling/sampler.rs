@@ -353,7 +353,7 @@ impl Sampler<'_> {
     /// sample below 2^(61 - max(2 log2_res + log2_spp, 24) + log2_spp) (at least 2^29; 2^39
     /// at 1920 x 1080 by default), or a photon index below 2^36 with pass below 2^25;
     /// `Primary`: a slot of the store. Debug builds assert them.
-    #[inline]
+    #[inline(always)]
     pub fn key(&self, stream: Stream, index: u64, sample: u64) -> SampleKey {
         match *self {
             Sampler::Independent { seed } => {
