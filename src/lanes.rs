@@ -309,9 +309,17 @@ impl Real for f32 {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct F<const N: usize>(pub [f32; N]);
 
-/// One flag per lane, `N` lanes.
+/// One flag per lane, `N` lanes: all bits set (true) or none, the width of an f32 lane, as
+/// vector compares give them. As `[bool; N]` the flags were bytes, and every compare and
+/// select went through conversions between byte and word lanes and their shuffles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct M<const N: usize>(pub [bool; N]);
+pub struct M<const N: usize>([u32; N]);
+
+/// A flag's lane bits.
+#[inline(always)]
+fn flag_bits(v: bool) -> u32 {
+    (v as u32).wrapping_neg()
+}
 
 impl<const N: usize> F<N> {
     /// Lane `l` is `f(l)`.
@@ -341,9 +349,9 @@ impl<const N: usize> F<N> {
     }
     #[inline(always)]
     fn test(self, o: F<N>, f: impl Fn(f32, f32) -> bool) -> M<N> {
-        let mut out = [false; N];
+        let mut out = [0; N];
         for ((m, a), b) in out.iter_mut().zip(self.0).zip(o.0) {
-            *m = f(a, b);
+            *m = flag_bits(f(a, b));
         }
         M(out)
     }
@@ -393,11 +401,10 @@ impl<const N: usize> Real for F<N> {
     }
     #[inline(always)]
     fn select(m: M<N>, a: F<N>, b: F<N>) -> F<N> {
+        // By bits: exactly `a` or `b`, and a blend for the compiler.
         let mut out = b.0;
         for ((v, m), a) in out.iter_mut().zip(m.0).zip(a.0) {
-            if m {
-                *v = a;
-            }
+            *v = f32::from_bits((a.to_bits() & m) | (v.to_bits() & !m));
         }
         F(out)
     }
@@ -427,23 +434,24 @@ impl<const N: usize> Real for F<N> {
 impl<const N: usize> Mask for M<N> {
     #[inline(always)]
     fn splat(v: bool) -> M<N> {
-        M([v; N])
+        M([flag_bits(v); N])
     }
     #[inline(always)]
     fn lanes(f: impl FnMut(usize) -> bool) -> M<N> {
-        M(lanes_of(f))
+        let mut f = f;
+        M(lanes_of(|l| flag_bits(f(l))))
     }
     #[inline(always)]
     fn lane(self, l: usize) -> bool {
-        self.0[l]
+        self.0[l] != 0
     }
     #[inline(always)]
     fn all(self) -> bool {
-        self.0.iter().all(|&b| b)
+        self.0.iter().fold(!0, |all, &m| all & m) != 0
     }
     #[inline(always)]
     fn any(self) -> bool {
-        self.0.iter().any(|&b| b)
+        self.0.iter().fold(0, |any, &m| any | m) != 0
     }
 }
 
@@ -855,7 +863,7 @@ mod tests {
             same(x.abs().sqrt(), l, a.abs().sqrt());
             same(x.sign_one(), l, 1.0f32.copysign(a));
             let m = x.less(y);
-            assert_eq!(m.0[l], a < b);
+            assert_eq!(m.lane(l), a < b);
             same(F::select(m, x, y), l, f32::select(a < b, a, b));
             let (q, qa) = (x * 0.1, a * 0.1);
             same(q.sin_cos_quarter().0, l, qa.sin_cos_quarter().0);

@@ -9,7 +9,7 @@ use crate::components::path_tracing::DIM_LIGHT_POINT;
 use crate::components::path_tracing::MaterialRanges;
 use crate::components::path_tracing::bounce_dim;
 use crate::components::{Paths, PathsView, ShadowRaysChunk, Surfaces, SurfacesView};
-use crate::lanes::{F, LaneKernel, LaneWidth, M, Real, V3, lanes_of, run_lanes};
+use crate::lanes::{F, LaneKernel, LaneWidth, M, Mask, Real, V3, lanes_of, run_lanes};
 use crate::math::gamma;
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler, power_heuristic, sample_cdf};
@@ -205,7 +205,7 @@ impl<const N: usize> KindVisitor for LightLanesOf<'_, '_, N> {
         light.dir.store(&mut c.dir[i..]);
         light.contribution.store(&mut c.contribution[i..]);
         c.t_max[i..i + N].copy_from_slice(&t_max.0);
-        Some(light.cast.0.iter().filter(|&&b| b).count())
+        Some((0..N).filter(|&l| light.cast.lane(l)).count())
     }
 }
 

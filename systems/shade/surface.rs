@@ -7,7 +7,7 @@ use crate::components::path_tracing::DIM_BSDF;
 use crate::components::path_tracing::bounce_dim;
 use crate::components::{PathFlags, Paths, PathsChunk, Rays, RaysChunk, Surfaces, SurfacesView};
 use crate::geometry::{SurfacePoint, offset_ray_origin};
-use crate::lanes::{F, LaneKernel, LaneWidth, M, Real, V3, lanes_of, run_lanes};
+use crate::lanes::{F, LaneKernel, LaneWidth, M, Mask, Real, V3, lanes_of, run_lanes};
 use crate::math::Frame;
 use crate::pipeline::Flow;
 use crate::sampling::{SampleKey, Sampler};
@@ -239,7 +239,7 @@ fn scatter_chunk<B: Bsdf, const N: usize>(
             let throughput = V3::load(&p.throughput[i..]) * next.weight;
             for l in 0..N {
                 let j = i + l;
-                if next.scattered.0[l] {
+                if next.scattered.lane(l) {
                     p.throughput[j] = throughput.lane(l);
                     p.bsdf_pdf[j] = next.pdf.0[l];
                     p.flags[j].set(PathFlags::SPECULAR, false);

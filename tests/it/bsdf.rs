@@ -2174,7 +2174,7 @@ fn assert_lane_form_is_one_path<B: Bsdf + std::fmt::Debug, const N: usize>(
     materials: &[B],
     stream: u64,
 ) {
-    use stagelight::lanes::{F, V3};
+    use stagelight::lanes::{F, Mask, V3};
     let lanes: [B; N] = std::array::from_fn(|l| materials[l % materials.len()]);
     let direction = |i: u64| {
         let u = u2(91, stream, i);
@@ -2204,13 +2204,13 @@ fn assert_lane_form_is_one_path<B: Bsdf + std::fmt::Debug, const N: usize>(
             let what = format!("{:?} lane {l} of {N}, wo {} u {}", lanes[l], wo[l], u[l]);
             match lanes[l].sample(wo[l], u[l], TransportMode::Radiance) {
                 Some(s) => {
-                    assert!(sampled.valid.0[l], "{what}: lanes drew no sample");
+                    assert!(sampled.valid.lane(l), "{what}: lanes drew no sample");
                     assert_eq!(bits3(sampled.wi.lane(l)), bits3(s.wi), "{what}");
                     assert_eq!(bits3(sampled.value.lane(l)), bits3(s.value), "{what}");
                     assert_eq!(bits(sampled.pdf.0[l]), bits(s.pdf), "{what}");
                     assert!(!s.delta, "{what}");
                 }
-                None => assert!(!sampled.valid.0[l], "{what}: lanes drew a sample"),
+                None => assert!(!sampled.valid.lane(l), "{what}: lanes drew a sample"),
             }
             let (f1, pdf1) = lanes[l].eval_pdf(wo[l], wi[l], TransportMode::Radiance);
             assert_eq!(bits3(f.lane(l)), bits3(f1), "{what} wi {}", wi[l]);
