@@ -236,20 +236,24 @@ fn scatter_chunk<B: Bsdf, const N: usize>(
             let keys: &[SampleKey; N] = p.key[i..i + N].try_into().unwrap();
             let depths: &[u32; N] = p.depth[i..i + N].try_into().unwrap();
             let next = scatter_lanes(sampler, &surf, &materials, keys, depths);
+            // Every lane is written, without a branch per lane: a path that ends here is
+            // only ever read again for its radiance (Russian roulette empties its ray and
+            // `sort_by_material` retires it), so what lands in its other columns is unused.
             let throughput = V3::load(&p.throughput[i..]) * next.weight;
+            throughput.store(&mut p.throughput[i..]);
+            p.bsdf_pdf[i..i + N].copy_from_slice(&next.pdf.0);
+            next.origin.store(&mut r.origin[i..]);
+            next.dir.store(&mut r.dir[i..]);
             for l in 0..N {
                 let j = i + l;
-                if next.scattered.lane(l) {
-                    p.throughput[j] = throughput.lane(l);
-                    p.bsdf_pdf[j] = next.pdf.0[l];
-                    p.flags[j].set(PathFlags::SPECULAR, false);
-                    p.depth[j] += 1;
-                    r.origin[j] = next.origin.lane(l);
-                    r.dir[j] = next.dir.lane(l);
-                    scattered += 1;
+                let on = next.scattered.lane(l);
+                p.depth[j] += 1;
+                p.flags[j].0 = if on {
+                    p.flags[j].0 & !PathFlags::SPECULAR
                 } else {
-                    p.flags[j].set(PathFlags::DEAD, true);
-                }
+                    p.flags[j].0 | PathFlags::DEAD
+                };
+                scattered += usize::from(on);
             }
             first += N;
         }
