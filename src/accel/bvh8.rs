@@ -25,9 +25,11 @@ use glam::{Vec3, Vec3A};
 /// packet in the low bits.
 pub(super) const LEAF: u32 = 1 << 31;
 /// The lane mask of a leaf reference.
-const LANE_MASK: u32 = (1 << LANES) - 1;
+pub(super) const LANE_MASK: u32 = (1 << LANES) - 1;
+/// The reference of the root node.
+pub(super) const ROOT: u32 = 0;
 /// The box test's padding, relative to the magnitudes involved (see `BoxRay`).
-const PADDING: f32 = 1.0 / (1u32 << 18) as f32;
+pub(super) const PADDING: f32 = 1.0 / (1u32 << 18) as f32;
 /// The most triangles a leaf holds: one packet.
 pub(super) const LEAF_MAX: u32 = LANES as u32;
 /// The most packets a tree may hold (the bits of a leaf reference).
@@ -39,7 +41,7 @@ pub(super) const MAX_PACKETS: usize = 1 << (31 - LANES);
 pub(super) struct Node {
     /// `planes[axis][0]` are the children's minima along `axis`, `planes[axis][1]` their
     /// maxima. Empty slots hold an inverted box (+inf, -inf), which no ray enters.
-    planes: [[[f32; 8]; 2]; 3],
+    pub(super) planes: [[[f32; 8]; 2]; 3],
     pub(super) child: [u32; 8],
 }
 
@@ -100,7 +102,7 @@ impl Node {
 const PREFETCH_FROM_BYTES: usize = 4 << 20;
 
 pub(crate) struct Bvh8 {
-    nodes: Vec<Node>,
+    pub(super) nodes: Vec<Node>,
     /// Whether traversal prefetches the children it will visit later (big trees only).
     prefetch: bool,
 }
@@ -153,20 +155,40 @@ impl Bvh8 {
         &self,
         tris: &LeafTriangles,
         ray: &TraversalRay,
+        t_max: f32,
+    ) -> Option<TriangleHit> {
+        self.traverse_from::<ANY, AVX2>(tris, ray, ROOT, t_max, None)
+    }
+
+    /// `traverse` of the subtree `start` (a node or leaf reference), for a closest hit with
+    /// `hit` the best found so far elsewhere (at `t_max` if any): the closer of the two.
+    #[inline(always)]
+    pub(crate) fn traverse_from<const ANY: bool, const AVX2: bool>(
+        &self,
+        tris: &LeafTriangles,
+        ray: &TraversalRay,
+        start: u32,
         mut t_max: f32,
+        mut hit: Option<TriangleHit>,
     ) -> Option<TriangleHit> {
         let box_ray = BoxRay::new(ray);
-        let mut hit = None;
+        // The slot of the best hit: `closer` breaks ties in t by it. Before any hit (and for
+        // any hit) no tie is taken: a hit at exactly t_max is beyond the range.
+        let mut best = if ANY { 0 } else { hit.map_or(0, |h| h.slot) };
         // Pending children: the entry distance (non-negative, so its bits order like the
         // value) in the high half, the child reference in the low half.
         let mut stack = TraversalStack::<u64, 24>::new();
-        let mut current = 0u32;
+        let mut current = start;
         loop {
             if current & LEAF != 0 {
                 let packet = ((current & !LEAF) >> LANES) as usize;
-                if let Some((lane, (t, b1, b2))) =
-                    ray.intersect4::<ANY>(&tris.packets[packet], current & LANE_MASK, &mut t_max)
-                {
+                if let Some((lane, (t, b1, b2))) = ray.intersect4::<ANY>(
+                    &tris.packets[packet],
+                    current & LANE_MASK,
+                    (packet * LANES) as u32,
+                    &mut t_max,
+                    &mut best,
+                ) {
                     hit = Some(TriangleHit {
                         t,
                         slot: (packet * LANES + lane as usize) as u32,
@@ -217,7 +239,9 @@ impl Bvh8 {
                         if let Some((lane, (t, b1, b2))) = ray.intersect4::<ANY>(
                             &tris.packets[packet],
                             refs[c] & LANE_MASK,
+                            (packet * LANES) as u32,
                             &mut t_max,
+                            &mut best,
                         ) {
                             return Some(TriangleHit {
                                 t,
@@ -321,19 +345,19 @@ impl Bvh8 {
 /// triangle it hits. Padding by each box's own magnitudes, not the scene's largest, keeps one
 /// huge triangle (a floor 2e10 wide) from enlarging every box in the scene: with the scene's,
 /// a 4 m room's boxes grew by 38 km and every ray entered every box.
-struct BoxRay {
+pub(super) struct BoxRay {
     /// Per axis: the index (0: minima, 1: maxima) of the planes the ray enters by.
-    near: [usize; 3],
+    pub(super) near: [usize; 3],
     /// The origin moved back along the ray by `pad` (for the entry planes) and forwards (for
     /// the exit planes).
-    o_near: [f32; 3],
-    o_far: [f32; 3],
-    inv: [f32; 3],
+    pub(super) o_near: [f32; 3],
+    pub(super) o_far: [f32; 3],
+    pub(super) inv: [f32; 3],
 }
 
 impl BoxRay {
     #[inline(always)]
-    fn new(ray: &TraversalRay) -> BoxRay {
+    pub(super) fn new(ray: &TraversalRay) -> BoxRay {
         let o = ray.origin;
         let pad = o.abs().max_element() * PADDING;
         let neg = ray.neg;

@@ -23,13 +23,13 @@ pub struct TraversalRay {
     pub neg: u32,
     /// The axes that become x, y and z: z is the axis along which the direction is largest in
     /// magnitude, and the vertices are rotated (a cyclic permutation, so handedness is kept).
-    k: [usize; 3],
+    pub(super) k: [usize; 3],
     /// Shear constants: `-d[kx] / d[kz]`, `-d[ky] / d[kz]`, `1 / d[kz]`.
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    pub(super) sx: f32,
+    pub(super) sy: f32,
+    pub(super) sz: f32,
     /// The origin's coordinates along the axes `k`, each in all three lanes.
-    o_k: [Vec3A; 3],
+    pub(super) o_k: [Vec3A; 3],
 }
 
 /// A triangle laid out for the test: for each axis, the coordinates of p0, p1 and p2.
@@ -73,7 +73,8 @@ impl TraversalRay {
         }
     }
 
-    /// Intersects the triangle `v`: the hit's `(t, b1, b2)` when it lies in `(0, t_max)`.
+    /// Intersects the triangle `v`: the hit's `(t, b1, b2)` when it lies in `(0, t_max]` (a
+    /// hit at exactly `t_max` is returned so that the caller can break the tie, see `closer`).
     #[inline(always)]
     pub fn intersect(&self, cols: &TriangleColumns, t_max: f32) -> Option<(f32, f32, f32)> {
         let [kx, ky, kz] = self.k;
@@ -155,10 +156,10 @@ fn finish(
 ) -> Option<(f32, f32, f32)> {
     {
         if det < 0.0 {
-            if t_scaled >= 0.0 || t_scaled < t_max * det {
+            if t_scaled >= 0.0 || t_scaled < t_max * det * RANGE_MARGIN {
                 return None;
             }
-        } else if t_scaled <= 0.0 || t_scaled > t_max * det {
+        } else if t_scaled <= 0.0 || t_scaled > t_max * det * RANGE_MARGIN {
             return None;
         }
 
@@ -177,8 +178,8 @@ fn finish(
         let max_e = e0.abs().max(e1.abs()).max(e2.abs());
         let delta_t =
             3.0 * (gamma(3) * max_e * max_z + delta_e * max_z + delta_z * max_e) * inv_det.abs();
-        // Also rejects a t that rounded up to t_max, and any NaN.
-        if t > delta_t && t < t_max {
+        // Keeps a t equal to t_max (the caller breaks that tie), rejects any NaN.
+        if t > delta_t && t <= t_max {
             Some((t, e1 * inv_det, e2 * inv_det))
         } else {
             None
@@ -186,15 +187,22 @@ fn finish(
     }
 }
 
-/// The range test of `finish`: whether the scaled distance lies in (0, t_max) (det non-zero).
-#[cfg(target_arch = "x86_64")]
+/// How much the range test of the scaled distance widens `t_max |det|` before it rejects a
+/// hit: enough that no hit whose final `t = t_scaled * (1 / det)` (two roundings) is at most
+/// `t_max` is ever rejected by it (`t_max |det|` rounds once more; 2^-20 is over four times
+/// those three roundings of 2^-24). So whether a triangle is hit, and at which t, does not
+/// depend on the `t_max` it was tested against, only whether that t is taken does: the
+/// closest hit is the same whichever order the triangles are tested in.
+pub(crate) const RANGE_MARGIN: f32 = 1.0 + 1.0 / (1u32 << 20) as f32;
+
+/// Whether a hit at `t` on the triangle in leaf-order slot `slot` is closer than the best so
+/// far (`t_max`, `best`): a nearer t, or the same t on a lower slot. The tie-break by slot
+/// makes the closest hit independent of the order in which traversal meets the triangles, so
+/// single rays and packets (which visit in different orders) find the same hit. Before the
+/// first hit, and in any-hit searches, `best` is 0, so that only t below `t_max` counts.
 #[inline(always)]
-fn in_range_scalar(det: f32, t_scaled: f32, t_max: f32) -> bool {
-    if det < 0.0 {
-        !(t_scaled >= 0.0 || t_scaled < t_max * det)
-    } else {
-        !(t_scaled <= 0.0 || t_scaled > t_max * det)
-    }
+pub(crate) fn closer(t: f32, slot: u32, t_max: f32, best: u32) -> bool {
+    t < t_max || (t == t_max && slot < best)
 }
 
 /// Triangles per packet.
@@ -244,9 +252,10 @@ impl TrianglePacket {
 }
 
 impl TraversalRay {
-    /// Tests the triangles of `packet` in the lanes set in `lanes`, in lane order, exactly as `intersect` would one after another: each hit
-    /// narrows `t_max`; with `ANY`, the first hit ends the test. Returns the lane and the hit
-    /// of the last hit found (the closest one), if any.
+    /// Tests the triangles of `packet` (whose lane 0 is leaf-order slot `base`) in the lanes
+    /// set in `valid`, exactly as `intersect` would one after another: each hit `closer` than
+    /// (`t_max`, `best`) becomes the best; with `ANY`, the first hit ends the test. Returns the
+    /// lane and the hit of the last hit taken (the closest one), if any.
     ///
     /// SSE2 (always present on x86_64): the sheared coordinates, edge functions and scaled
     /// distances of the four triangles, lane by lane the same operations in the same order as
@@ -259,7 +268,9 @@ impl TraversalRay {
         &self,
         packet: &TrianglePacket,
         valid: u32,
+        base: u32,
         t_max: &mut f32,
+        best: &mut u32,
     ) -> Option<(u32, (f32, f32, f32))> {
         use std::arch::x86_64::*;
         let [kx, ky, kz] = self.k;
@@ -315,10 +326,14 @@ impl TraversalRay {
                     _mm_mul_ps(e2, cz),
                 );
                 // The range test with the sign of det moved onto both sides (exact): lanes
-                // with 0 < t_scaled <= t_max |det|; also fails for det == 0 and for NaN.
+                // with 0 < t_scaled <= t_max |det| (widened by `RANGE_MARGIN`); also fails for
+                // det == 0 and for NaN.
                 let sign = _mm_and_ps(det, _mm_set1_ps(-0.0));
                 let ts = _mm_xor_ps(t_scaled, sign);
-                let limit = _mm_xor_ps(_mm_mul_ps(_mm_set1_ps(*t_max), det), sign);
+                let limit = _mm_mul_ps(
+                    _mm_xor_ps(_mm_mul_ps(_mm_set1_ps(*t_max), det), sign),
+                    _mm_set1_ps(RANGE_MARGIN),
+                );
                 let in_range = _mm_and_ps(_mm_cmpgt_ps(ts, zero), _mm_cmple_ps(ts, limit));
                 lanes &= _mm_movemask_ps(in_range) as u32;
                 if lanes | exact == 0 {
@@ -326,8 +341,8 @@ impl TraversalRay {
                 }
                 // `finish` on all four lanes at once, operation for operation (so bit for bit:
                 // the maxima see no NaN in a lane that passed the range test, since a NaN
-                // coordinate makes det or t_scaled NaN). Only the lanes that pass are then
-                // taken in order, with the range test redone against the narrowed t_max.
+                // coordinate makes det or t_scaled NaN). The lanes that pass are then taken in
+                // order where `closer` than the best so far.
                 let abs_mask = _mm_set1_ps(f32::from_bits(0x7fff_ffff));
                 let abs = |v: __m128| _mm_and_ps(v, abs_mask);
                 let max3 = |a: __m128, b: __m128, c: __m128| {
@@ -368,7 +383,7 @@ impl TraversalRay {
                 );
                 let ok = _mm_and_ps(
                     _mm_cmpgt_ps(t, delta_t),
-                    _mm_cmplt_ps(t, _mm_set1_ps(*t_max)),
+                    _mm_cmple_ps(t, _mm_set1_ps(*t_max)),
                 );
                 lanes &= _mm_movemask_ps(ok) as u32;
                 if lanes | exact == 0 {
@@ -380,7 +395,6 @@ impl TraversalRay {
                     a
                 };
                 let (t, inv_det) = (store(t), store(inv_det));
-                let (det, t_scaled) = (store(det), store(t_scaled));
                 let (e1, e2) = (store(e1), store(e2));
                 let mut hit = None;
                 let mut left = lanes | exact;
@@ -389,16 +403,13 @@ impl TraversalRay {
                     left &= left - 1;
                     let h = if exact & (1 << i) != 0 {
                         self.intersect(&packet.columns(i), *t_max)
-                    } else if hit.is_none()
-                        || (in_range_scalar(det[i], t_scaled[i], *t_max) && t[i] < *t_max)
-                    {
-                        // Until a hit narrows t_max, the tests above were against this t_max.
-                        Some((t[i], e1[i] * inv_det[i], e2[i] * inv_det[i]))
                     } else {
-                        None
+                        Some((t[i], e1[i] * inv_det[i], e2[i] * inv_det[i]))
                     };
-                    if let Some(h) = h {
+                    let slot = base + i as u32;
+                    if let Some(h) = h.filter(|h| closer(h.0, slot, *t_max, *best)) {
                         *t_max = h.0;
+                        *best = slot;
                         hit = Some((i as u32, h));
                         if ANY {
                             break;
@@ -407,7 +418,7 @@ impl TraversalRay {
                 }
                 hit
             } else if exact != 0 {
-                self.intersect_lanes::<ANY>(packet, exact, t_max)
+                self.intersect_lanes::<ANY>(packet, exact, base, t_max, best)
             } else {
                 None
             }
@@ -421,9 +432,11 @@ impl TraversalRay {
         &self,
         packet: &TrianglePacket,
         lanes: u32,
+        base: u32,
         t_max: &mut f32,
+        best: &mut u32,
     ) -> Option<(u32, (f32, f32, f32))> {
-        self.intersect_lanes::<ANY>(packet, lanes, t_max)
+        self.intersect_lanes::<ANY>(packet, lanes, base, t_max, best)
     }
 
     /// The scalar test of the triangles of `packet` in the lanes set in `lanes`, in order.
@@ -432,14 +445,21 @@ impl TraversalRay {
         &self,
         packet: &TrianglePacket,
         mut lanes: u32,
+        base: u32,
         t_max: &mut f32,
+        best: &mut u32,
     ) -> Option<(u32, (f32, f32, f32))> {
         let mut hit = None;
         while lanes != 0 {
             let i = lanes.trailing_zeros();
             lanes &= lanes - 1;
-            if let Some(h) = self.intersect(&packet.columns(i as usize), *t_max) {
+            let slot = base + i;
+            if let Some(h) = self
+                .intersect(&packet.columns(i as usize), *t_max)
+                .filter(|h| closer(h.0, slot, *t_max, *best))
+            {
                 *t_max = h.0;
+                *best = slot;
                 hit = Some((i, h));
                 if ANY {
                     break;

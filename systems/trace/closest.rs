@@ -1,6 +1,8 @@
 //! Finds the closest hit of every live ray.
 
 use crate::accel::{Accel, Hit};
+#[cfg(target_arch = "x86_64")]
+use crate::accel::{PACKET_WIDTH, RayColumns};
 use crate::components::Hits;
 use crate::components::{HitsChunk, MISS, Rays};
 use crate::pipeline::Flow;
@@ -48,15 +50,45 @@ fn trace_chunk_avx2(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) 
     })
 }
 
-/// `trace_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`), the traversal inlined.
+/// The closest hits of one chunk's live rays as packets of sixteen in slot order (see
+/// `Accel::closest_hits16`: the same hits as ray by ray), compiled for AVX-512 (see
+/// `crate::cpu::has_avx512`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
 fn trace_chunk_avx512(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) {
-    trace_chunk(rays, h, |o, d| {
-        // SAFETY: this function is compiled for AVX2 and FMA (and AVX-512) and only called
-        // where the CPU has them.
-        unsafe { accel.trace_in_avx2::<false>(o, d, f32::INFINITY) }
-    })
+    let (mut traced, mut found) = (0, 0);
+    let view = rays.view(h.start..h.start + h.len());
+    let mut packet = RayColumns::new();
+    let mut slots = [0usize; PACKET_WIDTH];
+    let mut hits = [None; PACKET_WIDTH];
+    for i in 0..h.len() {
+        if view.dir[i] == Vec3::ZERO {
+            h.triangle[i] = MISS;
+        } else {
+            slots[packet.len] = i;
+            packet.push(view.origin[i], view.dir[i], f32::INFINITY);
+        }
+        if packet.len == PACKET_WIDTH || (i + 1 == h.len() && packet.len > 0) {
+            // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called
+            // where the CPU has them.
+            unsafe { accel.closest_hits16(&packet, &mut hits) };
+            for (&slot, hit) in slots[..packet.len].iter().zip(&hits) {
+                match hit {
+                    Some(hit) => {
+                        h.t[slot] = hit.t;
+                        h.triangle[slot] = hit.triangle;
+                        h.b1[slot] = hit.b1;
+                        h.b2[slot] = hit.b2;
+                        found += 1;
+                    }
+                    None => h.triangle[slot] = MISS,
+                }
+            }
+            traced += packet.len;
+            packet.len = 0;
+        }
+    }
+    (traced, found)
 }
 
 /// Closest hits of the rays of one chunk with `closest_hit`; returns (rays traced, hits).

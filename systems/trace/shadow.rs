@@ -1,6 +1,8 @@
 //! Tests every shadow ray for occlusion (any hit before its end).
 
 use crate::accel::{Accel, NO_HINT};
+#[cfg(target_arch = "x86_64")]
+use crate::accel::{PACKET_WIDTH, RayColumns};
 use crate::components::ShadowRays;
 use crate::components::ShadowRaysChunk;
 use crate::pipeline::Flow;
@@ -47,15 +49,37 @@ fn trace_chunk_avx2(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
     })
 }
 
-/// `trace_chunk` compiled for AVX-512 (see `crate::cpu::has_avx512`), the traversal inlined.
+/// Occlusion of one chunk's shadow rays as packets of sixteen in slot order (see
+/// `Accel::occluded16`: the same answers as ray by ray), compiled for AVX-512 (see
+/// `crate::cpu::has_avx512`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
 fn trace_chunk_avx512(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
-    trace_chunk(c, |o, d, t_max, hint| {
-        // SAFETY: this function is compiled for AVX2 and FMA (and AVX-512) and only called
-        // where the CPU has them.
-        unsafe { accel.any_hit_hinted_in_avx2(o, d, t_max, hint) }
-    })
+    let (mut taken, mut clear) = (0, 0);
+    let mut packet = RayColumns::new();
+    let mut slots = [0usize; PACKET_WIDTH];
+    let mut hint = NO_HINT;
+    for i in 0..c.len() {
+        if c.t_max[i] <= 0.0 {
+            c.unoccluded[i] = false;
+        } else {
+            slots[packet.len] = i;
+            packet.push(c.origin[i], c.dir[i], c.t_max[i]);
+        }
+        if packet.len == PACKET_WIDTH || (i + 1 == c.len() && packet.len > 0) {
+            // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called
+            // where the CPU has them.
+            let occluded = unsafe { accel.occluded16(&packet, &mut hint) };
+            for (k, &slot) in slots[..packet.len].iter().enumerate() {
+                let open = occluded & (1 << k) == 0;
+                c.unoccluded[slot] = open;
+                clear += usize::from(open);
+            }
+            taken += packet.len;
+            packet.len = 0;
+        }
+    }
+    (taken, clear)
 }
 
 /// Occlusion of the shadow rays of one chunk with `any_hit`, each ray first trying the
