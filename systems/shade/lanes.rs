@@ -163,29 +163,27 @@ impl<const N: usize> SurfaceLanes<N> {
         dirs: &[Vec3],
         i: usize,
     ) -> Option<(SurfaceLanes<N>, [B; N])> {
-        // The material slot `k` sees: its looked-up one where the scene has textures, else
-        // the scene's (as `Surface::at`). Inlined: out of line, its call and the copy of the
-        // material it returns took 2% of a Cornell box render.
-        #[inline(always)]
-        fn seen_at(
-            data: &crate::scene::SceneData,
-            surfaces: &crate::components::SurfacesView,
-            looked_up: &[crate::bsdf::Material],
-            triangles: &[u32],
-            dirs: &[Vec3],
-            k: usize,
-        ) -> crate::bsdf::Material {
-            match looked_up.get(k) {
-                Some(&material) => material,
-                None => data
-                    .scene
-                    .uniform_material_seen(triangles[k], -dirs[k], surfaces.ng[k]),
-            }
-        }
-        let first = *B::of(&seen_at(data, surfaces, looked_up, triangles, dirs, i))?;
+        use super::surface::material_seen;
+        let (ng, dir) = (&surfaces.ng, dirs);
+        let first = *B::of(&material_seen(
+            data,
+            looked_up,
+            i,
+            triangles[i],
+            dir[i],
+            ng[i],
+        ))?;
         let mut materials = [first; N];
         for (l, m) in materials.iter_mut().enumerate().skip(1) {
-            *m = *B::of(&seen_at(data, surfaces, looked_up, triangles, dirs, i + l))?;
+            let k = i + l;
+            *m = *B::of(&material_seen(
+                data,
+                looked_up,
+                k,
+                triangles[k],
+                dir[k],
+                ng[k],
+            ))?;
         }
         let ng = V3::load(&surfaces.ng[i..]);
         let ns = V3::load(&surfaces.ns[i..]);

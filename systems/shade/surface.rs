@@ -30,6 +30,25 @@ pub struct Surface {
     pub material: Material,
 }
 
+/// The material that slot `i` of a chunk sees on `triangle` along `dir` (geometric normal
+/// `ng`): `looked_up[i]` where the scene has textures (`look_up_textures` wrote the chunk's
+/// column), else the scene's for that side. Inlined: out of line, its call and the copy of the
+/// material it returns took 2% of a Cornell box render.
+#[inline(always)]
+pub(super) fn material_seen(
+    data: &SceneData,
+    looked_up: &[Material],
+    i: usize,
+    triangle: u32,
+    dir: Vec3,
+    ng: Vec3,
+) -> Material {
+    match looked_up.get(i) {
+        Some(&material) => material,
+        None => data.scene.uniform_material_seen(triangle, -dir, ng),
+    }
+}
+
 impl Surface {
     /// The shading point of item `i` of a chunk's view of the surfaces (its hit's triangle
     /// given), seen along `dir`; its material is `looked_up[i]` where the scene has textures
@@ -49,10 +68,7 @@ impl Surface {
             ng: surfaces.ng[i],
             ns: surfaces.ns[i],
         };
-        let material = match looked_up.get(i) {
-            Some(&material) => material,
-            None => data.scene.uniform_material_seen(triangle, -dir, point.ng),
-        };
+        let material = material_seen(data, looked_up, i, triangle, dir, point.ng);
         Surface::with_material(data, triangle, &point, dir, material)
     }
 
@@ -248,11 +264,9 @@ fn scatter_chunk<B: Bsdf, const N: usize>(
                 let j = i + l;
                 let on = next.scattered.lane(l);
                 p.depth[j] += 1;
-                p.flags[j].0 = if on {
-                    p.flags[j].0 & !PathFlags::SPECULAR
-                } else {
-                    p.flags[j].0 | PathFlags::DEAD
-                };
+                // Also clears SPECULAR on an ended path, which is harmless (see above).
+                p.flags[j].set(PathFlags::SPECULAR, false);
+                p.flags[j].set(PathFlags::DEAD, !on);
                 scattered += usize::from(on);
             }
             first += N;
