@@ -163,7 +163,6 @@ impl<const N: usize> SurfaceLanes<N> {
         dirs: &[Vec3],
         i: usize,
     ) -> Option<(SurfaceLanes<N>, [B; N])> {
-        use super::surface::material_seen;
         let (ng, dir) = (&surfaces.ng, dirs);
         let first = *B::of(&material_seen(
             data,
@@ -207,5 +206,24 @@ impl<const N: usize> SurfaceLanes<N> {
             },
             materials,
         ))
+    }
+}
+
+/// The material that slot `i` of a chunk sees on `triangle` along `dir` (geometric normal
+/// `ng`): `looked_up[i]` where the scene has textures (`look_up_textures` wrote the chunk's
+/// column), else the scene's for that side. Inlined: out of line, its call and the copy of the
+/// material it returns took 2% of a Cornell box render.
+#[inline(always)]
+pub(super) fn material_seen(
+    data: &crate::scene::SceneData,
+    looked_up: &[crate::bsdf::Material],
+    i: usize,
+    triangle: u32,
+    dir: Vec3,
+    ng: Vec3,
+) -> crate::bsdf::Material {
+    match looked_up.get(i) {
+        Some(&material) => material,
+        None => data.scene.uniform_material_seen(triangle, -dir, ng),
     }
 }

@@ -1,7 +1,7 @@
 //! The shading point of a hit, shared by the systems that shade, sample lights or add
 //! emission: position with its error bound, normals, the shading frame and wo.
 
-use super::lanes::{SurfaceLanes, draw2, offset_origin};
+use super::lanes::{SurfaceLanes, draw2, material_seen, offset_origin};
 use crate::bsdf::{Bsdf, BsdfSample, KindVisitor, Material, TransportMode, leaving_direction};
 use crate::components::path_tracing::DIM_BSDF;
 use crate::components::path_tracing::bounce_dim;
@@ -28,25 +28,6 @@ pub struct Surface {
     pub wo: Vec3,
     pub wo_local: Vec3,
     pub material: Material,
-}
-
-/// The material that slot `i` of a chunk sees on `triangle` along `dir` (geometric normal
-/// `ng`): `looked_up[i]` where the scene has textures (`look_up_textures` wrote the chunk's
-/// column), else the scene's for that side. Inlined: out of line, its call and the copy of the
-/// material it returns took 2% of a Cornell box render.
-#[inline(always)]
-pub(super) fn material_seen(
-    data: &SceneData,
-    looked_up: &[Material],
-    i: usize,
-    triangle: u32,
-    dir: Vec3,
-    ng: Vec3,
-) -> Material {
-    match looked_up.get(i) {
-        Some(&material) => material,
-        None => data.scene.uniform_material_seen(triangle, -dir, ng),
-    }
 }
 
 impl Surface {
