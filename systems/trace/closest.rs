@@ -55,7 +55,7 @@ fn trace_chunk_avx2(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) 
 /// `crate::cpu::has_avx512`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
-fn trace_chunk_avx512(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) {
+fn trace_chunk_avx512(accel: &Accel, rays: &Rays, mut h: HitsChunk) -> (usize, usize) {
     let (mut traced, mut found) = (0, 0);
     let view = rays.view(h.start..h.start + h.len());
     let mut packet = RayColumns::new();
@@ -72,17 +72,8 @@ fn trace_chunk_avx512(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize
             // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called
             // where the CPU has them.
             unsafe { accel.closest_hits16(&packet, &mut hits) };
-            for (&slot, hit) in slots[..packet.len].iter().zip(&hits) {
-                match hit {
-                    Some(hit) => {
-                        h.t[slot] = hit.t;
-                        h.triangle[slot] = hit.triangle;
-                        h.b1[slot] = hit.b1;
-                        h.b2[slot] = hit.b2;
-                        found += 1;
-                    }
-                    None => h.triangle[slot] = MISS,
-                }
+            for (&slot, &hit) in slots[..packet.len].iter().zip(&hits) {
+                found += usize::from(write_hit(&mut h, slot, hit));
             }
             traced += packet.len;
             packet.len = 0;
@@ -95,7 +86,7 @@ fn trace_chunk_avx512(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize
 #[inline(always)]
 fn trace_chunk(
     rays: &Rays,
-    h: HitsChunk,
+    mut h: HitsChunk,
     closest_hit: impl Fn(Vec3, Vec3) -> Option<Hit>,
 ) -> (usize, usize) {
     let (mut traced, mut found) = (0, 0);
@@ -106,16 +97,29 @@ fn trace_chunk(
             continue;
         }
         traced += 1;
-        match closest_hit(rays.origin[i], rays.dir[i]) {
-            Some(hit) => {
-                h.t[i] = hit.t;
-                h.triangle[i] = hit.triangle;
-                h.b1[i] = hit.b1;
-                h.b2[i] = hit.b2;
-                found += 1;
-            }
-            None => h.triangle[i] = MISS,
-        }
+        found += usize::from(write_hit(
+            &mut h,
+            i,
+            closest_hit(rays.origin[i], rays.dir[i]),
+        ));
     }
     (traced, found)
+}
+
+/// Writes `hit` (or a miss) into slot `i` of the chunk's hit columns; whether it hit.
+#[inline(always)]
+fn write_hit(h: &mut HitsChunk, i: usize, hit: Option<Hit>) -> bool {
+    match hit {
+        Some(hit) => {
+            h.t[i] = hit.t;
+            h.triangle[i] = hit.triangle;
+            h.b1[i] = hit.b1;
+            h.b2[i] = hit.b2;
+            true
+        }
+        None => {
+            h.triangle[i] = MISS;
+            false
+        }
+    }
 }
