@@ -7,8 +7,9 @@
 //! `bvh8`). Traversal is our own, nearest child first, with a conservative box test (no box that
 //! holds a hit triangle is ever culled) and the watertight triangle test of Woop, Benthin and
 //! Wald, four triangles (one packet) at a time, so that rays never slip through shared edges
-//! or vertices. Where the CPU has AVX-512, the trace systems send rays sixteen at a time
-//! through the same tree as packets (see `packet`), which find the same hits as single rays:
+//! or vertices. The trace systems send rays through the same tree as packets (see `packet`),
+//! sixteen at a time where the CPU has AVX-512 and eight where it has AVX2, which find the
+//! same hits as single rays:
 //! ties in t go to the lower leaf-order slot (`triangle::closer`), whatever the order of visits.
 //!
 //! Measured against a binary BVH (obvhs' BVH2, SAH-collapsed leaves of up to 8 triangles, with
@@ -32,7 +33,8 @@ use obvhs::aabb::Aabb;
 use rayon::prelude::*;
 use triangle::{LANES, TraversalRay, columns};
 
-/// Rays in a packet of `Accel::closest_hits16` and `Accel::occluded16`.
+/// The most rays in a packet: `Accel::closest_hits16`'s and `Accel::occluded16`'s (the
+/// eight-ray packets use the first half).
 #[cfg(target_arch = "x86_64")]
 pub const PACKET_WIDTH: usize = packet::WIDTH;
 #[cfg(target_arch = "x86_64")]
@@ -435,22 +437,24 @@ impl Accel {
         rays: &RayColumns,
         hits: &mut [Option<Hit>; PACKET_WIDTH],
     ) {
-        let Some(tree) = self.tree.as_ref() else {
-            *hits = [None; PACKET_WIDTH];
-            return;
-        };
-        let mut best = packet::Best::none(rays);
-        // SAFETY: the caller guarantees the CPU features.
-        let traced = unsafe { tree.closest16(&self.tris, rays, &mut best) };
-        for (i, h) in hits.iter_mut().enumerate() {
-            let slot = best.slot[i] as usize;
-            *h = (traced & (1 << i) != 0 && best.slot[i] != u32::MAX).then(|| Hit {
-                t: best.t[i],
-                triangle: self.tris.packets[slot / LANES].ids[slot % LANES],
-                b1: best.b1[i],
-                b2: best.b2[i],
-            });
-        }
+        // SAFETY: the caller guarantees AVX-512's features, and this is compiled for them.
+        unsafe { self.closest_hits_packet::<packet::Avx512>(rays, hits) }
+    }
+
+    /// `closest_hits16` for up to eight rays, with AVX2 and FMA.
+    ///
+    /// # Safety
+    /// The CPU must support AVX2 and FMA.
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub(crate) unsafe fn closest_hits8(
+        &self,
+        rays: &RayColumns,
+        hits: &mut [Option<Hit>; PACKET_WIDTH],
+    ) {
+        // SAFETY: the caller guarantees AVX2 and FMA, and this is compiled for them.
+        unsafe { self.closest_hits_packet::<packet::Avx2>(rays, hits) }
     }
 
     /// Which of up to sixteen shadow rays hit anything with t in (0, t_max), traced together
@@ -462,10 +466,62 @@ impl Accel {
     #[cfg(target_arch = "x86_64")]
     #[inline]
     #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
-    pub(crate) unsafe fn occluded16(&self, rays: &RayColumns, hint: &mut u32) -> u16 {
+    pub(crate) unsafe fn occluded16(&self, rays: &RayColumns, hint: &mut u32) -> u32 {
+        // SAFETY: as for `closest_hits16`.
+        unsafe { self.occluded_packet::<packet::Avx512>(rays, hint) }
+    }
+
+    /// `occluded16` for up to eight rays, with AVX2 and FMA.
+    ///
+    /// # Safety
+    /// As for `closest_hits8`.
+    #[cfg(target_arch = "x86_64")]
+    #[inline]
+    #[target_feature(enable = "avx2,fma")]
+    pub(crate) unsafe fn occluded8(&self, rays: &RayColumns, hint: &mut u32) -> u32 {
+        // SAFETY: as for `closest_hits8`.
+        unsafe { self.occluded_packet::<packet::Avx2>(rays, hint) }
+    }
+
+    /// The closest hits of a packet of `S::WIDTH` rays at most.
+    ///
+    /// # Safety
+    /// The CPU must have `S`'s features, and this be inlined in code compiled for them.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn closest_hits_packet<S: packet::Simd>(
+        &self,
+        rays: &RayColumns,
+        hits: &mut [Option<Hit>; PACKET_WIDTH],
+    ) {
+        let Some(tree) = self.tree.as_ref() else {
+            *hits = [None; PACKET_WIDTH];
+            return;
+        };
+        let mut best = packet::Best::none(rays);
+        // SAFETY: as the caller guarantees.
+        let traced = unsafe { tree.closest_packet::<S>(&self.tris, rays, &mut best) };
+        for (i, h) in hits.iter_mut().enumerate() {
+            let slot = best.slot[i] as usize;
+            *h = (traced & (1 << i) != 0 && best.slot[i] != u32::MAX).then(|| Hit {
+                t: best.t[i],
+                triangle: self.tris.packets[slot / LANES].ids[slot % LANES],
+                b1: best.b1[i],
+                b2: best.b2[i],
+            });
+        }
+    }
+
+    /// The occlusion of a packet of `S::WIDTH` shadow rays at most.
+    ///
+    /// # Safety
+    /// As for `closest_hits_packet`.
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn occluded_packet<S: packet::Simd>(&self, rays: &RayColumns, hint: &mut u32) -> u32 {
         match self.tree.as_ref() {
-            // SAFETY: the caller guarantees the CPU features.
-            Some(tree) => unsafe { tree.occluded16(&self.tris, rays, hint) },
+            // SAFETY: as the caller guarantees.
+            Some(tree) => unsafe { tree.occluded_packet::<S>(&self.tris, rays, hint) },
             None => 0,
         }
     }
@@ -580,18 +636,34 @@ mod tests {
         }
     }
 
-    /// Packets of sixteen rays find the hits that single rays find, bit for bit (t, triangle,
+    /// Packets of sixteen rays (AVX-512) and of eight (AVX2) find the hits that single rays
+    /// find, bit for bit (t, triangle,
     /// barycentrics), and the same occlusion of shadow rays, on a soup of overlapping triangles and on a grid with a second,
     /// coplanar triangulation over it, aimed at its vertices and edges, where many hits tie in
     /// t and only the tie-break decides. Packets of coherent rays (from near one point, in a
     /// narrow cone), of incoherent ones, and part-filled packets with dead rays among them.
-    /// Passes without testing anything on a CPU without AVX-512 (the CI machine has it).
+    /// Each width is tested where the CPU has its ISA (the CI machines have AVX2, some
+    /// AVX-512 too).
     #[cfg(target_arch = "x86_64")]
     #[test]
     fn packets_find_the_hits_of_single_rays() {
-        if !crate::cpu::has_avx512() {
-            return;
+        let widths: Vec<usize> = [
+            (16, crate::cpu::has_avx512()),
+            (8, crate::cpu::has_avx2_fma()),
+        ]
+        .into_iter()
+        .filter_map(|(width, has)| has.then_some(width))
+        .collect();
+        if widths.is_empty() {
+            eprintln!("packets untested: this CPU has neither AVX2 nor AVX-512");
         }
+        for width in widths {
+            packets_of_width_find_the_hits_of_single_rays(width);
+        }
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    fn packets_of_width_find_the_hits_of_single_rays(width: usize) {
         let r = |i: u64, d: u32| SampleKey::new(13, i, 0).get(d);
         let vertex = |i: u64, d: u32, centre: Vec3| {
             centre + uniform_sphere(Vec2::new(r(i, d), r(i, d + 1))) * (2.0 * r(i, d + 2))
@@ -618,7 +690,7 @@ mod tests {
                 let coherent = p % 2 == 0;
                 let base = Vec3::new(r(p, 20), r(p, 21), r(p, 22)) * 12.0 - 1.0;
                 let aim = uniform_sphere(Vec2::new(r(p, 23), r(p, 24)));
-                let rays: Vec<(Vec3, Vec3)> = (0..PACKET_WIDTH as u64)
+                let rays: Vec<(Vec3, Vec3)> = (0..width as u64)
                     .map(|k| {
                         let i = p * 100 + k;
                         if scene == "grid" {
@@ -651,9 +723,9 @@ mod tests {
                     })
                     .collect();
                 let len = if p % 5 == 4 {
-                    1 + p as usize % PACKET_WIDTH
+                    1 + p as usize % width
                 } else {
-                    PACKET_WIDTH
+                    width
                 };
                 // Every third packet's rays end at a random distance, or at exactly the
                 // distance of their hit without an end (which then does not count).
@@ -671,8 +743,14 @@ mod tests {
                     columns.push(o, d, end);
                 }
                 let mut hits = [None; PACKET_WIDTH];
-                // SAFETY: the CPU has AVX-512 (checked above).
-                unsafe { accel.closest_hits16(&columns, &mut hits) };
+                // SAFETY: the CPU has the ISA of `width` (checked by the caller).
+                unsafe {
+                    if width == 16 {
+                        accel.closest_hits16(&columns, &mut hits)
+                    } else {
+                        accel.closest_hits8(&columns, &mut hits)
+                    }
+                };
                 for (k, (&(o, d), &end)) in rays[..len].iter().zip(&ends).enumerate() {
                     let single = accel.closest_hit(o, d, end);
                     assert_eq!(hits[k], single, "{scene}, packet {p}, ray {k}");
@@ -698,8 +776,14 @@ mod tests {
                     ends.push((o, d, t_max));
                 }
                 // SAFETY: as above.
-                let occluded = unsafe { accel.occluded16(&shadow, &mut hint) };
-                assert_eq!(u32::from(occluded) >> len, 0);
+                let occluded = unsafe {
+                    if width == 16 {
+                        accel.occluded16(&shadow, &mut hint)
+                    } else {
+                        accel.occluded8(&shadow, &mut hint)
+                    }
+                };
+                assert_eq!(occluded >> len, 0);
                 for (k, &(o, d, t_max)) in ends.iter().enumerate() {
                     let blocked = occluded & (1 << k) != 0;
                     assert_eq!(
@@ -711,8 +795,11 @@ mod tests {
                 }
             }
         }
-        assert!(checked > 5000, "{checked} hits");
-        assert!(shadowed > 2000, "{shadowed} shadow rays occluded");
+        assert!(checked > 5000 * width / 16, "{width} wide: {checked} hits");
+        assert!(
+            shadowed > 2000 * width / 16,
+            "{width} wide: {shadowed} shadow rays occluded"
+        );
     }
 
     /// Any-hit with a hint answers as any-hit does, whatever the hint: the packet of the
