@@ -7,9 +7,9 @@
 //! `bvh8`). Traversal is our own, nearest child first, with a conservative box test (no box that
 //! holds a hit triangle is ever culled) and the watertight triangle test of Woop, Benthin and
 //! Wald, four triangles (one packet) at a time, so that rays never slip through shared edges
-//! or vertices. The trace systems send rays through the same tree as packets (see `packet`),
-//! sixteen at a time where the CPU has AVX-512 and eight where it has AVX2, which find the
-//! same hits as single rays:
+//! or vertices. Where the CPU has AVX-512, the trace systems send rays sixteen at a time
+//! through the same tree as packets (see `packet`, which also traces eight-ray AVX2 packets,
+//! so far only in tests), which find the same hits as single rays:
 //! ties in t go to the lower leaf-order slot (`triangle::closer`), whatever the order of visits.
 //!
 //! Measured against a binary BVH (obvhs' BVH2, SAH-collapsed leaves of up to 8 triangles, with
@@ -443,9 +443,11 @@ impl Accel {
 
     /// `closest_hits16` for up to eight rays, with AVX2 and FMA.
     ///
+    /// Only the tests trace eight-ray packets (see `closest::trace_chunk_avx2` for why).
+    ///
     /// # Safety
     /// The CPU must support AVX2 and FMA.
-    #[cfg(target_arch = "x86_64")]
+    #[cfg(all(target_arch = "x86_64", test))]
     #[inline]
     #[target_feature(enable = "avx2,fma")]
     pub(crate) unsafe fn closest_hits8(
@@ -473,9 +475,11 @@ impl Accel {
 
     /// `occluded16` for up to eight rays, with AVX2 and FMA.
     ///
+    /// Only the tests trace eight-ray packets (see `closest::trace_chunk_avx2` for why).
+    ///
     /// # Safety
     /// As for `closest_hits8`.
-    #[cfg(target_arch = "x86_64")]
+    #[cfg(all(target_arch = "x86_64", test))]
     #[inline]
     #[target_feature(enable = "avx2,fma")]
     pub(crate) unsafe fn occluded8(&self, rays: &RayColumns, hint: &mut u32) -> u32 {

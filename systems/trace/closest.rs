@@ -39,52 +39,35 @@ crate::system! {
     }
 }
 
-/// The closest hits of one chunk's live rays as packets of eight in slot order (see
-/// `Accel::closest_hits8`: the same hits as ray by ray) where a packet's rays point into one
-/// octant, else ray by ray, compiled for AVX2 and FMA (see `crate::cpu`). Eight AVX2 lanes
-/// trace coherent rays (camera rays, the shadow rays from their hits) 1.5-2x faster than
-/// single rays, but rays that point every way, as after a diffuse bounce, a fifth slower
+/// `trace_chunk` compiled for AVX2 and FMA, with the traversal inlined (see `crate::cpu`).
+/// Eight-ray AVX2 packets (`Accel::closest_hits8`) are not used: they trace camera rays
+/// 1.5-2.5x faster but later bounces up to a third slower, and PT no faster
 /// (docs/measurements/2026-12-02-avx2-packets.md).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn trace_chunk_avx2(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) {
-    trace_chunk_in_packets(
-        rays,
-        h,
-        8,
-        |packet, hits| {
-            // SAFETY: this function is compiled for AVX2 and FMA and only called where the
-            // CPU has them.
-            unsafe { accel.closest_hits8(packet, hits) }
-        },
-        Some(|o, d| {
-            // SAFETY: as above.
-            unsafe { accel.trace_in_avx2::<false>(o, d, f32::INFINITY) }
-        }),
-    )
+    trace_chunk(rays, h, |o, d| {
+        // SAFETY: this function is compiled for AVX2 and FMA and only called where the CPU
+        // has them.
+        unsafe { accel.trace_in_avx2::<false>(o, d, f32::INFINITY) }
+    })
 }
 
-/// As `trace_chunk_avx2`, sixteen rays a packet, compiled for AVX-512 (see
+/// The closest hits of one chunk's live rays as packets of sixteen in slot order (see
+/// `Accel::closest_hits16`: the same hits as ray by ray), compiled for AVX-512 (see
 /// `crate::cpu::has_avx512`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
 fn trace_chunk_avx512(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) {
-    trace_chunk_in_packets(
-        rays,
-        h,
-        16,
-        |packet, hits| {
-            // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called
-            // where the CPU has them.
-            unsafe { accel.closest_hits16(packet, hits) }
-        },
-        None::<fn(Vec3, Vec3) -> Option<Hit>>,
-    )
+    trace_chunk_in_packets(rays, h, 16, |packet, hits| {
+        // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called where
+        // the CPU has them.
+        unsafe { accel.closest_hits16(packet, hits) }
+    })
 }
 
 /// The closest hits of one chunk's live rays, `width` at a time in slot order by
-/// `closest_hits`, or, with `single`, by `single` ray by ray where a packet's rays point into
-/// more than one octant; returns (rays traced, hits).
+/// `closest_hits`; returns (rays traced, hits).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn trace_chunk_in_packets(
@@ -92,7 +75,6 @@ fn trace_chunk_in_packets(
     mut h: HitsChunk,
     width: usize,
     closest_hits: impl Fn(&RayColumns, &mut [Option<Hit>; PACKET_WIDTH]),
-    single: Option<impl Fn(Vec3, Vec3) -> Option<Hit>>,
 ) -> (usize, usize) {
     let (mut traced, mut found) = (0, 0);
     let view = rays.view(h.start..h.start + h.len());
@@ -107,14 +89,7 @@ fn trace_chunk_in_packets(
             packet.push(view.origin[i], view.dir[i], f32::INFINITY);
         }
         if packet.len == width || (i + 1 == h.len() && packet.len > 0) {
-            match &single {
-                Some(single) if !packet.one_octant() => {
-                    for (hit, &slot) in hits.iter_mut().zip(&slots[..packet.len]) {
-                        *hit = single(view.origin[slot], view.dir[slot]);
-                    }
-                }
-                _ => closest_hits(&packet, &mut hits),
-            }
+            closest_hits(&packet, &mut hits);
             for (&slot, &hit) in slots[..packet.len].iter().zip(&hits) {
                 found += usize::from(write_hit(&mut h, slot, hit));
             }

@@ -38,56 +38,40 @@ crate::system! {
     }
 }
 
-/// Occlusion of one chunk's shadow rays as packets of eight in slot order (see
-/// `Accel::occluded8`: the same answers as ray by ray) where a packet's rays point into one
-/// octant, else ray by ray, compiled for AVX2 and FMA (see `crate::cpu`; why, at
-/// `closest::trace_chunk_avx2`).
+/// `trace_chunk` compiled for AVX2 and FMA, with the traversal inlined (see `crate::cpu`;
+/// why not as eight-ray packets, at `closest::trace_chunk_avx2`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn trace_chunk_avx2(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
-    trace_chunk_in_packets(
-        c,
-        8,
-        |packet, hint| {
-            // SAFETY: this function is compiled for AVX2 and FMA and only called where the
-            // CPU has them.
-            unsafe { accel.occluded8(packet, hint) }
-        },
-        Some(|o, d, t_max, hint: &mut u32| {
-            // SAFETY: as above.
-            unsafe { accel.any_hit_hinted_in_avx2(o, d, t_max, hint) }
-        }),
-    )
+    trace_chunk(c, |o, d, t_max, hint| {
+        // SAFETY: this function is compiled for AVX2 and FMA and only called where the CPU
+        // has them.
+        unsafe { accel.any_hit_hinted_in_avx2(o, d, t_max, hint) }
+    })
 }
 
-/// As `trace_chunk_avx2`, sixteen rays a packet, compiled for AVX-512 (see
+/// Occlusion of one chunk's shadow rays as packets of sixteen in slot order (see
+/// `Accel::occluded16`: the same answers as ray by ray), compiled for AVX-512 (see
 /// `crate::cpu::has_avx512`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
 fn trace_chunk_avx512(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
-    trace_chunk_in_packets(
-        c,
-        16,
-        |packet, hint| {
-            // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called
-            // where the CPU has them.
-            unsafe { accel.occluded16(packet, hint) }
-        },
-        None::<fn(Vec3, Vec3, f32, &mut u32) -> bool>,
-    )
+    trace_chunk_in_packets(c, 16, |packet, hint| {
+        // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called where
+        // the CPU has them.
+        unsafe { accel.occluded16(packet, hint) }
+    })
 }
 
 /// Occlusion of one chunk's shadow rays, `width` at a time in slot order by `occluded` (a
-/// bit per ray), or, with `single`, by `single` ray by ray where a packet's rays point into
-/// more than one octant (the hint passed on from packet or ray to the next); returns (rays
-/// taken, rays unoccluded).
+/// bit per ray, the hint passed from packet to packet); returns (rays taken, rays
+/// unoccluded).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn trace_chunk_in_packets(
     c: ShadowRaysChunk,
     width: usize,
     occluded: impl Fn(&RayColumns, &mut u32) -> u32,
-    single: Option<impl Fn(Vec3, Vec3, f32, &mut u32) -> bool>,
 ) -> (usize, usize) {
     let (mut taken, mut clear) = (0, 0);
     let mut packet = RayColumns::new();
@@ -101,19 +85,7 @@ fn trace_chunk_in_packets(
             packet.push(c.origin[i], c.dir[i], c.t_max[i]);
         }
         if packet.len == width || (i + 1 == c.len() && packet.len > 0) {
-            let occluded = match &single {
-                Some(single) if !packet.one_octant() => {
-                    // A loop, not a closure: one would be compiled without AVX2 and call
-                    // `single` out of line.
-                    let mut bits = 0;
-                    for (k, &s) in slots[..packet.len].iter().enumerate() {
-                        let blocked = single(c.origin[s], c.dir[s], c.t_max[s], &mut hint);
-                        bits |= u32::from(blocked) << k;
-                    }
-                    bits
-                }
-                _ => occluded(&packet, &mut hint),
-            };
+            let occluded = occluded(&packet, &mut hint);
             for (k, &slot) in slots[..packet.len].iter().enumerate() {
                 let open = occluded & (1 << k) == 0;
                 c.unoccluded[slot] = open;

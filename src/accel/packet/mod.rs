@@ -1,6 +1,6 @@
 //! Rays a packet at a time through the eight-wide tree, one vector lane a ray: sixteen rays
-//! where the CPU has AVX-512, eight where it has AVX2, from one source generic over the ISA
-//! (`simd`). Closest hits and shadow rays (Wald, Slusallek, Benthin and Wagner's packets, with
+//! with AVX-512, eight with AVX2 (only in tests so far: see `closest::trace_chunk_avx2`), from
+//! one source generic over the ISA (`simd`). Closest hits and shadow rays (Wald, Slusallek, Benthin and Wagner's packets, with
 //! Benthin, Wald, Woop, Ernst and Mark's fall-back to single rays once few of a packet's rays
 //! are left at a node).
 //!
@@ -18,7 +18,9 @@
 
 mod simd;
 
-pub(crate) use simd::{Avx2, Avx512, Simd};
+#[cfg(test)]
+pub(crate) use simd::Avx2;
+pub(crate) use simd::{Avx512, Simd};
 
 use super::bvh8::{Bvh8, LANE_MASK, LEAF, PADDING, ROOT};
 use super::stack::TraversalStack;
@@ -46,9 +48,6 @@ pub(crate) struct RayColumns {
     dir: [[f32; WIDTH]; 3],
     t_max: [f32; WIDTH],
     pub(crate) len: usize,
-    /// The directions' sign bits (x, y, z in bits 0-2), and-ed and or-ed over the rays.
-    signs_all: u32,
-    signs_any: u32,
 }
 
 impl RayColumns {
@@ -58,8 +57,6 @@ impl RayColumns {
             dir: [[0.0; WIDTH]; 3],
             t_max: [0.0; WIDTH],
             len: 0,
-            signs_all: 0b111,
-            signs_any: 0,
         }
     }
 
@@ -67,16 +64,6 @@ impl RayColumns {
     #[inline(always)]
     pub(crate) fn clear(&mut self) {
         self.len = 0;
-        self.signs_all = 0b111;
-        self.signs_any = 0;
-    }
-
-    /// Whether the rays' directions all point into one octant (the same sign along each
-    /// axis): rays that share nodes, as camera rays and the shadow rays from the points they
-    /// find do, and rays after a diffuse bounce do not.
-    #[inline(always)]
-    pub(crate) fn one_octant(&self) -> bool {
-        self.signs_all == self.signs_any
     }
 
     /// Adds a ray in lane `len` (which must be below `WIDTH`).
@@ -89,10 +76,6 @@ impl RayColumns {
         }
         self.t_max[i] = t_max;
         self.len += 1;
-        let signs =
-            (dir.x.to_bits() >> 31) | (dir.y.to_bits() >> 31) << 1 | (dir.z.to_bits() >> 31) << 2;
-        self.signs_all &= signs;
-        self.signs_any |= signs;
     }
 
     /// The ray of lane `i` for the single-ray traversal and the scalar triangle test.

@@ -81,7 +81,10 @@ pub(crate) trait Simd: Copy {
 #[derive(Clone, Copy)]
 pub(crate) struct Avx512;
 
-/// Eight lanes of AVX2 (with FMA: `crate::cpu::has_avx2_fma`).
+/// Eight lanes of AVX2 (with FMA: `crate::cpu::has_avx2_fma`). Only the tests trace with it:
+/// on AVX2 the trace systems trace single rays, which PT found no slower
+/// (docs/measurements/2026-12-02-avx2-packets.md).
+#[cfg(test)]
 #[derive(Clone, Copy)]
 pub(crate) struct Avx2;
 
@@ -228,6 +231,7 @@ impl Simd for Avx512 {
     }
 }
 
+#[cfg(test)]
 impl Simd for Avx2 {
     const WIDTH: usize = 8;
     type V = __m256;
