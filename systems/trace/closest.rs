@@ -59,21 +59,20 @@ fn trace_chunk_avx2(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
 fn trace_chunk_avx512(accel: &Accel, rays: &Rays, h: HitsChunk) -> (usize, usize) {
-    trace_chunk_in_packets(rays, h, 16, |packet, hits| {
+    trace_chunk_in_packets(rays, h, |packet, hits| {
         // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called where
         // the CPU has them.
         unsafe { accel.closest_hits16(packet, hits) }
     })
 }
 
-/// The closest hits of one chunk's live rays, `width` at a time in slot order by
+/// The closest hits of one chunk's live rays, sixteen at a time in slot order by
 /// `closest_hits`; returns (rays traced, hits).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn trace_chunk_in_packets(
     rays: &Rays,
     mut h: HitsChunk,
-    width: usize,
     closest_hits: impl Fn(&RayColumns, &mut [Option<Hit>; PACKET_WIDTH]),
 ) -> (usize, usize) {
     let (mut traced, mut found) = (0, 0);
@@ -88,7 +87,7 @@ fn trace_chunk_in_packets(
             slots[packet.len] = i;
             packet.push(view.origin[i], view.dir[i], f32::INFINITY);
         }
-        if packet.len == width || (i + 1 == h.len() && packet.len > 0) {
+        if packet.len == PACKET_WIDTH || (i + 1 == h.len() && packet.len > 0) {
             closest_hits(&packet, &mut hits);
             for (&slot, &hit) in slots[..packet.len].iter().zip(&hits) {
                 found += usize::from(write_hit(&mut h, slot, hit));

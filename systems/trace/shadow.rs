@@ -56,21 +56,20 @@ fn trace_chunk_avx2(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
 fn trace_chunk_avx512(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
-    trace_chunk_in_packets(c, 16, |packet, hint| {
+    trace_chunk_in_packets(c, |packet, hint| {
         // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called where
         // the CPU has them.
         unsafe { accel.occluded16(packet, hint) }
     })
 }
 
-/// Occlusion of one chunk's shadow rays, `width` at a time in slot order by `occluded` (a
+/// Occlusion of one chunk's shadow rays, sixteen at a time in slot order by `occluded` (a
 /// bit per ray, the hint passed from packet to packet); returns (rays taken, rays
 /// unoccluded).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn trace_chunk_in_packets(
     c: ShadowRaysChunk,
-    width: usize,
     occluded: impl Fn(&RayColumns, &mut u32) -> u32,
 ) -> (usize, usize) {
     let (mut taken, mut clear) = (0, 0);
@@ -84,7 +83,7 @@ fn trace_chunk_in_packets(
             slots[packet.len] = i;
             packet.push(c.origin[i], c.dir[i], c.t_max[i]);
         }
-        if packet.len == width || (i + 1 == c.len() && packet.len > 0) {
+        if packet.len == PACKET_WIDTH || (i + 1 == c.len() && packet.len > 0) {
             let occluded = occluded(&packet, &mut hint);
             for (k, &slot) in slots[..packet.len].iter().enumerate() {
                 let open = occluded & (1 << k) == 0;
