@@ -1,7 +1,7 @@
 """The Python module against the command line and against independent checks.
 
 The command line's binary comes from $STAGELIGHT_BIN, else target/release/stagelight
-(`cargo build --release`); .ci/run builds it before running these tests.
+(`cargo build --release`); .ci/run sets it to the test profile's binary, which the suite built.
 """
 
 from __future__ import annotations

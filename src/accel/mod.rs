@@ -441,13 +441,11 @@ impl Accel {
         unsafe { self.closest_hits_packet::<packet::Avx512>(rays, hits) }
     }
 
-    /// `closest_hits16` for up to eight rays, with AVX2 and FMA.
-    ///
-    /// Only the tests trace eight-ray packets (see `closest::trace_chunk_avx2` for why).
+    /// `closest_hits16` for up to eight rays, with AVX2 and FMA (the first eight hits).
     ///
     /// # Safety
     /// The CPU must support AVX2 and FMA.
-    #[cfg(all(target_arch = "x86_64", test))]
+    #[cfg(target_arch = "x86_64")]
     #[inline]
     #[target_feature(enable = "avx2,fma")]
     pub(crate) unsafe fn closest_hits8(
@@ -475,11 +473,9 @@ impl Accel {
 
     /// `occluded16` for up to eight rays, with AVX2 and FMA.
     ///
-    /// Only the tests trace eight-ray packets (see `closest::trace_chunk_avx2` for why).
-    ///
     /// # Safety
     /// As for `closest_hits8`.
-    #[cfg(all(target_arch = "x86_64", test))]
+    #[cfg(target_arch = "x86_64")]
     #[inline]
     #[target_feature(enable = "avx2,fma")]
     pub(crate) unsafe fn occluded8(&self, rays: &RayColumns, hint: &mut u32) -> u32 {

@@ -371,6 +371,12 @@ impl WaveState for BdptState {
     fn film_mut(&mut self) -> &mut Film {
         &mut self.film
     }
+    /// Not where the image depends on the waves' size (VCM and BPM merge with the light
+    /// subpaths of their own wave, LVC-BDPT joins those of its wave's groups of samples), nor
+    /// with strategy images (their f64 sums round by how the waves were grouped).
+    fn waves_side_by_side(settings: &BdptSettings) -> bool {
+        settings.merging.is_none() && settings.light_vertex_cache == 0 && !settings.strategy_images
+    }
     fn notes(&self) -> Vec<(&'static str, String)> {
         if let Some(m) = self.settings.merging {
             let footprint = crate::components::photon_mapping::pixel_footprint(&self.data);

@@ -13,13 +13,15 @@ use super::{Budget, Control, RenderOutcome, Resume};
 use crate::film::{Film, Image};
 use crate::pipeline::{Graph, Stats};
 use crate::scene::SceneData;
-use std::sync::Arc;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 /// The state of an integrator and the graph that runs over it.
 pub trait IntegratorState: Sized + Send + 'static {
     /// The integrator's own settings.
-    type Settings: Copy;
+    type Settings: Copy + Send + Sync;
     /// Columns the driver sets before the graph runs (for `Graph::check`).
     const INPUTS: &'static [&'static str];
     /// The graph for a scene: only the systems the scene needs.
@@ -45,6 +47,18 @@ pub trait WaveState: IntegratorState {
     /// Lines the integrator adds to the render report (label, value).
     fn notes(&self) -> Vec<(&'static str, String)> {
         Vec::new()
+    }
+    /// Whether a state per thread may render waves of `wavefront` over the thread count side
+    /// by side, folded together at the end (`absorb`), with the image of one state rendering
+    /// waves of `wavefront`: true where the image does not depend on the waves' size and all
+    /// a state sums is exact (the film) or counted.
+    fn waves_side_by_side(_settings: &Self::Settings) -> bool {
+        true
+    }
+    /// Adds what `other` rendered (other waves of the same render) to this state: its film,
+    /// and whatever else a state counts or sums that the report or the image reads.
+    fn absorb(&mut self, mut other: Self) -> Result<(), String> {
+        self.film_mut().add_film(other.film_mut())
     }
 }
 
@@ -97,6 +111,12 @@ pub fn render_waves<S: WaveState>(
 /// `render_waves` in waves of up to `wavefront` samples (at least 1; `--wavefront N`): the
 /// paths in flight. Samples are pure functions of their ids and the film's sums exact, so the
 /// image is the same for every `wavefront`.
+///
+/// Each thread of the pool renders whole waves on a state of its own (waves of `wavefront`
+/// over the thread count), taking the next wave of the plan when its last is done, and the
+/// states are folded together at the end. A wave's systems still split their queues over the
+/// pool, so a thread that reaches the barrier at the end of a system takes work of the other
+/// waves in flight instead of waiting: one wave's barriers no longer idle the machine.
 pub fn render_waves_of<S: WaveState>(
     data: Arc<SceneData>,
     settings: S::Settings,
@@ -110,8 +130,15 @@ pub fn render_waves_of<S: WaveState>(
     let pixels = cam.width as u64 * cam.height as u64;
     let graph = S::graph(&data, &settings);
     let first_pass = from.as_ref().map_or(0, |r| r.passes);
-    let mut plan = WavePlan::starting_at(pixels, budget, wavefront, first_pass);
-    let mut state = S::new(data, settings, plan.capacity());
+    // Never more paths in flight than `wavefront`, however many threads.
+    let workers = if S::waves_side_by_side(&settings) {
+        rayon::current_num_threads().clamp(1, wavefront)
+    } else {
+        1
+    };
+    let plan = WavePlan::starting_at(pixels, budget, wavefront / workers, first_pass);
+    let capacity = plan.capacity();
+    let mut first_state = S::new(data.clone(), settings, capacity);
     if let Some(from) = from {
         assert!(
             from.film.width == cam.width as usize
@@ -120,19 +147,50 @@ pub fn render_waves_of<S: WaveState>(
                 && from.film.total_samples() == (from.passes - from.first_pass) * pixels,
             "a resumed film must hold whole passes of this camera's image"
         );
-        *state.film_mut() = from.film;
+        *first_state.film_mut() = from.film;
     }
-    let mut stats = Stats::default();
-    while let Some((first, len)) = plan.next_wave(control) {
-        state.begin_wave(Wave { first, len });
-        graph.run(&mut state, &mut stats);
-        (control.progress)(plan.passes_done(), plan.total_passes());
+    // Paths in flight at most: a state per thread, or per wave where there are fewer waves.
+    let waves = plan.total.map_or(workers as u64, |t| {
+        t.saturating_sub(plan.next).div_ceil(capacity.max(1) as u64)
+    });
+    let in_flight = capacity * workers.min(waves.max(1) as usize);
+    let mut workers: Vec<Option<(S, Stats)>> = (0..workers).map(|_| None).collect();
+    workers[0] = Some((first_state, Stats::default()));
+    let plan = Mutex::new(plan);
+    let rendered = AtomicU64::new(first_pass * pixels);
+    workers.par_iter_mut().for_each(|worker| {
+        loop {
+            let Some((first, len)) = plan.lock().unwrap().next_wave(control) else {
+                break;
+            };
+            let (state, stats) = worker.get_or_insert_with(|| {
+                (S::new(data.clone(), settings, capacity), Stats::default())
+            });
+            state.begin_wave(Wave { first, len });
+            graph.run(state, stats);
+            let done = rendered.fetch_add(len as u64, Ordering::Relaxed) + len as u64;
+            let total_passes = plan.lock().unwrap().total_passes();
+            (control.progress)(done / pixels, total_passes);
+        }
+    });
+    let plan = plan.into_inner().unwrap();
+    let mut worked = workers.into_iter().flatten();
+    let (mut state, mut stats) = worked
+        .next()
+        .expect("the first worker's state is made first");
+    let mut notes = Vec::new();
+    for (other, other_stats) in worked {
+        stats.absorb(&other_stats);
+        if let Err(e) = state.absorb(other) {
+            // Sums within 2^63 film units of the brightest light each: not seen in practice.
+            notes.push(("lost waves", format!("a thread's waves were dropped: {e}")));
+        }
     }
     // A stop that arrives after the last wave interrupts nothing.
     let interrupted = control.stopped() && !plan.budget_spent();
     let new_passes = plan.passes_done() - first_pass;
     let counted_rays = state.counted_rays();
-    let notes = state.notes();
+    notes.extend(state.notes());
     let (film, layers, bytes_per_path) = state.finish(new_passes);
     RenderOutcome {
         samples: plan.next,
@@ -143,7 +201,7 @@ pub fn render_waves_of<S: WaveState>(
         interrupted,
         systems: graph.system_names(),
         bytes_per_path,
-        wavefront: plan.capacity(),
+        wavefront: in_flight,
         layers,
         notes,
         counted_rays,

@@ -621,14 +621,22 @@ impl RenderOutcome {
     pub fn closest_rays(&self) -> u64 {
         match self.counted_rays {
             Some((closest, _)) => closest,
-            None => self.stats.get("trace_closest").map_or(0, |s| s.taken),
+            None => self.taken_by(&["trace_closest", "trace_coherent_closest"]),
         }
     }
     pub fn shadow_rays(&self) -> u64 {
         match self.counted_rays {
             Some((_, shadow)) => shadow,
-            None => self.stats.get("trace_shadow").map_or(0, |s| s.taken),
+            None => self.taken_by(&["trace_shadow", "trace_coherent_shadow"]),
         }
+    }
+    /// Items the systems of these names took, together.
+    fn taken_by(&self, systems: &[&str]) -> u64 {
+        systems
+            .iter()
+            .filter_map(|name| self.stats.get(name))
+            .map(|s| s.taken)
+            .sum()
     }
 }
 

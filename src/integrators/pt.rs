@@ -152,46 +152,57 @@ fn graph_of(data: &SceneData, record: bool) -> Graph<PtState> {
     let has_emitters = !data.scene.emitters.triangle.is_empty();
     let light_sampling = has_emitters && kinds.iter().any(|k| !k.is_delta());
 
-    let mut bounce: Vec<Node<PtState>> = vec![Node::system(trace::closest::TraceClosest)];
-    if record {
-        bounce.push(Node::system(trace::record_rays::RecordClosestRays));
-    }
-    if has_emitters {
-        bounce.push(Node::system(shade::emitted_light::AddEmittedLight));
-    }
-    bounce.push(Node::system(shade::sort_by_material::SortByMaterial));
-    if data.scene.has_textures() {
-        bounce.push(Node::system(shade::look_up_textures::LookUpTextures));
-    }
-    if light_sampling {
-        bounce.push(Node::system(connect::sample_lights::SampleLights));
-    }
-    for kind in kinds {
-        bounce.push(Node::system(shade::material::ShadeMaterial(kind)));
-    }
-    if light_sampling {
-        bounce.push(Node::system(trace::shadow::TraceShadow));
+    // The systems of one bounce. The first bounce's rays are coherent (camera rays of
+    // neighbouring pixels, and shadow rays from their hits), so it is laid out ahead of the
+    // loop with the trace systems that make use of that.
+    let bounce = |first: bool| {
+        let mut nodes: Vec<Node<PtState>> = vec![if first {
+            Node::system(trace::closest::TraceCoherentClosest)
+        } else {
+            Node::system(trace::closest::TraceClosest)
+        }];
         if record {
-            bounce.push(Node::system(trace::record_rays::RecordShadowRays));
+            nodes.push(Node::system(trace::record_rays::RecordClosestRays));
         }
-        bounce.push(Node::system(
-            connect::apply_shadow::ApplyShadowContributions,
-        ));
-    }
-    bounce.push(Node::system(shade::russian_roulette::RussianRoulette));
+        if has_emitters {
+            nodes.push(Node::system(shade::emitted_light::AddEmittedLight));
+        }
+        nodes.push(Node::system(shade::sort_by_material::SortByMaterial));
+        if data.scene.has_textures() {
+            nodes.push(Node::system(shade::look_up_textures::LookUpTextures));
+        }
+        if light_sampling {
+            nodes.push(Node::system(connect::sample_lights::SampleLights));
+        }
+        for &kind in &kinds {
+            nodes.push(Node::system(shade::material::ShadeMaterial(kind)));
+        }
+        if light_sampling {
+            nodes.push(if first {
+                Node::system(trace::shadow::TraceCoherentShadow)
+            } else {
+                Node::system(trace::shadow::TraceShadow)
+            });
+            if record {
+                nodes.push(Node::system(trace::record_rays::RecordShadowRays));
+            }
+            nodes.push(Node::system(
+                connect::apply_shadow::ApplyShadowContributions,
+            ));
+        }
+        nodes.push(Node::system(shade::russian_roulette::RussianRoulette));
+        nodes
+    };
 
-    Graph::new(
-        "pt",
-        vec![
-            Node::system(generate::camera_rays::GenerateCameraRays),
-            Node::Loop {
-                name: "bounces",
-                queue_len: |s: &PtState| s.active,
-                body: bounce,
-            },
-            Node::system(gather::film::AccumulateFilm),
-        ],
-    )
+    let mut nodes = vec![Node::system(generate::camera_rays::GenerateCameraRays)];
+    nodes.extend(bounce(true));
+    nodes.push(Node::Loop {
+        name: "bounces",
+        queue_len: |s: &PtState| s.active,
+        body: bounce(false),
+    });
+    nodes.push(Node::system(gather::film::AccumulateFilm));
+    Graph::new("pt", nodes)
 }
 
 impl IntegratorState for PtState {
@@ -334,6 +345,10 @@ mod bindings {
             read accel = data.accel, rays, live = active;
             write hits;
         }
+        trace::closest::TraceCoherentClosest {
+            read accel = data.accel, rays, live = active;
+            write hits;
+        }
         trace::record_rays::RecordClosestRays {
             read rays, hits, live = active, wave;
             write record;
@@ -343,6 +358,10 @@ mod bindings {
             write record;
         }
         trace::shadow::TraceShadow {
+            read accel = data.accel, len = shadow_len;
+            write shadow;
+        }
+        trace::shadow::TraceCoherentShadow {
             read accel = data.accel, len = shadow_len;
             write shadow;
         }

@@ -83,6 +83,12 @@ impl WaveState for MegakernelState {
     fn counted_rays(&self) -> Option<(u64, u64)> {
         Some((self.traced.closest, self.traced.shadow))
     }
+    fn absorb(&mut self, other: MegakernelState) -> Result<(), String> {
+        self.film.add_film(&other.film)?;
+        self.traced.closest += other.traced.closest;
+        self.traced.shadow += other.traced.shadow;
+        Ok(())
+    }
     fn notes(&self) -> Vec<(&'static str, String)> {
         vec![(
             "kernel",

@@ -405,6 +405,23 @@ impl Stats {
         self.systems.iter().find(|s| s.name == name)
     }
 
+    /// Adds another record of the same graph's runs (another state's waves) to this one.
+    pub fn absorb(&mut self, other: &Stats) {
+        for s in &other.systems {
+            let e = self.entry(s.name);
+            e.runs += s.runs;
+            e.time += s.time;
+            e.taken += s.taken;
+            e.emitted += s.emitted;
+        }
+        for &(name, n) in &other.loops {
+            match self.loops.iter_mut().find(|(l, _)| *l == name) {
+                Some((_, m)) => *m += n,
+                None => self.loops.push((name, n)),
+            }
+        }
+    }
+
     fn entry(&mut self, name: &'static str) -> &mut SystemStats {
         let i = match self.systems.iter().position(|s| s.name == name) {
             Some(i) => i,
@@ -425,14 +442,22 @@ impl<S> Graph<S> {
         Graph { name, nodes }
     }
 
-    /// Names of every system in the graph, in order.
+    /// Names of the graph's systems in the order they first run, each once (a system may run at
+    /// several places: stats and reports count it under its name).
     pub fn system_names(&self) -> Vec<&'static str> {
         fn walk<S>(nodes: &[Node<S>], out: &mut Vec<&'static str>) {
             for n in nodes {
                 match n {
-                    Node::System(s) => out.push(s.name()),
+                    Node::System(s) if !out.contains(&s.name()) => out.push(s.name()),
+                    Node::System(_) => {}
                     Node::Loop { body, .. } | Node::Once { body, .. } => walk(body, out),
-                    Node::Nested(g) => out.extend(g.system_names()),
+                    Node::Nested(g) => {
+                        for name in g.system_names() {
+                            if !out.contains(&name) {
+                                out.push(name);
+                            }
+                        }
+                    }
                     Node::StopPoint => {}
                 }
             }

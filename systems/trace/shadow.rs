@@ -17,29 +17,57 @@ crate::system! {
     read accel: Accel, len: usize;
     write shadow: ShadowRays;
     run {
-        let accel: &Accel = accel;
-        let (taken, unoccluded) = shadow
-            .chunks_mut(0..*len)
-            .into_par_iter()
-            .map(|c| {
-                #[cfg(target_arch = "x86_64")]
-                if crate::cpu::has_avx512() {
-                    // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
-                    return unsafe { trace_chunk_avx512(accel, c) };
-                }
-                if crate::cpu::has_avx2_fma() {
-                    // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                    return unsafe { trace_chunk_avx2(accel, c) };
-                }
-                trace_chunk(c, |o, d, t_max, hint| accel.any_hit_with_hint(o, d, t_max, hint))
-            })
-            .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-        Flow::new(taken, unoccluded)
+        trace(accel, *len, shadow, false)
     }
 }
 
-/// `trace_chunk` compiled for AVX2 and FMA, with the traversal inlined (see `crate::cpu`;
-/// why not as eight-ray packets, at `closest::trace_chunk_avx2`).
+/// `TraceShadow` for a queue of coherent shadow rays (neighbours leave nearby points towards
+/// nearby points, as those from the first hits of neighbouring camera rays do): on AVX2 as
+/// packets of eight (see `closest::TraceCoherentClosest`), elsewhere as `TraceShadow`. The same
+/// answers either way.
+pub struct TraceCoherentShadow;
+
+crate::system! {
+    TraceCoherentShadow = "trace_coherent_shadow";
+    read accel: Accel, len: usize;
+    write shadow: ShadowRays;
+    run {
+        trace(accel, *len, shadow, true)
+    }
+}
+
+/// The occlusion of shadow rays `0..len`, in parallel chunks; eight-ray packets on AVX2 where
+/// `coherent`.
+fn trace(accel: &Accel, len: usize, shadow: &mut ShadowRays, coherent: bool) -> Flow {
+    let (taken, unoccluded) = shadow
+        .chunks_mut(0..len)
+        .into_par_iter()
+        .map(|c| {
+            #[cfg(target_arch = "x86_64")]
+            if crate::cpu::has_avx512() {
+                // SAFETY: the CPU has AVX-512 (F, DQ, VL, BW), AVX2 and FMA (checked just above).
+                return unsafe { trace_chunk_avx512(accel, c) };
+            }
+            #[cfg(target_arch = "x86_64")]
+            if crate::cpu::has_avx2_fma() {
+                // SAFETY: the CPU has AVX2 and FMA (checked just above).
+                return unsafe {
+                    if coherent {
+                        trace_chunk_avx2_packets(accel, c)
+                    } else {
+                        trace_chunk_avx2(accel, c)
+                    }
+                };
+            }
+            trace_chunk(c, |o, d, t_max, hint| {
+                accel.any_hit_with_hint(o, d, t_max, hint)
+            })
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    Flow::new(taken, unoccluded)
+}
+
+/// `trace_chunk` compiled for AVX2 and FMA, with the traversal inlined (see `crate::cpu`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 fn trace_chunk_avx2(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
@@ -50,26 +78,39 @@ fn trace_chunk_avx2(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
     })
 }
 
+/// Occlusion of one chunk's shadow rays as packets of eight in slot order (see
+/// `Accel::occluded8`), compiled for AVX2 and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn trace_chunk_avx2_packets(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
+    trace_chunk_in_packets(c, 8, |packet, hint| {
+        // SAFETY: this function is compiled for AVX2 and FMA and only called where the CPU
+        // has them.
+        unsafe { accel.occluded8(packet, hint) }
+    })
+}
+
 /// Occlusion of one chunk's shadow rays as packets of sixteen in slot order (see
 /// `Accel::occluded16`: the same answers as ray by ray), compiled for AVX-512 (see
 /// `crate::cpu::has_avx512`).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx512bw,avx2,fma")]
 fn trace_chunk_avx512(accel: &Accel, c: ShadowRaysChunk) -> (usize, usize) {
-    trace_chunk_in_packets(c, |packet, hint| {
+    trace_chunk_in_packets(c, PACKET_WIDTH, |packet, hint| {
         // SAFETY: this function is compiled for AVX-512, AVX2 and FMA and only called where
         // the CPU has them.
         unsafe { accel.occluded16(packet, hint) }
     })
 }
 
-/// Occlusion of one chunk's shadow rays, sixteen at a time in slot order by `occluded` (a
+/// Occlusion of one chunk's shadow rays, `width` at a time in slot order by `occluded` (a
 /// bit per ray, the hint passed from packet to packet); returns (rays taken, rays
 /// unoccluded).
 #[cfg(target_arch = "x86_64")]
 #[inline(always)]
 fn trace_chunk_in_packets(
     c: ShadowRaysChunk,
+    width: usize,
     occluded: impl Fn(&RayColumns, &mut u32) -> u32,
 ) -> (usize, usize) {
     let (mut taken, mut clear) = (0, 0);
@@ -83,7 +124,7 @@ fn trace_chunk_in_packets(
             slots[packet.len] = i;
             packet.push(c.origin[i], c.dir[i], c.t_max[i]);
         }
-        if packet.len == PACKET_WIDTH || (i + 1 == c.len() && packet.len > 0) {
+        if packet.len == width || (i + 1 == c.len() && packet.len > 0) {
             let occluded = occluded(&packet, &mut hint);
             for (k, &slot) in slots[..packet.len].iter().enumerate() {
                 let open = occluded & (1 << k) == 0;

@@ -1,5 +1,5 @@
 //! Rays a packet at a time through the eight-wide tree, one vector lane a ray: sixteen rays
-//! with AVX-512, eight with AVX2 (only in tests so far: see `closest::trace_chunk_avx2`), from
+//! with AVX-512, eight with AVX2 (coherent rays only: see `closest::TraceCoherentClosest`), from
 //! one source generic over the ISA (`simd`). Closest hits and shadow rays (Wald, Slusallek, Benthin and Wagner's packets, with
 //! Benthin, Wald, Woop, Ernst and Mark's fall-back to single rays once few of a packet's rays
 //! are left at a node).
@@ -18,9 +18,7 @@
 
 mod simd;
 
-#[cfg(test)]
-pub(crate) use simd::Avx2;
-pub(crate) use simd::{Avx512, Simd};
+pub(crate) use simd::{Avx2, Avx512, Simd};
 
 use super::bvh8::{Bvh8, LANE_MASK, LEAF, PADDING, ROOT};
 use super::stack::TraversalStack;

@@ -81,10 +81,9 @@ pub(crate) trait Simd: Copy {
 #[derive(Clone, Copy)]
 pub(crate) struct Avx512;
 
-/// Eight lanes of AVX2 (with FMA: `crate::cpu::has_avx2_fma`). Only the tests trace with it:
-/// on AVX2 the trace systems trace single rays, which PT found no slower
-/// (docs/measurements/2026-12-02-avx2-packets.md).
-#[cfg(test)]
+/// Eight lanes of AVX2 (with FMA: `crate::cpu::has_avx2_fma`). On AVX2 only coherent rays are
+/// traced with it (`trace_coherent_closest`, `trace_coherent_shadow`): eight-ray packets lose
+/// to single rays on the later bounces (docs/measurements/2026-12-02-avx2-packets.md).
 #[derive(Clone, Copy)]
 pub(crate) struct Avx2;
 
@@ -231,7 +230,6 @@ impl Simd for Avx512 {
     }
 }
 
-#[cfg(test)]
 impl Simd for Avx2 {
     const WIDTH: usize = 8;
     type V = __m256;
