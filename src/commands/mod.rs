@@ -211,7 +211,13 @@ pub fn render_memory(
             .saturating_mul(500)
             .saturating_add(p.photons_per_pass.saturating_mul(PHOTON_BYTES)),
     };
-    film.saturating_add(state)
+    // pt and bdpt keep a state, film included, per thread (`driver::render_waves_of`).
+    let films = if matches!(kind.as_str(), "pt" | "bdpt") {
+        threads.max(1) as u64
+    } else {
+        1
+    };
+    film.saturating_mul(films).saturating_add(state)
 }
 
 /// Refuses each of `flags` (options the command line gives) that `integrator` does not read,
