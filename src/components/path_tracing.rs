@@ -23,9 +23,23 @@ pub fn bounce_dim(depth: u32) -> u32 {
     2 + depth * DIMS_PER_BOUNCE
 }
 
-/// Paths in flight at once by default (the wavefront's and the megakernel's waves) (`--wavefront N` sets another): large enough to keep
-/// both cores busy between stage barriers, small enough to stay in a few tens of megabytes.
+/// The most paths in flight at once by default (the wavefront's and the megakernel's waves;
+/// `--wavefront N` sets another): a few tens of megabytes.
 pub const WAVEFRONT: usize = 1 << 18;
+
+/// Paths in flight a thread by default, up to `WAVEFRONT` in all: each thread renders waves on a
+/// state of its own, and on a Zen 5 at one and two threads waves of 16384 paths a thread
+/// rendered cornell_box and door_ajar 1.08-1.16x as fast as 2^18 in all, big_1m at two threads
+/// 1.21x, one thread level (docs/measurements/2026-12-02-zen5-sitting-and-vec3-permutes.md).
+pub const WAVEFRONT_PER_THREAD: usize = 1 << 14;
+
+/// PT's paths in flight where `--wavefront` is not given: `WAVEFRONT_PER_THREAD` for each thread
+/// of the current pool, at most `WAVEFRONT`.
+pub fn default_wavefront() -> usize {
+    WAVEFRONT_PER_THREAD
+        .saturating_mul(rayon::current_num_threads())
+        .min(WAVEFRONT)
+}
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct PtSettings {

@@ -273,7 +273,7 @@ pub fn render_with(
     from: Option<Resume>,
 ) -> RenderOutcome {
     let settings = PtSettings::from(s);
-    let wavefront = s.wavefront.unwrap_or(WAVEFRONT);
+    let wavefront = s.wavefront.unwrap_or_else(default_wavefront);
     match s.kernel {
         Kernel::Wavefront => {
             render_waves_of::<PtState>(data, settings, budget, control, from, wavefront)
