@@ -903,10 +903,12 @@ mod transpose {
 
     /// Reads 48 f32 at `from` into sixteen lanes at each of `to`.
     ///
+    /// Not marked `#[target_feature]`, so that it inlines into the lane kernels, which are
+    /// compiled for AVX-512 (`run_lanes`); marked, it stayed out of line.
+    ///
     /// # Safety
-    /// The CPU must have AVX-512F, and the caller be inlined in code compiled for it (as the
-    /// lane kernels are: `run_lanes`; with the feature on this function, it was left out of
-    /// line); `from` must be readable for 48 f32 and each `to` writable for 16.
+    /// The CPU must have AVX-512F; `from` must be readable for 48 f32 and each `to` writable
+    /// for 16.
     #[inline(always)]
     pub(super) unsafe fn load16(from: *const f32, to: [*mut f32; 3]) {
         // SAFETY: the caller's guarantees.

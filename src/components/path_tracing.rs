@@ -28,9 +28,9 @@ pub fn bounce_dim(depth: u32) -> u32 {
 pub const WAVEFRONT: usize = 1 << 18;
 
 /// Paths in flight a thread by default, up to `WAVEFRONT` in all: each thread renders waves on a
-/// state of its own, and on a Zen 5 at one and two threads waves of 16384 paths a thread
-/// rendered cornell_box and door_ajar 1.08-1.16x as fast as 2^18 in all, big_1m at two threads
-/// 1.21x, one thread level (docs/measurements/2026-12-02-zen5-sitting-and-vec3-permutes.md).
+/// state of its own, and on a Zen 5 at one and two threads these rendered cornell_box, door_ajar
+/// and big_1m 1.06-1.18x as fast as 2^18 in all
+/// (docs/measurements/2026-12-02-zen5-sitting-and-vec3-permutes.md).
 pub const WAVEFRONT_PER_THREAD: usize = 1 << 14;
 
 /// PT's paths in flight where `--wavefront` is not given: `WAVEFRONT_PER_THREAD` for each thread

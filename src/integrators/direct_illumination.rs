@@ -38,7 +38,7 @@ crate::system! {
             let passes = held(Some(&film));
             Resume { film, first_pass: 0, passes, state: None }
         });
-        let outcome = crate::integrators::driver::render_waves::<crate::integrators::pt::PtState>(
+        let outcome = crate::integrators::driver::render_waves_of::<crate::integrators::pt::PtState>(
             data.clone(),
             pt,
             Budget::SamplesPerPixel(want),
@@ -47,6 +47,7 @@ crate::system! {
                 progress: &|_, _| {},
             },
             from,
+            crate::integrators::pt::default_wavefront(),
         );
         let n = outcome.film.width * outcome.film.height;
         *direct = Some(outcome.film);

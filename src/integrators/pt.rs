@@ -9,7 +9,7 @@ use crate::bsdf::{Material, MaterialKind};
 use crate::components::ray_record::RayRecord;
 use crate::components::{Hits, Paths, Rays, ShadowRays, Surfaces};
 use crate::film::{Film, Image};
-use crate::integrators::driver::{render_waves, render_waves_of};
+use crate::integrators::driver::render_waves_of;
 use crate::integrators::{
     Budget, Control, IntegratorState, RenderOutcome, RenderSettings, Resume, SceneData, Wave,
     WaveState,
@@ -293,7 +293,7 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    render_waves::<PtState>(data, settings, budget, control, None)
+    render_waves_of::<PtState>(data, settings, budget, control, None, default_wavefront())
 }
 
 /// The systems of its graphs bound to the columns of `PtState`.
