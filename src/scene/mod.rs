@@ -200,6 +200,8 @@ pub struct PreparedScene {
     /// Per material: what it reads at each shading point (textures, the uv tangent), or
     /// `None` for a material that is the same everywhere (see `material_at`).
     pub varying: Vec<Option<Varying>>,
+    /// `has_textures`.
+    textured: bool,
     pub textures: Vec<textures::Texture>,
     /// Per triangle, the uvs of its corners (Mitsuba's (0, 0), (1, 0), (0, 1) where the mesh has
     /// none); empty when no material varies over its surface.
@@ -264,6 +266,9 @@ pub fn is_at_infinity(triangle: u32) -> bool {
     triangle != u32::MAX && triangle & AT_INFINITY != 0
 }
 
+/// The index `uniform_material_index_seen` gives for `BLACK` (no material has it).
+pub const SEEN_BLACK: u32 = u32::MAX;
+
 /// What a one-sided surface is from behind: it reflects nothing.
 pub const BLACK: Material = Material::Diffuse(Diffuse {
     reflectance: Vec3::ZERO,
@@ -284,30 +289,52 @@ impl PreparedScene {
     }
 
     /// `material_seen` of a material that does not vary over its surface (`varying` is
-    /// `None`: no texture to look up, so neither the point nor the shading normal matters).
-    /// The wavefront reads materials this way; scenes with textures look theirs up once per
-    /// hit first (`systems/shade/look_up_textures.rs`).
+    /// `None`: no texture to look up, so neither the point nor the shading normal matters),
+    /// as its index in `materials` (`SEEN_BLACK` for `BLACK`; `seen_material` reads it).
+    /// The wavefront finds it once per hit, in `sort_by_material`, and its shading systems
+    /// read it from the hit's surface point; scenes with textures look theirs up once per hit
+    /// instead (`systems/shade/look_up_textures.rs`).
     #[inline(always)]
-    pub fn uniform_material_seen(&self, tri: u32, wo: Vec3, ng: Vec3) -> Material {
+    pub fn uniform_material_index_seen(&self, tri: u32, wo: Vec3, ng: Vec3) -> u32 {
         if self.seen_from_behind(tri, wo, ng) {
-            return BLACK;
+            return SEEN_BLACK;
         }
-        let m = self.triangles.material[tri as usize] as usize;
+        let m = self.triangles.material[tri as usize];
         debug_assert!(
-            self.varying[m].is_none(),
+            self.varying[m as usize].is_none(),
             "a textured material read as uniform"
         );
-        match self.back[m] {
-            Some(back) if wo.dot(self.triangles.normal[tri as usize]) < 0.0 => {
-                self.materials[back as usize]
-            }
-            _ => self.materials[m],
+        match self.back[m as usize] {
+            Some(back) if wo.dot(self.triangles.normal[tri as usize]) < 0.0 => back,
+            _ => m,
         }
     }
 
+    /// The material of an index `uniform_material_index_seen` gave.
+    #[inline(always)]
+    pub fn seen_material(&self, index: u32) -> Material {
+        match self.materials.get(index as usize) {
+            Some(&material) => material,
+            None => BLACK,
+        }
+    }
+
+    /// `uniform_material_index_seen`'s material.
+    #[inline(always)]
+    pub fn uniform_material_seen(&self, tri: u32, wo: Vec3, ng: Vec3) -> Material {
+        self.seen_material(self.uniform_material_index_seen(tri, wo, ng))
+    }
+
     /// Whether a material some triangle uses (or its back) varies over its surface: the
-    /// wavefront then holds `look_up_textures`.
+    /// wavefront then holds `look_up_textures`. Found once, when the scene is prepared
+    /// (`sort_by_material` asks it every bounce).
+    #[inline]
     pub fn has_textures(&self) -> bool {
+        self.textured
+    }
+
+    /// `has_textures`, from the materials the triangles use.
+    fn uses_textures(&self) -> bool {
         let varies = |m: usize| self.varying[m].is_some();
         let mut used = vec![false; self.materials.len()];
         for &m in &self.triangles.material {

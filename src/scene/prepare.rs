@@ -456,7 +456,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
     let bounds_min = all_points(&triangles).fold(Vec3::INFINITY, |m, p| m.min(*p));
     let bounds_max = all_points(&triangles).fold(Vec3::NEG_INFINITY, |m, p| m.max(*p));
 
-    Ok(PreparedScene {
+    let mut prepared = PreparedScene {
         source: scene.source.clone(),
         camera,
         triangles,
@@ -464,13 +464,16 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         black_behind,
         back,
         varying,
+        textured: false,
         textures,
         triangle_uvs,
         emitters,
         bounds_min,
         bounds_max,
         warnings,
-    })
+    };
+    prepared.textured = prepared.uses_textures();
+    Ok(prepared)
 }
 
 /// Every triangle corner.

@@ -136,7 +136,6 @@ fn sample_chunk<const N: usize>(chunk: SampleChunk) -> usize {
             sampler,
             surfaces: &surfaces,
             looked_up,
-            triangles,
             dirs,
             paths: &paths,
             i,
@@ -169,7 +168,6 @@ struct LightLanesOf<'a, 'c, const N: usize> {
     sampler: &'a Sampler<'a>,
     surfaces: &'a SurfacesView<'a>,
     looked_up: &'a [Material],
-    triangles: &'a [u32],
     dirs: &'a [Vec3],
     paths: &'a PathsView<'a>,
     i: usize,
@@ -188,14 +186,12 @@ impl<const N: usize> KindVisitor for LightLanesOf<'_, '_, N> {
             sampler,
             surfaces,
             looked_up,
-            triangles,
             dirs,
             paths,
             i,
             c,
         } = self;
-        let (surf, materials) =
-            SurfaceLanes::<N>::at::<B>(data, surfaces, looked_up, triangles, dirs, i)?;
+        let (surf, materials) = SurfaceLanes::<N>::at::<B>(data, surfaces, looked_up, dirs, i)?;
         let keys: &[SampleKey; N] = paths.key[i..i + N].try_into().unwrap();
         let depths: &[u32; N] = paths.depth[i..i + N].try_into().unwrap();
         let throughput = V3::load(&paths.throughput[i..]);

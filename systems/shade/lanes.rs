@@ -159,30 +159,13 @@ impl<const N: usize> SurfaceLanes<N> {
         data: &crate::scene::SceneData,
         surfaces: &crate::components::SurfacesView,
         looked_up: &[crate::bsdf::Material],
-        triangles: &[u32],
         dirs: &[Vec3],
         i: usize,
     ) -> Option<(SurfaceLanes<N>, [B; N])> {
-        let (ng, dir) = (&surfaces.ng, dirs);
-        let first = *B::of(&material_seen(
-            data,
-            looked_up,
-            i,
-            triangles[i],
-            dir[i],
-            ng[i],
-        ))?;
+        let first = *B::of(&material_seen(data, looked_up, surfaces, i))?;
         let mut materials = [first; N];
         for (l, m) in materials.iter_mut().enumerate().skip(1) {
-            let k = i + l;
-            *m = *B::of(&material_seen(
-                data,
-                looked_up,
-                k,
-                triangles[k],
-                dir[k],
-                ng[k],
-            ))?;
+            *m = *B::of(&material_seen(data, looked_up, surfaces, i + l))?;
         }
         let ng = V3::load(&surfaces.ng[i..]);
         let ns = V3::load(&surfaces.ns[i..]);
@@ -209,21 +192,19 @@ impl<const N: usize> SurfaceLanes<N> {
     }
 }
 
-/// The material that slot `i` of a chunk sees on `triangle` along `dir` (geometric normal
-/// `ng`): `looked_up[i]` where the scene has textures (`look_up_textures` wrote the chunk's
-/// column), else the scene's for that side. Inlined: out of line, its call and the copy of the
-/// material it returns took 2% of a Cornell box render.
+/// The material that slot `i` of a chunk's surfaces sees: `looked_up[i]` where the scene has
+/// textures (`look_up_textures` wrote the chunk's column), else the one `sort_by_material`
+/// found for the hit (`Surfaces::material`). Inlined: out of line, its call and the copy of
+/// the material it returns took 2% of a Cornell box render.
 #[inline(always)]
 pub(super) fn material_seen(
     data: &crate::scene::SceneData,
     looked_up: &[crate::bsdf::Material],
+    surfaces: &crate::components::SurfacesView,
     i: usize,
-    triangle: u32,
-    dir: Vec3,
-    ng: Vec3,
 ) -> crate::bsdf::Material {
     match looked_up.get(i) {
         Some(&material) => material,
-        None => data.scene.uniform_material_seen(triangle, -dir, ng),
+        None => data.scene.seen_material(surfaces.material[i]),
     }
 }

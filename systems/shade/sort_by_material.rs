@@ -128,6 +128,9 @@ crate::system! {
         {
             let tris = &scene.triangles;
             let prefetch = tris.memory_bytes() >= PREFETCH_FROM_BYTES;
+            // Without textures, the material each hit sees is found here, once, where its
+            // triangle is read anyway (the shading systems read it from the surface).
+            let uniform = !scene.has_textures();
             let (from_paths, from_dir, from_hits) = (&*paths, &rays.dir, &*hits);
             let dirs = scratch.rays.dir[..kept].par_chunks_mut(CHUNK);
             let triangles = scratch.hits.triangle[..kept].par_chunks_mut(CHUNK);
@@ -141,10 +144,11 @@ crate::system! {
                 .zip(order.par_chunks(CHUNK))
                 .for_each(|((((p, s), dir), triangle), from)| {
                     let chunk = KeptChunk { p, s, dir, triangle };
+                    let from_state = (from_paths, &from_dir[..], from_hits);
                     if prefetch {
-                        move_kept::<true>(tris, from_paths, from_dir, from_hits, chunk, from);
+                        move_kept::<true>(scene, uniform, from_state, chunk, from);
                     } else {
-                        move_kept::<false>(tris, from_paths, from_dir, from_hits, chunk, from);
+                        move_kept::<false>(scene, uniform, from_state, chunk, from);
                     }
                 });
             std::mem::swap(paths, &mut scratch.paths);
@@ -166,18 +170,18 @@ struct KeptChunk<'a> {
     triangle: &'a mut [u32],
 }
 
-/// Moves the kept paths of slots `from` into `to` and interpolates their surface points,
-/// prefetching the triangles ahead where `PREFETCH` (a copy of the loop each way, so that
-/// small scenes run the loop without it).
+/// Moves the kept paths of slots `from` into `to` and interpolates their surface points (and,
+/// where `uniform`, finds the material each one sees), prefetching the triangles ahead where
+/// `PREFETCH` (a copy of the loop each way, so that small scenes run the loop without it).
 #[inline(always)]
 fn move_kept<const PREFETCH: bool>(
-    tris: &TriangleColumns,
-    from_paths: &Paths,
-    from_dir: &[Vec3],
-    from_hits: &Hits,
+    scene: &PreparedScene,
+    uniform: bool,
+    (from_paths, from_dir, from_hits): (&Paths, &[Vec3], &Hits),
     to: KeptChunk,
     from: &[u32],
 ) {
+    let tris = &scene.triangles;
     let KeptChunk {
         mut p,
         s,
@@ -203,6 +207,9 @@ fn move_kept<const PREFETCH: bool>(
         s.p_error[i] = sp.p_error;
         s.ng[i] = sp.ng;
         s.ns[i] = sp.ns;
+        if uniform {
+            s.material[i] = scene.uniform_material_index_seen(t, -dir[i], sp.ng);
+        }
     }
 }
 
@@ -216,7 +223,8 @@ const PREFETCH_FROM_BYTES: usize = 4 << 20;
 /// vertex normals, which need the triangle's `smooth` entry, half as far ahead).
 const PREFETCH_AHEAD: usize = 16;
 
-/// Asks the CPU to bring into the cache what `surface_point` reads of `triangle`.
+/// Asks the CPU to bring into the cache what `surface_point` (and the material look-up) reads
+/// of `triangle`.
 #[inline(always)]
 fn prefetch_triangle(tris: &TriangleColumns, triangle: u32) {
     let i = triangle as usize;
@@ -226,6 +234,7 @@ fn prefetch_triangle(tris: &TriangleColumns, triangle: u32) {
         crate::cpu::prefetch(&tris.p2[i]);
         crate::cpu::prefetch(&tris.normal[i]);
         crate::cpu::prefetch(&tris.smooth[i]);
+        crate::cpu::prefetch(&tris.material[i]);
     }
 }
 

@@ -49,7 +49,7 @@ impl Surface {
             ng: surfaces.ng[i],
             ns: surfaces.ns[i],
         };
-        let material = material_seen(data, looked_up, i, triangle, dir, point.ng);
+        let material = material_seen(data, looked_up, surfaces, i);
         Surface::with_material(data, triangle, &point, dir, material)
     }
 
@@ -226,7 +226,7 @@ fn scatter_chunk<B: Bsdf, const N: usize>(
         while first + N <= p.len() {
             let i = first;
             let Some((surf, materials)) =
-                SurfaceLanes::<N>::at::<B>(data, &surfaces, looked_up, triangles, r.dir, i)
+                SurfaceLanes::<N>::at::<B>(data, &surfaces, looked_up, r.dir, i)
             else {
                 break;
             };
