@@ -34,6 +34,29 @@ pub struct TriangleColumns {
 }
 
 impl TriangleColumns {
+    /// Moves the columns to memory the kernel is asked to back with huge pages (see
+    /// `accel::advise_huge_pages`): each hit's surface point reads them at a random triangle,
+    /// and a random read of a column thousands of 4 KiB pages long misses the TLB as well.
+    pub fn move_to_huge_pages(&mut self) {
+        fn moved<T: Copy>(v: &mut Vec<T>) {
+            if std::mem::size_of_val(v.as_slice()) < (4 << 20) {
+                return;
+            }
+            let mut fresh = Vec::with_capacity(v.len());
+            crate::accel::advise_huge_pages(&fresh);
+            fresh.extend_from_slice(v);
+            *v = fresh;
+        }
+        moved(&mut self.p0);
+        moved(&mut self.p1);
+        moved(&mut self.p2);
+        moved(&mut self.normal);
+        moved(&mut self.material);
+        moved(&mut self.emitter);
+        moved(&mut self.smooth);
+        moved(&mut self.vertex_normals);
+    }
+
     pub fn len(&self) -> usize {
         self.p0.len()
     }

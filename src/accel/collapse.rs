@@ -141,7 +141,7 @@ pub(crate) fn collapse(bvh: &Bvh2, verts: &[[Vec3; 3]]) -> Collapsed {
 /// transparent huge pages: traversal reads nodes and packets all over hundreds of megabytes, and
 /// with 4 KiB pages nearly every read below the top of the tree misses the TLB. Only a hint:
 /// where the kernel refuses, nothing changes.
-fn advise_huge_pages<T>(v: &Vec<T>) {
+pub(crate) fn advise_huge_pages<T>(v: &Vec<T>) {
     #[cfg(target_os = "linux")]
     {
         const HUGE: usize = 2 << 20;

@@ -20,6 +20,7 @@
 
 mod bvh8;
 mod collapse;
+pub(crate) use collapse::advise_huge_pages;
 #[cfg(target_arch = "x86_64")]
 mod packet;
 mod stack;

@@ -473,6 +473,7 @@ pub fn prepare(scene: &SceneWorld) -> Result<PreparedScene, SceneError> {
         warnings,
     };
     prepared.textured = prepared.uses_textures();
+    prepared.triangles.move_to_huge_pages();
     Ok(prepared)
 }
 
