@@ -35,7 +35,7 @@ pub struct TriangleColumns {
 
 impl TriangleColumns {
     /// Moves the columns to memory the kernel is asked to back with huge pages (see
-    /// `accel::advise_huge_pages`): each hit's surface point reads them at a random triangle,
+    /// `cpu::advise_huge_pages`): each hit's surface point reads them at a random triangle,
     /// and a random read of a column thousands of 4 KiB pages long misses the TLB as well.
     pub fn move_to_huge_pages(&mut self) {
         fn moved<T: Copy>(v: &mut Vec<T>) {
@@ -43,7 +43,7 @@ impl TriangleColumns {
                 return;
             }
             let mut fresh = Vec::with_capacity(v.len());
-            crate::accel::advise_huge_pages(&fresh);
+            crate::cpu::advise_huge_pages(&fresh);
             fresh.extend_from_slice(v);
             *v = fresh;
         }

@@ -81,9 +81,9 @@ pub(crate) fn collapse(bvh: &Bvh2, verts: &[[Vec3; 3]]) -> Collapsed {
     tree.nodes.reserve_exact(node_end - top_nodes);
     tree.packets.reserve_exact(packet_end - top_packets);
     tree.lanes.reserve_exact((packet_end - top_packets) * LANES);
-    advise_huge_pages(&tree.nodes);
-    advise_huge_pages(&tree.packets);
-    advise_huge_pages(&tree.lanes);
+    crate::cpu::advise_huge_pages(&tree.nodes);
+    crate::cpu::advise_huge_pages(&tree.packets);
+    crate::cpu::advise_huge_pages(&tree.lanes);
     // The part that holds element `i` of the array whose parts start at `starts`.
     let part_of = |starts: &[usize], i: usize| starts.partition_point(|&s| s <= i) - 1;
     tree.nodes
@@ -134,25 +134,6 @@ pub(crate) fn collapse(bvh: &Bvh2, verts: &[[Vec3; 3]]) -> Collapsed {
         tree: Bvh8::new(tree.nodes, tree.packets.len()),
         packets: tree.packets,
         lanes: tree.lanes,
-    }
-}
-
-/// Asks the kernel to back the whole 2 MiB pages of `v`'s allocation (its capacity) with
-/// transparent huge pages: traversal reads nodes and packets all over hundreds of megabytes, and
-/// with 4 KiB pages nearly every read below the top of the tree misses the TLB. Only a hint:
-/// where the kernel refuses, nothing changes.
-pub(crate) fn advise_huge_pages<T>(v: &Vec<T>) {
-    #[cfg(target_os = "linux")]
-    {
-        const HUGE: usize = 2 << 20;
-        let start = v.as_ptr() as usize;
-        let end = start + v.capacity() * std::mem::size_of::<T>();
-        let (lo, hi) = (start.next_multiple_of(HUGE), end / HUGE * HUGE);
-        if hi > lo {
-            // SAFETY: madvise on whole pages inside `v`'s own allocation; MADV_HUGEPAGE only
-            // changes how the kernel backs them, never their contents or their validity.
-            unsafe { libc::madvise(lo as *mut libc::c_void, hi - lo, libc::MADV_HUGEPAGE) };
-        }
     }
 }
 

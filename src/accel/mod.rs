@@ -20,7 +20,6 @@
 
 mod bvh8;
 mod collapse;
-pub(crate) use collapse::advise_huge_pages;
 #[cfg(target_arch = "x86_64")]
 mod packet;
 mod stack;
