@@ -33,9 +33,36 @@ pub const WAVEFRONT: usize = 1 << 18;
 /// (docs/measurements/2026-12-02-zen5-sitting-and-vec3-permutes.md).
 pub const WAVEFRONT_PER_THREAD: usize = 1 << 14;
 
-/// PT's paths in flight where `--wavefront` is not given: `WAVEFRONT_PER_THREAD` for each thread
-/// of the current pool, at most `WAVEFRONT`.
-pub fn default_wavefront() -> usize {
+/// The wavefront's paths in flight a thread on a scene whose tree and triangles take more than
+/// `BIG_SCENE_BYTES`: far beyond the last-level cache, so a wave's columns (280 bytes a path)
+/// are best small enough to stay in the core's own cache. On the Zen 5 (32 MiB of L3, 1 MiB of
+/// L2 a core), against `WAVEFRONT_PER_THREAD`: big_1m (141 MB) 1.11x / 1.12x at one / two
+/// threads, big_5m 1.14x / 1.09x; big_100k (19 MB) 1.06x / 0.94x, cornell_box and door_ajar
+/// 0.96-1.02x (docs/measurements/2026-12-02-material-index-and-huge-columns.md).
+pub const BIG_SCENE_WAVEFRONT_PER_THREAD: usize = 1 << 12;
+
+/// See `BIG_SCENE_WAVEFRONT_PER_THREAD`: between big_100k's 19 MB and big_1m's 141 MB, twice
+/// the measured machines' last-level cache.
+pub const BIG_SCENE_BYTES: usize = 64 << 20;
+
+/// PT's wavefront's paths in flight where `--wavefront` is not given, for a scene whose tree and
+/// triangles take `scene_bytes`: `WAVEFRONT_PER_THREAD` (or `BIG_SCENE_WAVEFRONT_PER_THREAD`)
+/// for each thread of the current pool, at most `WAVEFRONT`. The image does not depend on it.
+pub fn default_wavefront(scene_bytes: usize) -> usize {
+    let per_thread = if scene_bytes > BIG_SCENE_BYTES {
+        BIG_SCENE_WAVEFRONT_PER_THREAD
+    } else {
+        WAVEFRONT_PER_THREAD
+    };
+    per_thread
+        .saturating_mul(rayon::current_num_threads())
+        .min(WAVEFRONT)
+}
+
+/// The megakernel's paths in flight where `--wavefront` is not given: `WAVEFRONT_PER_THREAD`
+/// for each thread, at most `WAVEFRONT`, whatever the scene (it is the control the wavefront is
+/// measured against).
+pub fn default_megakernel_wave() -> usize {
     WAVEFRONT_PER_THREAD
         .saturating_mul(rayon::current_num_threads())
         .min(WAVEFRONT)

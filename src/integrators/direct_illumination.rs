@@ -47,7 +47,7 @@ crate::system! {
                 progress: &|_, _| {},
             },
             from,
-            crate::integrators::pt::default_wavefront(),
+            crate::integrators::pt::default_wavefront(data.geometry_bytes()),
         );
         let n = outcome.film.width * outcome.film.height;
         *direct = Some(outcome.film);

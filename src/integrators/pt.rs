@@ -273,12 +273,15 @@ pub fn render_with(
     from: Option<Resume>,
 ) -> RenderOutcome {
     let settings = PtSettings::from(s);
-    let wavefront = s.wavefront.unwrap_or_else(default_wavefront);
     match s.kernel {
         Kernel::Wavefront => {
+            let wavefront = s
+                .wavefront
+                .unwrap_or_else(|| default_wavefront(data.geometry_bytes()));
             render_waves_of::<PtState>(data, settings, budget, control, from, wavefront)
         }
         Kernel::Megakernel => {
+            let wavefront = s.wavefront.unwrap_or_else(default_megakernel_wave);
             render_waves_of::<crate::integrators::pt_megakernel::MegakernelState>(
                 data, settings, budget, control, from, wavefront,
             )
@@ -293,7 +296,8 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    render_waves_of::<PtState>(data, settings, budget, control, None, default_wavefront())
+    let wavefront = default_wavefront(data.geometry_bytes());
+    render_waves_of::<PtState>(data, settings, budget, control, None, wavefront)
 }
 
 /// The systems of its graphs bound to the columns of `PtState`.

@@ -842,4 +842,11 @@ impl SceneData {
         let accel = crate::accel::Accel::build(&scene.triangles);
         SceneData { scene, accel }
     }
+
+    /// Bytes of the tree (nodes and triangles in leaf order) and the triangle columns: what
+    /// tracing and shading read at random.
+    pub fn geometry_bytes(&self) -> usize {
+        let (nodes, leaves) = self.accel.memory_bytes();
+        nodes + leaves + self.scene.triangles.memory_bytes()
+    }
 }
