@@ -319,12 +319,6 @@ impl PreparedScene {
         }
     }
 
-    /// `uniform_material_index_seen`'s material.
-    #[inline(always)]
-    pub fn uniform_material_seen(&self, tri: u32, wo: Vec3, ng: Vec3) -> Material {
-        self.seen_material(self.uniform_material_index_seen(tri, wo, ng))
-    }
-
     /// Whether a material some triangle uses (or its back) varies over its surface: the
     /// wavefront then holds `look_up_textures`. Found once, when the scene is prepared
     /// (`sort_by_material` asks it every bounce).
