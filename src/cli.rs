@@ -220,8 +220,9 @@ pub struct KernelArgs {
     #[arg(long, value_enum, default_value_t = KernelName::Wavefront)]
     pub kernel: KernelName,
     /// Samples in flight per wave (pt, bdpt, vcm, bpm; default for pt 16384 a thread, 4096 on
-    /// scenes whose tree and triangles pass 64 MiB, at most 262144; 32768 for the others). vcm
-    /// and bpm merge with the light subpaths of the same wave.
+    /// scenes whose tree and triangles pass 64 MiB, at most 262144; for bdpt 1024 a thread, at
+    /// most 32768; 32768 for vcm and bpm). vcm and bpm merge with the light subpaths of the
+    /// same wave.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
     pub wavefront: Option<u64>,
     /// Paths pt's wavefront shades at a time in vector lanes: 8 (AVX2's registers) or 16

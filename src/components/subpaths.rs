@@ -10,9 +10,27 @@ use crate::sampling::{PrimarySamples, SampleKey, Sampler, SamplerKind, Stream};
 use crate::weight_tails::MergedLight;
 use glam::Vec3;
 
-/// Samples per wave. Each holds two subpaths and their connections, about ten times a path
-/// tracer's state, so the wave is smaller than PT's.
+/// Samples in flight at most by default (vcm's and bpm's waves; bdpt's are smaller, see
+/// `WAVEFRONT_PER_THREAD`). Each holds two subpaths and their connections, about ten times a
+/// path tracer's state, so the wave is smaller than PT's.
 pub const WAVEFRONT: usize = 1 << 15;
+
+/// BDPT's samples in flight a thread by default (`WAVEFRONT` at most in all; each thread
+/// renders whole waves of this many). A sample's subpaths and connections take about 5 KB, so
+/// a thread's wave stays in its caches from one system to the next. Against `WAVEFRONT` in all,
+/// on an AMD EPYC (Zen 5) at one / two threads, medians of three alternated rounds: cornell_box
+/// 1.12x / 1.04x, door_ajar 1.24x / 1.36x (docs/measurements/2026-12-03-bdpt-wave-size.md).
+/// A multiple of `CACHE_GROUP`, so LVC-BDPT's groups do not depend on the thread count.
+pub const WAVEFRONT_PER_THREAD: usize = CACHE_GROUP;
+const _: () = assert!(WAVEFRONT_PER_THREAD % CACHE_GROUP == 0 && WAVEFRONT % CACHE_GROUP == 0);
+
+/// BDPT's samples in flight where `--wavefront` is not given: `WAVEFRONT_PER_THREAD` for each
+/// thread of the current pool, at most `WAVEFRONT`. The image does not depend on it.
+pub fn default_wavefront() -> usize {
+    WAVEFRONT_PER_THREAD
+        .saturating_mul(rayon::current_num_threads())
+        .min(WAVEFRONT)
+}
 
 /// Samples per chunk of the connection work (much heavier per item than a bounce).
 pub const CONNECT_CHUNK: usize = 64;

@@ -29,7 +29,7 @@
 
 use crate::components::{Connections, Hits, PathVertices, Rays, ShadowRays, Walkers};
 use crate::film::{Film, Image};
-use crate::integrators::driver::render_waves;
+use crate::integrators::driver::render_waves_of;
 use crate::integrators::{
     Budget, Control, IntegratorState, RenderOutcome, RenderSettings, SceneData, Wave, WaveState,
 };
@@ -438,7 +438,7 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    render_waves::<BdptState>(data, settings, budget, control, None)
+    render_waves_of::<BdptState>(data, settings, budget, control, None, default_wavefront())
 }
 
 /// The subpaths of samples `first..first + len` (global sample ids), camera and light, as the
