@@ -19,14 +19,18 @@ pub const WAVEFRONT: usize = 1 << 15;
 /// renders whole waves of this many). A sample's subpaths and connections take about 5 KB, so
 /// a thread's wave stays in its caches from one system to the next. Against `WAVEFRONT` in all,
 /// on an AMD EPYC (Zen 5) at one / two threads, medians of three alternated rounds: cornell_box
-/// 1.12x / 1.04x, door_ajar 1.24x / 1.36x (docs/measurements/2026-12-03-bdpt-wave-size.md).
-/// A multiple of `CACHE_GROUP`, so LVC-BDPT's groups do not depend on the thread count.
-pub const WAVEFRONT_PER_THREAD: usize = CACHE_GROUP;
-const _: () = assert!(WAVEFRONT_PER_THREAD % CACHE_GROUP == 0 && WAVEFRONT % CACHE_GROUP == 0);
+/// 1.11x / 1.05x, door_ajar 1.18x / 1.28x, torus_glass 1.73x / 1.23x
+/// (docs/measurements/2026-12-03-bdpt-wave-size.md).
+pub const WAVEFRONT_PER_THREAD: usize = 1 << 10;
 
 /// BDPT's samples in flight where `--wavefront` is not given: `WAVEFRONT_PER_THREAD` for each
-/// thread of the current pool, at most `WAVEFRONT`. The image does not depend on it.
-pub fn default_wavefront() -> usize {
+/// thread of the current pool, at most `WAVEFRONT`, where the image does not depend on it;
+/// through a light-vertex cache, whose groups are counted from each wave's start (so the image
+/// does depend on the waves), `WAVEFRONT` whatever the thread count.
+pub fn default_wavefront(settings: &BdptSettings) -> usize {
+    if settings.light_vertex_cache > 0 {
+        return WAVEFRONT;
+    }
     WAVEFRONT_PER_THREAD
         .saturating_mul(rayon::current_num_threads())
         .min(WAVEFRONT)

@@ -438,7 +438,8 @@ pub fn render(
     budget: Budget,
     control: &Control,
 ) -> RenderOutcome {
-    render_waves_of::<BdptState>(data, settings, budget, control, None, default_wavefront())
+    let wavefront = default_wavefront(&settings);
+    render_waves_of::<BdptState>(data, settings, budget, control, None, wavefront)
 }
 
 /// The subpaths of samples `first..first + len` (global sample ids), camera and light, as the

@@ -106,7 +106,9 @@ pub static REGISTRY: [IntegratorInfo; 10] = [
         options: &["--mis", "--strategy-images", "--light-vertex-cache"],
         render: |data, s, budget, control, from| {
             let settings = bdpt::BdptSettings::from(s);
-            let wavefront = s.wavefront.unwrap_or_else(bdpt::default_wavefront);
+            let wavefront = s
+                .wavefront
+                .unwrap_or_else(|| bdpt::default_wavefront(&settings));
             driver::render_waves_of::<bdpt::BdptState>(
                 data, settings, budget, control, from, wavefront,
             )
