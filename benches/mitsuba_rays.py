@@ -15,7 +15,10 @@ Usage: python mitsuba_rays.py SCENE.xml RAYS_DIR [THREADS] [VARIANT]
     stagelight bench --rays rays/big_1m --threads 1
 
 Each group (all rays, bounce 0, bounce 1) is traced four times and the median of the last
-three is printed as rays/s. Every ray starts a hundred-thousandth of the scene's diagonal
+three is printed as rays/s; where RAYS_DIR holds the hits.npy `stagelight bench --rays` wrote,
+also how many answers differ from stagelight's (a closest hit: one tracer hits and the other
+does not, or the distances differ by more than a relative 1e-4; a shadow ray: one finds it
+occluded and the other does not). Every ray starts a hundred-thousandth of the scene's diagonal
 along its direction (its t_max shortened as much), as in embree_rays.py: Mitsuba, like
 embreex, would otherwise find a ray leaving a surface at t = 0 on that surface."""
 import json, sys, time
@@ -32,6 +35,10 @@ scene = mi.load_file(scene_file)
 bounds = scene.bbox()
 offset = 1e-5 * float(dr.norm(bounds.extents()))
 meta = json.load(open(f'{ray_dir}/rays.json'))
+try:
+    ours = np.load(f'{ray_dir}/hits.npy')['t']
+except FileNotFoundError:
+    ours = None
 
 
 def rays_of(columns):
@@ -53,18 +60,36 @@ def rays_of(columns):
 print(f'{scene_file}: {variant}, {dr.thread_count()} thread(s); median of 3 runs after one')
 for kind in ('closest', 'shadow'):
     rows = np.load(f'{ray_dir}/{kind}.npy')
-    groups = [('all', rows)] + [(f"bounce {g['bounce']}", rows[g['first']:g['first'] + g['count']])
-                                for g in meta[kind] if g['bounce'] <= 1]
-    for name, part in groups:
+    # hits.npy: the closest-hit rays' answers, then the shadow rays'.
+    first = 0 if kind == 'closest' else len(np.load(f'{ray_dir}/closest.npy', mmap_mode='r'))
+    groups = [('all', 0, rows)] + [(f"bounce {g['bounce']}", g['first'],
+                                    rows[g['first']:g['first'] + g['count']])
+                                   for g in meta[kind] if g['bounce'] <= 1]
+    for name, start, part in groups:
         ray = rays_of(part)
         times = []
         for _ in range(4):
-            start = time.perf_counter()
+            began = time.perf_counter()
             if kind == 'closest':
-                dr.eval(scene.ray_intersect_preliminary(ray).t)
+                answer = scene.ray_intersect_preliminary(ray).t
             else:
-                dr.eval(scene.ray_test(ray))
-            times.append(time.perf_counter() - start)
+                answer = scene.ray_test(ray)
+            dr.eval(answer)
+            times.append(time.perf_counter() - began)
         median = sorted(times[1:])[1]
-        print(f'{kind:8} {name:10} {len(part):8} rays {len(part) / median / 1e6:7.2f} M rays/s',
-              flush=True)
+        differ = ''
+        if ours is not None:
+            theirs = np.array(answer)
+            mine = ours[first + start:first + start + len(part)]
+            if kind == 'closest':
+                length = np.linalg.norm(part[:, 4:7], axis=1)
+                theirs = np.where(np.isfinite(theirs), theirs + offset / length, np.inf)
+                both = np.isfinite(theirs) & np.isfinite(mine)
+                with np.errstate(invalid='ignore'):
+                    apart = np.abs(theirs - mine) > 1e-4 * np.maximum(np.abs(mine), 1e-30)
+                count = int(np.sum(np.isfinite(theirs) != np.isfinite(mine)) + np.sum(both & apart))
+            else:
+                count = int(np.sum(theirs.astype(bool) != np.isfinite(mine)))
+            differ = f'  {count} differ'
+        print(f'{kind:8} {name:10} {len(part):8} rays {len(part) / median / 1e6:7.2f} M rays/s'
+              f'{differ}', flush=True)
