@@ -221,8 +221,8 @@ pub struct KernelArgs {
     pub kernel: KernelName,
     /// Samples in flight per wave (pt, bdpt, vcm, bpm; default for pt 16384 a thread, 4096 on
     /// scenes whose tree and triangles pass 64 MiB, at most 262144; for bdpt 1024 a thread, at
-    /// most 32768, and 32768 with a light-vertex cache; 32768 for vcm and bpm). vcm and bpm merge with the light subpaths of the
-    /// same wave.
+    /// most 32768, and 32768 with a light-vertex cache; 32768 for vcm and bpm). vcm and bpm
+    /// merge with the light subpaths of the same wave.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
     pub wavefront: Option<u64>,
     /// Paths pt's wavefront shades at a time in vector lanes: 8 (AVX2's registers) or 16

@@ -54,21 +54,14 @@ pub fn default_wavefront(scene_bytes: usize) -> usize {
     } else {
         WAVEFRONT_PER_THREAD
     };
-    in_all(per_thread)
+    crate::integrators::driver::waves_for_threads(per_thread, WAVEFRONT)
 }
 
 /// The megakernel's paths in flight where `--wavefront` is not given: `WAVEFRONT_PER_THREAD`
 /// for each thread, at most `WAVEFRONT`, whatever the scene (it is the control the wavefront is
 /// measured against).
 pub fn default_megakernel_wave() -> usize {
-    in_all(WAVEFRONT_PER_THREAD)
-}
-
-/// `per_thread` paths for each thread of the current pool, at most `WAVEFRONT`.
-fn in_all(per_thread: usize) -> usize {
-    per_thread
-        .saturating_mul(rayon::current_num_threads())
-        .min(WAVEFRONT)
+    crate::integrators::driver::waves_for_threads(WAVEFRONT_PER_THREAD, WAVEFRONT)
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

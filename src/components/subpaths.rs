@@ -31,9 +31,7 @@ pub fn default_wavefront(settings: &BdptSettings) -> usize {
     if settings.light_vertex_cache > 0 {
         return WAVEFRONT;
     }
-    WAVEFRONT_PER_THREAD
-        .saturating_mul(rayon::current_num_threads())
-        .min(WAVEFRONT)
+    crate::integrators::driver::waves_for_threads(WAVEFRONT_PER_THREAD, WAVEFRONT)
 }
 
 /// Samples per chunk of the connection work (much heavier per item than a bounce).

@@ -93,6 +93,14 @@ pub trait PassState: IntegratorState {
 
 pub use crate::components::Wave;
 
+/// A default wave: `per_thread` samples for each thread of the current pool (each renders
+/// whole waves on a state of its own, `render_waves_of`), at most `most` in all.
+pub fn waves_for_threads(per_thread: usize, most: usize) -> usize {
+    per_thread
+        .saturating_mul(rayon::current_num_threads())
+        .min(most)
+}
+
 /// Renders with a sample-based integrator until the budget is spent or a stop is asked for,
 /// continuing from `from` when given: a sample budget counts the passes already done
 /// (`SamplesPerPixel(n)` ends at pass n), a time budget counts from now. The outcome's film,
