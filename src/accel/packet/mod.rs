@@ -9,18 +9,19 @@
 //! pass of the same watertight test the single-ray traversal runs (the same operations on the
 //! same inputs, lane by lane, so the same t and barycentrics). Where a ray's edge function
 //! rounds to exactly zero, that ray's test of that triangle is redone by the scalar test, as in
-//! the single-ray one. The packet visits children in the order of the nearest entry distance
-//! of its rays, not each ray's own order; `closer`'s tie-break makes the closest hit the same
-//! whatever the order, so every ray finds the hit the single-ray traversal finds, bit for bit,
-//! and every shadow ray the same answer. Measured against single rays on cornell_box,
-//! door_ajar and big_1m in docs/measurements/2026-11-29-ray-packets.md (sixteen rays) and
+//! the single-ray one. A closest-hit packet visits children in the order of the nearest entry
+//! distance of its rays, not each ray's own order, and a shadow packet in slot order;
+//! `closer`'s tie-break makes the closest hit the same whatever the order, so every ray finds
+//! the hit the single-ray traversal finds, bit for bit, and every shadow ray the same answer.
+//! Measured against single rays on cornell_box, door_ajar and big_1m in
+//! docs/measurements/2026-11-29-ray-packets.md (sixteen rays) and
 //! docs/measurements/2026-12-02-avx2-packets.md (eight).
 
 mod simd;
 
 pub(crate) use simd::{Avx2, Avx512, Simd};
 
-use super::bvh8::{Bvh8, LANE_MASK, LEAF, PADDING, ROOT};
+use super::bvh8::{Bvh8, LANE_MASK, LEAF, Node, PADDING, ROOT};
 use super::stack::TraversalStack;
 use super::triangle::{LANES, RANGE_MARGIN, TraversalRay, TrianglePacket, closer};
 use super::{LeafTriangles, NO_HINT, TriangleHit};
@@ -430,7 +431,13 @@ impl Bvh8 {
                 }
             } else {
                 // SAFETY: as the caller guarantees.
-                let next = unsafe { self.visit_node(current, &lanes, active, best, &mut stack) };
+                let next = unsafe {
+                    if ANY {
+                        self.visit_node_any_order(current, &lanes, active, best, &mut stack)
+                    } else {
+                        self.visit_node(current, &lanes, active, best, &mut stack)
+                    }
+                };
                 if let Some((reference, rays)) = next {
                     (current, active) = (reference, rays);
                     continue;
@@ -457,7 +464,8 @@ impl Bvh8 {
 
     /// Tests the children of node `node` against the `active` rays: pushes all the entered
     /// children but the nearest (farthest first), and returns the nearest with its rays.
-    /// Children are ordered by their nearest entry distance over the rays (then reference).
+    /// Children are ordered by their nearest entry distance over the rays (then slot), which
+    /// lets a closest-hit packet skip the children beyond its hits.
     ///
     /// # Safety
     /// As for `closest_packet`.
@@ -472,65 +480,124 @@ impl Bvh8 {
     ) -> Option<(u32, u32)> {
         let node = &self.nodes[node as usize];
         // SAFETY: as the caller guarantees.
-        unsafe {
-            let t_max = S::load(&best.t);
-            let active_lanes = S::from_bits(active);
-            let mut entered = [Pending::default(); 8];
-            let mut keys = [0u64; 8];
-            let mut n = 0;
-            for c in 0..8 {
-                let reference = node.child[c];
-                if reference == 0 {
-                    continue;
-                }
-                let mut t0 = S::zero();
-                let mut t1 = t_max;
-                for axis in 0..3 {
-                    let lo = S::splat(node.planes[axis][0][c]);
-                    let hi = S::splat(node.planes[axis][1][c]);
-                    let neg = lanes.neg[axis];
-                    let near = S::blend(neg, lo, hi);
-                    let far = S::blend(neg, hi, lo);
-                    let inv = lanes.inv[axis];
-                    let tn = S::mul(S::sub(near, lanes.o_near[axis]), inv);
-                    let tf = S::mul(S::sub(far, lanes.o_far[axis]), inv);
-                    // As in `box_hits8`: a NaN slab distance constrains nothing.
-                    t0 = S::max(tn, t0);
-                    t1 = S::min(tf, t1);
-                }
-                let entering = S::and_k(active_lanes, S::le(t0, t1));
-                let rays = S::bits(entering);
-                if rays == 0 {
-                    continue;
-                }
-                let nearest = S::reduce_min(entering, t0);
-                let mut pending = Pending {
-                    reference,
-                    rays,
-                    entry: [0.0; WIDTH],
-                };
-                S::store(&mut pending.entry, t0);
-                // Entry distances are not negative, so their bits order like their values.
-                let key = (u64::from(nearest.to_bits()) << 32) | n as u64;
-                // Insertion by key, farthest first.
-                let mut j = n;
-                while j > 0 && keys[j - 1] < key {
-                    keys[j] = keys[j - 1];
-                    j -= 1;
-                }
-                keys[j] = key;
-                entered[n] = pending;
-                n += 1;
+        let (t_max, active) = unsafe { (S::load(&best.t), S::from_bits(active)) };
+        let mut entered = [Pending::default(); 8];
+        let mut keys = [0u64; 8];
+        let mut n = 0;
+        for c in 0..8 {
+            // SAFETY: as the caller guarantees.
+            let Some((pending, entering, t0)) =
+                (unsafe { enter_child(node, c, lanes, active, t_max) })
+            else {
+                continue;
+            };
+            // SAFETY: as the caller guarantees.
+            let nearest = unsafe { S::reduce_min(entering, t0) };
+            // Entry distances are not negative, so their bits order like their values.
+            let key = (u64::from(nearest.to_bits()) << 32) | n as u64;
+            // Insertion by key, farthest first.
+            let mut j = n;
+            while j > 0 && keys[j - 1] < key {
+                keys[j] = keys[j - 1];
+                j -= 1;
             }
-            if n == 0 {
-                return None;
-            }
-            for &k in &keys[..n - 1] {
-                stack.push(entered[k as u32 as usize]);
-            }
-            let nearest = &entered[keys[n - 1] as u32 as usize];
-            Some((nearest.reference, nearest.rays))
+            keys[j] = key;
+            entered[n] = pending;
+            n += 1;
         }
+        if n == 0 {
+            return None;
+        }
+        for &k in &keys[..n - 1] {
+            stack.push(entered[k as u32 as usize]);
+        }
+        let nearest = &entered[keys[n - 1] as u32 as usize];
+        Some((nearest.reference, nearest.rays))
+    }
+
+    /// `visit_node` for shadow rays, which take any hit: the entered children in slot order
+    /// (the lowest returned, the others pushed so that they pop lowest first), with no
+    /// nearest entry over the rays to find per child. Against the order by distance
+    /// (`bench --rays`, one thread, three alternated rounds on an Intel Xeon: see
+    /// docs/measurements/2026-12-03-intel-sitting-and-shadow-packet-order.md): door_ajar's
+    /// shadow rays 1.63x as fast, cornell_box's 1.06x, big_1m's 1.10x. The answers are the same
+    /// whatever the order.
+    ///
+    /// # Safety
+    /// As for `closest_packet`.
+    #[inline(always)]
+    unsafe fn visit_node_any_order<S: Simd>(
+        &self,
+        node: u32,
+        lanes: &Lanes<S>,
+        active: u32,
+        best: &Best,
+        stack: &mut TraversalStack<Pending, 24>,
+    ) -> Option<(u32, u32)> {
+        let node = &self.nodes[node as usize];
+        // SAFETY: as the caller guarantees.
+        let (t_max, active) = unsafe { (S::load(&best.t), S::from_bits(active)) };
+        let mut first: Option<Pending> = None;
+        for c in (0..8).rev() {
+            // SAFETY: as the caller guarantees.
+            if let Some((pending, _, _)) = unsafe { enter_child(node, c, lanes, active, t_max) }
+                && let Some(later) = first.replace(pending)
+            {
+                stack.push(later);
+            }
+        }
+        first.map(|p| (p.reference, p.rays))
+    }
+}
+
+/// Child `c` of `node` against the `active` rays (up to their `t_max`): the child with the
+/// rays that enter its box and their entry distances, and the same as lanes (for the nearest
+/// entry, which only the closest-hit order needs); None where no ray enters it or the slot is
+/// empty.
+///
+/// # Safety
+/// As for `Lanes::new`.
+#[inline(always)]
+unsafe fn enter_child<S: Simd>(
+    node: &Node,
+    c: usize,
+    lanes: &Lanes<S>,
+    active: S::K,
+    t_max: S::V,
+) -> Option<(Pending, S::K, S::V)> {
+    let reference = node.child[c];
+    if reference == 0 {
+        return None;
+    }
+    // SAFETY: as the caller guarantees.
+    unsafe {
+        let mut t0 = S::zero();
+        let mut t1 = t_max;
+        for axis in 0..3 {
+            let lo = S::splat(node.planes[axis][0][c]);
+            let hi = S::splat(node.planes[axis][1][c]);
+            let neg = lanes.neg[axis];
+            let near = S::blend(neg, lo, hi);
+            let far = S::blend(neg, hi, lo);
+            let inv = lanes.inv[axis];
+            let tn = S::mul(S::sub(near, lanes.o_near[axis]), inv);
+            let tf = S::mul(S::sub(far, lanes.o_far[axis]), inv);
+            // As in `box_hits8`: a NaN slab distance constrains nothing.
+            t0 = S::max(tn, t0);
+            t1 = S::min(tf, t1);
+        }
+        let entering = S::and_k(active, S::le(t0, t1));
+        let rays = S::bits(entering);
+        if rays == 0 {
+            return None;
+        }
+        let mut pending = Pending {
+            reference,
+            rays,
+            entry: [0.0; WIDTH],
+        };
+        S::store(&mut pending.entry, t0);
+        Some((pending, entering, t0))
     }
 }
 
