@@ -431,13 +431,8 @@ impl Bvh8 {
                 }
             } else {
                 // SAFETY: as the caller guarantees.
-                let next = unsafe {
-                    if ANY {
-                        self.visit_node_any_order(current, &lanes, active, best, &mut stack)
-                    } else {
-                        self.visit_node(current, &lanes, active, best, &mut stack)
-                    }
-                };
+                let next =
+                    unsafe { self.visit_node::<S, ANY>(current, &lanes, active, best, &mut stack) };
                 if let Some((reference, rays)) = next {
                     (current, active) = (reference, rays);
                     continue;
@@ -463,14 +458,22 @@ impl Bvh8 {
     }
 
     /// Tests the children of node `node` against the `active` rays: pushes all the entered
-    /// children but the nearest (farthest first), and returns the nearest with its rays.
-    /// Children are ordered by their nearest entry distance over the rays (then slot), which
-    /// lets a closest-hit packet skip the children beyond its hits.
+    /// children but one and returns that one with its rays.
+    ///
+    /// Closest-hit packets (`ANY` false) take the nearest child and push the others farthest
+    /// first, ordered by their nearest entry distance over the rays (then slot), which lets
+    /// the packet skip the children beyond its hits. Shadow packets take any hit, so they
+    /// visit the entered children in slot order (the lowest returned, the others popping
+    /// lowest first) with no nearest entry to find per child: against the order by distance
+    /// (`bench --rays`, one thread, three alternated rounds on an Intel Xeon: see
+    /// docs/measurements/2026-12-03-intel-sitting-and-shadow-packet-order.md) door_ajar's
+    /// shadow rays ran 1.63x as fast, cornell_box's 1.06x, big_1m's 1.10x. The answers are
+    /// the same whatever the order.
     ///
     /// # Safety
     /// As for `closest_packet`.
     #[inline(always)]
-    unsafe fn visit_node<S: Simd>(
+    unsafe fn visit_node<S: Simd, const ANY: bool>(
         &self,
         node: u32,
         lanes: &Lanes<S>,
@@ -481,6 +484,18 @@ impl Bvh8 {
         let node = &self.nodes[node as usize];
         // SAFETY: as the caller guarantees.
         let (t_max, active) = unsafe { (S::load(&best.t), S::from_bits(active)) };
+        if ANY {
+            let mut first: Option<Pending> = None;
+            for c in (0..8).rev() {
+                // SAFETY: as the caller guarantees.
+                if let Some((pending, _, _)) = unsafe { enter_child(node, c, lanes, active, t_max) }
+                    && let Some(later) = first.replace(pending)
+                {
+                    stack.push(later);
+                }
+            }
+            return first.map(|p| (p.reference, p.rays));
+        }
         let mut entered = [Pending::default(); 8];
         let mut keys = [0u64; 8];
         let mut n = 0;
@@ -513,40 +528,6 @@ impl Bvh8 {
         }
         let nearest = &entered[keys[n - 1] as u32 as usize];
         Some((nearest.reference, nearest.rays))
-    }
-
-    /// `visit_node` for shadow rays, which take any hit: the entered children in slot order
-    /// (the lowest returned, the others pushed so that they pop lowest first), with no
-    /// nearest entry over the rays to find per child. Against the order by distance
-    /// (`bench --rays`, one thread, three alternated rounds on an Intel Xeon: see
-    /// docs/measurements/2026-12-03-intel-sitting-and-shadow-packet-order.md): door_ajar's
-    /// shadow rays 1.63x as fast, cornell_box's 1.06x, big_1m's 1.10x. The answers are the same
-    /// whatever the order.
-    ///
-    /// # Safety
-    /// As for `closest_packet`.
-    #[inline(always)]
-    unsafe fn visit_node_any_order<S: Simd>(
-        &self,
-        node: u32,
-        lanes: &Lanes<S>,
-        active: u32,
-        best: &Best,
-        stack: &mut TraversalStack<Pending, 24>,
-    ) -> Option<(u32, u32)> {
-        let node = &self.nodes[node as usize];
-        // SAFETY: as the caller guarantees.
-        let (t_max, active) = unsafe { (S::load(&best.t), S::from_bits(active)) };
-        let mut first: Option<Pending> = None;
-        for c in (0..8).rev() {
-            // SAFETY: as the caller guarantees.
-            if let Some((pending, _, _)) = unsafe { enter_child(node, c, lanes, active, t_max) }
-                && let Some(later) = first.replace(pending)
-            {
-                stack.push(later);
-            }
-        }
-        first.map(|p| (p.reference, p.rays))
     }
 }
 
