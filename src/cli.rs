@@ -225,8 +225,9 @@ pub struct KernelArgs {
     /// merge with the light subpaths of the same wave.
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=1 << 30))]
     pub wavefront: Option<u64>,
-    /// Paths pt's wavefront shades at a time in vector lanes: 8 (AVX2's registers) or 16
-    /// (AVX-512's); default: the widest this CPU has. The image is the same.
+    /// Paths pt's wavefront shades at a time in vector lanes (and connections whose MIS weights
+    /// bdpt and vcm find at a time): 8 (AVX2's registers) or 16 (AVX-512's); default:
+    /// the widest this CPU has. The image is the same.
     #[arg(long, value_name = "8|16", value_parser = parse_lanes)]
     pub lanes: Option<crate::lanes::LaneWidth>,
 }

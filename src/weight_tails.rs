@@ -90,6 +90,16 @@ pub fn weight_tails(
     out: &mut Vec<WeightTail>,
 ) {
     out.clear();
+    append_weight_tails(vertices, side, heuristic, out);
+}
+
+/// `weight_tails`, appended to `out`.
+pub fn append_weight_tails(
+    vertices: &[Vertex],
+    side: Side,
+    heuristic: MisHeuristic,
+    out: &mut Vec<WeightTail>,
+) {
     let mut tail = WeightTail::default();
     out.push(tail);
     for (i, v) in vertices.iter().enumerate() {
@@ -174,6 +184,79 @@ fn camera_side(
     )
 }
 
+/// The area densities next to connection (s, t)'s joint as the connection makes them: at the
+/// camera subpath's z_{t-1} and z_{t-2} (`z_rev`, for t >= 2 and t >= 3) and at the light
+/// subpath's y_{s-1} and y_{s-2} (`y_rev`, for s >= 1 and s >= 2); zero where not read.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct JointDensities {
+    pub z_rev: [f32; 2],
+    pub y_rev: [f32; 2],
+}
+
+/// `PathContext::connection_weight_from_tails` from the connection's joint densities.
+pub fn connection_weight_from_densities(
+    (camera, camera_tails): (&[Vertex], &[WeightTail]),
+    (light, light_tails): (&[Vertex], &[WeightTail]),
+    (s, t): (usize, usize),
+    densities: JointDensities,
+    heuristic: MisHeuristic,
+    techniques: Techniques,
+) -> f32 {
+    debug_assert_eq!(techniques.connection_count, 1.0);
+    if s == 1 && t == 1 && light[0].is_at_infinity() {
+        // As `vcm_weight`: no such technique.
+        return 0.0;
+    }
+    let eta_h = h(heuristic, techniques.merge_count);
+    let connect = techniques.connect;
+    let y_last = (s >= 1).then(|| &light[s - 1]);
+    let y_before = (s >= 2).then(|| &light[s - 2]);
+    let mut sum = 1.0;
+    if t >= 2 {
+        let merge_last = s != 0;
+        sum += camera_side(
+            camera,
+            camera_tails,
+            t,
+            densities.z_rev,
+            merge_last,
+            heuristic,
+            (eta_h, connect),
+        );
+    }
+    if let Some(y) = y_last {
+        let mut near = [Near::default(); 2];
+        near[0] = Near {
+            rev: densities.y_rev[0],
+            fwd: y.pdf_fwd,
+            merge: s >= 2,
+            // Past a point light (s = 1) lies no strategy: no camera path hits it.
+            connect: (connect || s == 1) && !(s >= 2 && light[s - 2].delta) && !y.is_point_light(),
+        };
+        let count = if let Some(y_prev) = y_before {
+            near[1] = Near {
+                rev: densities.y_rev[1],
+                fwd: y_prev.pdf_fwd,
+                merge: s >= 3 && !y_prev.delta,
+                connect: (connect || s == 2)
+                    && !y_prev.delta
+                    && !(s >= 3 && light[s - 3].delta)
+                    && !y_prev.is_point_light(),
+            };
+            2
+        } else {
+            1
+        };
+        let tail = if s >= 2 {
+            light_tails[s - 2]
+        } else {
+            WeightTail::default()
+        };
+        sum += side_sum(&near[..count], tail, heuristic, eta_h, connect);
+    }
+    1.0 / sum
+}
+
 /// A light vertex y_s (s >= 1) as a merge with it is weighed: what the weight reads of y_s and
 /// of the subpath before it, kept beside the vertex so a merge does not visit the subpath.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -236,19 +319,31 @@ impl PathContext<'_> {
         heuristic: MisHeuristic,
         techniques: Techniques,
     ) -> f32 {
-        debug_assert_eq!(techniques.connection_count, 1.0);
-        if s == 1 && t == 1 && light[0].is_at_infinity() {
-            // As `vcm_weight`: no such technique.
-            return 0.0;
-        }
-        let eta_h = h(heuristic, techniques.merge_count);
-        let connect = techniques.connect;
+        let densities = self.joint_densities(camera, light, (s, t));
+        connection_weight_from_densities(
+            (camera, camera_tails),
+            (light, light_tails),
+            (s, t),
+            densities,
+            heuristic,
+            techniques,
+        )
+    }
+
+    /// The densities next to connection (s, t)'s joint that its weight reads.
+    #[inline]
+    pub fn joint_densities(
+        &self,
+        camera: &[Vertex],
+        light: &[Vertex],
+        (s, t): (usize, usize),
+    ) -> JointDensities {
         let z = &camera[t - 1];
         let y_last = (s >= 1).then(|| &light[s - 1]);
         let y_before = (s >= 2).then(|| &light[s - 2]);
-        let mut sum = 1.0;
+        let mut densities = JointDensities::default();
         if t >= 2 {
-            let z_rev = [
+            densities.z_rev = [
                 match y_last {
                     Some(y) => self.pdf_area(y, y_before, z),
                     None => self.pdf_light_origin(z),
@@ -260,51 +355,15 @@ impl PathContext<'_> {
                     None => self.pdf_light_dir(z, &camera[t - 2]),
                 },
             ];
-            let merge_last = s != 0;
-            sum += camera_side(
-                camera,
-                camera_tails,
-                t,
-                z_rev,
-                merge_last,
-                heuristic,
-                (eta_h, connect),
-            );
         }
         if let Some(y) = y_last {
             let z_prev = (t >= 2).then(|| &camera[t - 2]);
-            let mut near = [Near::default(); 2];
-            near[0] = Near {
-                rev: self.pdf_area(z, z_prev, y),
-                fwd: y.pdf_fwd,
-                merge: s >= 2,
-                // Past a point light (s = 1) lies no strategy: no camera path hits it.
-                connect: (connect || s == 1)
-                    && !(s >= 2 && light[s - 2].delta)
-                    && !y.is_point_light(),
-            };
-            let count = if let Some(y_prev) = y_before {
-                near[1] = Near {
-                    rev: self.pdf_area(y, Some(z), y_prev),
-                    fwd: y_prev.pdf_fwd,
-                    merge: s >= 3 && !y_prev.delta,
-                    connect: (connect || s == 2)
-                        && !y_prev.delta
-                        && !(s >= 3 && light[s - 3].delta)
-                        && !y_prev.is_point_light(),
-                };
-                2
-            } else {
-                1
-            };
-            let tail = if s >= 2 {
-                light_tails[s - 2]
-            } else {
-                WeightTail::default()
-            };
-            sum += side_sum(&near[..count], tail, heuristic, eta_h, connect);
+            densities.y_rev[0] = self.pdf_area(z, z_prev, y);
+            if let Some(y_prev) = y_before {
+                densities.y_rev[1] = self.pdf_area(y, Some(z), y_prev);
+            }
         }
-        1.0 / sum
+        densities
     }
 
     /// `vcm_weight` of the merge of camera vertex z_{t-1} (t >= 2) with light vertex y_s

@@ -243,7 +243,8 @@ pub fn refuse_options_of_others<'a>(
 }
 
 /// Refuses `--kernel megakernel` for an integrator that has none (only pt has one) and
-/// `--wavefront` for one that does not render in waves of samples (pt, bdpt, vcm, bpm do).
+/// `--wavefront` for one that does not render in waves of samples (pt, bdpt, vcm, bpm do), and
+/// `--lanes` for one with nothing in vector lanes.
 pub fn check_kernel(kind: IntegratorKind, settings: &RenderSettings) -> Result<()> {
     if settings.kernel == Kernel::Megakernel && kind.as_str() != "pt" {
         bail!("--kernel megakernel: only pt has a megakernel, not {kind}");
@@ -251,9 +252,14 @@ pub fn check_kernel(kind: IntegratorKind, settings: &RenderSettings) -> Result<(
     if settings.wavefront.is_some() && !matches!(kind.as_str(), "pt" | "bdpt" | "vcm" | "bpm") {
         bail!("--wavefront: only pt, bdpt, vcm and bpm render in waves of samples, not {kind}");
     }
-    if settings.lanes.is_some() && (kind.as_str() != "pt" || settings.kernel == Kernel::Megakernel)
-    {
-        bail!("--lanes: only pt's wavefront shades paths in vector lanes");
+    let in_lanes = match kind.as_str() {
+        "pt" => settings.kernel == Kernel::Wavefront,
+        // Their connections' weights.
+        "bdpt" | "vcm" => true,
+        _ => false,
+    };
+    if settings.lanes.is_some() && !in_lanes {
+        bail!("--lanes: only pt's wavefront, bdpt and vcm work in vector lanes, not {kind}");
     }
     Ok(())
 }

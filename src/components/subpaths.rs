@@ -234,6 +234,9 @@ pub struct BdptSettings {
     /// Vertex merging (VCM, BPM): camera vertices also merge with the wave's light vertices
     /// within a radius, and every weight counts the merges. None: BDPT.
     pub merging: Option<VertexMerging>,
+    /// How many connections `weigh_connections` takes at a time (`--lanes`): every width
+    /// gives the same weights.
+    pub lanes: crate::lanes::LaneWidth,
 }
 
 /// How camera vertices merge with light vertices (`--integrator vcm`, `bpm`).
@@ -314,6 +317,7 @@ impl BdptSettings {
             min_depth: 0,
             light_vertex_cache: 0,
             merging: None,
+            lanes: crate::lanes::LaneWidth::widest(),
         }
     }
 

@@ -50,6 +50,7 @@ impl From<&RenderSettings> for BdptSettings {
             sampler: s.sampler,
             strategy_images: s.strategy_images,
             light_vertex_cache: s.light_vertex_cache,
+            lanes: s.lanes.unwrap_or_else(crate::lanes::LaneWidth::widest),
             ..BdptSettings::new(s.seed, s.max_depth)
         }
     }

@@ -372,6 +372,18 @@ impl PreparedScene {
         self.materials[self.triangles.material[tri as usize] as usize].is_two_sided()
     }
 
+    /// For each material, whether it is Lambertian wherever it is seen: untextured `Diffuse` on
+    /// both faces (or black behind, which is `Diffuse` too), so that its density is the cosine
+    /// one about the shading normal whichever side a direction comes from.
+    pub fn lambertian_materials(&self) -> Vec<bool> {
+        let uniform_diffuse = |m: usize| {
+            matches!(self.materials[m], Material::Diffuse(_)) && self.varying[m].is_none()
+        };
+        (0..self.materials.len())
+            .map(|m| uniform_diffuse(m) && self.back[m].is_none_or(|b| uniform_diffuse(b as usize)))
+            .collect()
+    }
+
     /// The material of triangle `tri` at point `p` on it, its textures looked up there (the
     /// front's, for a twosided of two BSDFs: `material_facing` takes the side). `ns` is
     /// the normal of the shading frame the caller evaluates the material in

@@ -320,6 +320,28 @@ fn the_kernel_and_wavefront_options_run_and_refuse_what_does_not_apply() {
             "--lanes {lanes}: the EXRs differ"
         );
     }
+    // BDPT's weights in lanes of either width: the same image as at the widest.
+    let bdpt = |lanes: &[&str], name: &str| {
+        let c = out(name);
+        let mut line = vec![
+            "render",
+            scene,
+            "--spp",
+            "2",
+            "--quiet",
+            "--integrator",
+            "bdpt",
+        ];
+        line.extend(lanes.iter().copied().chain(["-o", c.as_str()]));
+        let o = stagelight(&line);
+        assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+        std::fs::read(&c).unwrap()
+    };
+    let widest = bdpt(&[], "bdpt.exr");
+    for lanes in ["8", "16"] {
+        let image = bdpt(&["--lanes", lanes], &format!("bdpt_lanes{lanes}.exr"));
+        assert!(image == widest, "bdpt --lanes {lanes}: the EXRs differ");
+    }
     // Bad input: one clear message, exit 1.
     for (args, expect) in [
         (
@@ -337,8 +359,8 @@ fn the_kernel_and_wavefront_options_run_and_refuse_what_does_not_apply() {
             "only pt's wavefront",
         ),
         (
-            vec!["--integrator", "bdpt", "--lanes", "16"],
-            "only pt's wavefront",
+            vec!["--integrator", "sppm", "--lanes", "16"],
+            "only pt's wavefront, bdpt and vcm",
         ),
         (vec!["--kernel", "simd"], "--kernel"),
     ] {

@@ -534,3 +534,79 @@ fn vcm_and_bpm_agree_with_pt_per_block_on_glass_spheres() {
         assert_blocks_agree(name, &images, &reference, 0.1, 5.0);
     }
 }
+
+/// The joint densities `weigh_connections` finds in lanes (between Lambertian surfaces and
+/// area lights) are `PathContext::joint_densities`' bits, at both lane widths, for every
+/// connection of random subpaths of scenes with Lambertian and other surfaces, one-sided ones
+/// and shading normals; and most of the Cornell box's are found in lanes.
+#[test]
+fn joint_densities_in_lanes_are_the_scalar_bits() {
+    use stagelight::lanes::LaneWidth;
+    use stagelight::systems::connect::weights::joint_densities_in_lanes;
+    let xml = |name: &str| {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("tests/scenes/mitsuba")
+            .join(name);
+        let text = std::fs::read_to_string(&path).unwrap();
+        stagelight::scene::load_mitsuba_from_str(
+            &path,
+            &text,
+            &[],
+            &stagelight::scene::Limits::of_this_machine(),
+        )
+        .unwrap()
+        .0
+    };
+    let scenes = [
+        ("cornell_box.ron", load_small("cornell_box.ron", 32)),
+        ("door_ajar.ron", load_small("door_ajar.ron", 32)),
+        ("one_sided.xml", xml("one_sided.xml")),
+        ("materials_room.xml", xml("materials_room.xml")),
+        ("analytic_shapes.xml", xml("analytic_shapes.xml")),
+        ("twosided_two.xml", xml("twosided_two.xml")),
+    ];
+    for (name, scene) in scenes {
+        let data = Arc::new(SceneData::new(scene));
+        let ctx = PathContext::new(&data.scene);
+        let subpaths = bdpt::trace_subpaths(data.clone(), BdptSettings::new(11, u32::MAX), 0, 4096);
+        let mut connections = Vec::new();
+        for (camera, light) in &subpaths {
+            for t in 1..=camera.len() {
+                for s in 1..=light.len() {
+                    connections.push((&camera[..t], &light[..s], (s, t)));
+                }
+            }
+        }
+        let mut in_lanes = 0;
+        for width in [LaneWidth::Eight, LaneWidth::Sixteen] {
+            let lanes = joint_densities_in_lanes(&data.scene, &connections, width);
+            in_lanes = 0;
+            for (&(camera, light, st), found) in connections.iter().zip(&lanes) {
+                let Some(found) = found else { continue };
+                let want = ctx.joint_densities(camera, light, st);
+                let bits = |d: &stagelight::weight_tails::JointDensities| {
+                    [d.z_rev, d.y_rev].map(|p| p.map(f32::to_bits))
+                };
+                assert_eq!(
+                    bits(found),
+                    bits(&want),
+                    "{name} {width:?}: connection {st:?} in lanes {found:?}, one at a time {want:?}"
+                );
+                in_lanes += 1;
+            }
+        }
+        let eligible = connections
+            .iter()
+            .filter(|c| c.2.0 >= 1 && c.2.1 >= 2)
+            .count();
+        println!("{name}: {in_lanes} of {eligible} joints with t >= 2 in lanes");
+        if name == "cornell_box.ron" {
+            assert!(
+                in_lanes * 10 >= eligible * 9,
+                "{name}: {in_lanes} of {eligible} in lanes"
+            );
+        } else {
+            assert!(in_lanes > 0, "{name}: no joint in lanes");
+        }
+    }
+}
