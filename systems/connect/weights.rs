@@ -520,7 +520,7 @@ impl LaneKernel for JointLanes<'_> {
         let c = self.columns;
         let [z_rev0, z_rev1, y_rev0, y_rev1] = self.out;
         for at in (0..c.z.len()).step_by(N) {
-            let [d0, d1, d2, d3] = lambertian_joint_densities(Joint {
+            let [d0, d1, d2, d3] = lambertian_joint_densities(JointVertices {
                 z: V3::load(&c.z[at..]),
                 z_ng: V3::load(&c.z_ng[at..]),
                 z_ns: V3::load(&c.z_ns[at..]),
@@ -551,8 +551,9 @@ fn mask_of<const N: usize>(flags: &[bool]) -> M<N> {
     M::lanes(|l| flags[l])
 }
 
-/// One joint (or lanes of them) as `lambertian_joint_densities` reads it: see `JointColumns`.
-pub struct Joint<T: Real> {
+/// The vertices about one joint (or lanes of them) as `lambertian_joint_densities` reads
+/// them: see `JointColumns`.
+pub struct JointVertices<T: Real> {
     pub z: V3<T>,
     pub z_ng: V3<T>,
     pub z_ns: V3<T>,
@@ -574,14 +575,14 @@ pub struct Joint<T: Real> {
 /// with `Diffuse::pdf_world` seen through `PathContext::scattering`, or an area light's
 /// cosine density), so each lane's numbers are the scalar ones.
 #[inline(always)]
-pub fn lambertian_joint_densities<T: Real>(j: Joint<T>) -> [T; 4] {
+pub fn lambertian_joint_densities<T: Real>(j: JointVertices<T>) -> [T; 4] {
     let zero = T::splat(0.0);
     let none = V3::splat(Vec3::ZERO);
     let z_to_y = (j.y - j.z).normalize_or(none);
     let z_to_prev = (j.z_prev - j.z).normalize_or(none);
     let y_to_z = (j.z - j.y).normalize_or(none);
     let y_to_prev = (j.y_prev - j.y).normalize_or(none);
-    let always = zero.equal(zero);
+    let always = T::Mask::splat(true);
     let light = y_to_z.dot(j.y_ng).max(zero) * FRAC_1_PI;
     let at_y = T::select(
         j.at_light,
